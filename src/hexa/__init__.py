@@ -1,0 +1,1 @@
+"""hexa: ROS-free core library (robot models, dynamics, singularity, vision, serial protocol, simulator)."""
