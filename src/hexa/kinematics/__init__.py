@@ -1,0 +1,1 @@
+"""Kinematics of the Hexa (6-RUS) and the 3UPS+RPU."""

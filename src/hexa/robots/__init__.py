@@ -1,0 +1,1 @@
+"""Robot descriptions (YAML, SI units) loaded into immutable model objects."""
