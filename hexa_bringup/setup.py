@@ -15,5 +15,8 @@ setup(
     zip_safe=True,
     description="hexa graph bringup, supervisor, `hexa` CLI, config and Fast DDS profile",
     license="Apache-2.0",
-    entry_points={"console_scripts": ["hexa = hexa_bringup.cli:main"]},
+    entry_points={"console_scripts": [
+        "hexa = hexa_bringup.cli:main",
+        "hexa-sim = hexa_bringup.sim_node:main",
+    ]},
 )
