@@ -1,0 +1,93 @@
+#!/usr/bin/env bash
+# One idempotent set-up for `make test` and `make demo`: venv, pinned wheels, CMake export repair, hexa_msgs build,
+# hexa Python packages, AVR toolchain. Each step is skipped when its inputs have not changed (stamps in .venv/.stamps).
+set -euo pipefail
+cd "$(dirname "$0")/.."
+ROOT=$(pwd)
+VENV="$ROOT/.venv"
+STAMPS="$VENV/.stamps"
+PY=${PYTHON:-python3.11}
+t0=$(date +%s)
+
+log() { printf '[setup %3ss] %s\n' "$(( $(date +%s) - t0 ))" "$*"; }
+hash_of() { cat "$@" 2>/dev/null | sha256sum | cut -c1-16; }
+# done_or_mark NAME HASH: returns 0 (skip) when the stamp matches
+fresh() { [ -f "$STAMPS/$1" ] && [ "$(cat "$STAMPS/$1")" = "$2" ]; }
+mark() { mkdir -p "$STAMPS"; echo "$2" > "$STAMPS/$1"; }
+
+# 1. Debian packages: AVR toolchain and simavr for the firmware and its firmware-in-the-loop tests; iproute2 for the
+#    two-host test. Installed once (dpkg knows).
+APT_PKGS=(gcc-avr avr-libc arduino-core-avr arduino-mk simavr libsimavr-dev libelf-dev pkg-config iproute2 make cmake g++)
+missing=()
+for p in "${APT_PKGS[@]}"; do dpkg -s "$p" >/dev/null 2>&1 || missing+=("$p"); done
+if [ ${#missing[@]} -gt 0 ]; then
+  if [ "$(id -u)" = 0 ]; then
+    log "apt-get install ${missing[*]}"
+    apt-get update -qq >/dev/null
+    DEBIAN_FRONTEND=noninteractive apt-get install -y -qq "${missing[@]}" >/dev/null
+  else
+    echo "setup: missing Debian packages ${missing[*]}; run: sudo apt-get install -y ${missing[*]}" >&2
+    exit 1
+  fi
+fi
+
+# 2. The venv (CPython 3.11).
+if [ ! -x "$VENV/bin/python" ]; then
+  log "creating $VENV with $PY"
+  "$PY" -m venv "$VENV"
+fi
+"$VENV/bin/python" -c 'import sys; assert sys.version_info[:2] == (3, 11), sys.version' \
+  || { echo "setup: .venv must be CPython 3.11; remove .venv and install python3.11" >&2; exit 1; }
+PIP=("$VENV/bin/python" -m pip install --disable-pip-version-check -q)
+
+# 3. Pinned wheels: core, ROS 2 Jazzy runtime, build-only ROS packages. torch is the local CPU build (never unpinned).
+h=$(hash_of requirements/*.txt)
+if ! fresh wheels "$h"; then
+  log "installing pinned wheels (requirements/*.txt)"
+  "${PIP[@]}" -r requirements/core.txt -r requirements/torch.txt -r requirements/ros.txt -r requirements/ros-build.txt \
+    2> >(grep -v "is ignored: it is neither" >&2)
+  mark wheels "$h"
+  rm -f "$STAMPS/cmake-fix" "$STAMPS/msgs"
+fi
+
+# 4. Repair the wheels' CMake exports, which point at their build container's /opt/python/cp311-cp311.
+PYINC=$("$VENV/bin/python" -c 'import sysconfig; print(sysconfig.get_paths()["include"])')
+NPINC=$("$VENV/bin/python" -c 'import numpy; print(numpy.get_include())')
+if ! fresh cmake-fix "$PYINC:$NPINC"; then
+  log "repairing CMake exports under .venv/share"
+  grep -rlF "/opt/python/cp311-cp311" "$VENV/share" --include='*.cmake' | while read -r f; do
+    sed -i -e "s#/opt/python/cp311-cp311/include/python3.11#$PYINC#g" \
+           -e "s#/opt/python/cp311-cp311/lib/python3.11/site-packages/numpy/_core/include#$NPINC#g" \
+           -e "s#/opt/python/cp311-cp311#$VENV#g" "$f"
+  done
+  mark cmake-fix "$PYINC:$NPINC"
+fi
+
+# 5. hexa_msgs with colcon (settings in colcon.meta), installed into the venv prefix (no runtime env vars needed).
+h=$(hash_of hexa_msgs/CMakeLists.txt hexa_msgs/package.xml hexa_msgs/msg/* hexa_msgs/srv/* colcon.meta)
+if ! fresh msgs "$h" || ! "$VENV/bin/python" -c 'import hexa_msgs.msg' 2>/dev/null; then
+  log "building hexa_msgs (colcon)"
+  (
+    export AMENT_PREFIX_PATH="$VENV" CMAKE_PREFIX_PATH="$VENV" PATH="$VENV/bin:$PATH"
+    export PYTHONPATH="$VENV/lib/python3.11/site-packages"
+    "$VENV/bin/colcon" --log-base build/log build --base-paths hexa_msgs --build-base build/colcon \
+      --install-base "$VENV" --merge-install --metas colcon.meta --event-handlers console_cohesion- summary- \
+      > build/colcon-hexa_msgs.log 2>&1 || { tail -40 build/colcon-hexa_msgs.log >&2; exit 1; }
+  )
+  "$VENV/bin/python" -c 'import hexa_msgs.msg' || { echo "setup: hexa_msgs built but not importable" >&2; exit 1; }
+  mark msgs "$h"
+fi
+
+# 6. Our Python packages (editable): the ROS-free core and the ROS packages' nodes and entry points.
+PKGS=(. hexa_bringup hexa_dynamics hexa_vision hexa_driver)
+h=$(for p in "${PKGS[@]}"; do cat "$p/setup.py" "$p/pyproject.toml" 2>/dev/null || true; done | sha256sum | cut -c1-16)
+if ! fresh pkgs "$h"; then
+  log "installing hexa packages (editable)"
+  for p in "${PKGS[@]}"; do
+    if [ -f "$p/setup.py" ] || [ -f "$p/pyproject.toml" ]; then
+      "${PIP[@]}" --no-deps --no-build-isolation -e "$p" 2> >(grep -v "is ignored: it is neither" >&2)
+    fi
+  done
+  mark pkgs "$h"
+fi
+log "environment ready ($VENV)"

@@ -1,0 +1,88 @@
+"""Shared pytest fixtures: a unique ROS_DOMAIN_ID per test and child-process cleanup."""
+from __future__ import annotations
+
+import fcntl
+import os
+import signal
+import subprocess
+import sys
+from pathlib import Path
+from typing import Iterator
+
+import pytest
+
+REPO = Path(__file__).resolve().parents[1]
+TEST_DIR = Path(__file__).resolve().parent
+if str(TEST_DIR) not in sys.path:
+    sys.path.insert(0, str(TEST_DIR))
+
+
+@pytest.fixture
+def ros_domain_id() -> Iterator[int]:
+    """A ROS_DOMAIN_ID (1..100) no other test on this machine holds right now (flock on /tmp), freed afterwards."""
+    start = (os.getpid() * 7) % 100
+    for k in range(100):
+        domain = (start + k) % 100 + 1
+        fd = os.open(f"/tmp/hexa_ros_domain_{domain}.lock", os.O_CREAT | os.O_RDWR, 0o666)
+        try:
+            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except OSError:
+            os.close(fd)
+            continue
+        try:
+            yield domain
+        finally:
+            fcntl.flock(fd, fcntl.LOCK_UN)
+            os.close(fd)
+        return
+    pytest.fail("no free ROS_DOMAIN_ID in 1..100 (too many ROS tests running at once?)")
+
+
+@pytest.fixture
+def ros_env(ros_domain_id: int) -> dict[str, str]:
+    """Environment for child ROS processes: rmw_fastrtps, hexa's DDS profile, unique domain, localhost only."""
+    from hexa_bringup.rosenv import ros_env as make_env
+
+    return make_env(ros_domain_id)
+
+
+class ProcessGroup:
+    """Child processes started by a test, each in its own session; all are killed at teardown."""
+
+    def __init__(self) -> None:
+        self.procs: list[subprocess.Popen] = []
+
+    def start(self, args: list[str], env: dict[str, str], **kw) -> subprocess.Popen:
+        kw.setdefault("stdout", subprocess.PIPE)
+        kw.setdefault("stderr", subprocess.PIPE)
+        kw.setdefault("text", True)
+        proc = subprocess.Popen(args, env=env, cwd=str(REPO), start_new_session=True, **kw)
+        self.procs.append(proc)
+        return proc
+
+    def stop_all(self) -> None:
+        for proc in self.procs:
+            if proc.poll() is None:
+                try:
+                    os.killpg(proc.pid, signal.SIGINT)
+                except ProcessLookupError:
+                    pass
+        for proc in self.procs:
+            try:
+                proc.wait(timeout=5)
+            except subprocess.TimeoutExpired:
+                try:
+                    os.killpg(proc.pid, signal.SIGKILL)
+                except ProcessLookupError:
+                    pass
+                proc.wait(timeout=5)
+
+
+@pytest.fixture
+def procs() -> Iterator[ProcessGroup]:
+    """Start child processes with `procs.start([...], env)`; they are always killed when the test ends."""
+    group = ProcessGroup()
+    try:
+        yield group
+    finally:
+        group.stop_all()
