@@ -15,9 +15,11 @@ hash_of() { cat "$@" 2>/dev/null | sha256sum | cut -c1-16; }
 fresh() { [ -f "$STAMPS/$1" ] && [ "$(cat "$STAMPS/$1")" = "$2" ]; }
 mark() { mkdir -p "$STAMPS"; echo "$2" > "$STAMPS/$1"; }
 
-# 1. Debian packages: AVR toolchain and simavr for the firmware and its firmware-in-the-loop tests; iproute2 for the
+# 1. Debian packages: AVR toolchain and simavr for the firmware and its firmware-in-the-loop tests; EGL for MuJoCo
+#    headless rendering; iproute2 for the
 #    two-host test. Installed once (dpkg knows).
-APT_PKGS=(gcc-avr avr-libc arduino-core-avr arduino-mk simavr libsimavr-dev libelf-dev pkg-config iproute2 make cmake g++)
+APT_PKGS=(gcc-avr avr-libc arduino-core-avr arduino-mk simavr libsimavr-dev libelf-dev pkg-config iproute2 make cmake g++
+          libegl1 libegl-mesa0 libgl1-mesa-dri)
 missing=()
 for p in "${APT_PKGS[@]}"; do dpkg -s "$p" >/dev/null 2>&1 || missing+=("$p"); done
 if [ ${#missing[@]} -gt 0 ]; then

@@ -1,0 +1,37 @@
+# hexa — the two commands a user needs: `make demo` and `make test`. Both do all set-up (idempotent).
+SHELL := /bin/bash
+VENV := .venv
+PY := $(VENV)/bin/python
+export MUJOCO_GL ?= egl
+export PYTHONDONTWRITEBYTECODE := 1
+PYTEST_ARGS ?=
+
+.PHONY: setup test demo bench firmware clean help
+
+help:
+	@echo "make demo   - set up, then run the main job on the simulated robot (hexa demo)"
+	@echo "make test   - set up, build the firmware, run the whole test suite"
+	@echo "make bench  - set up, run the benchmarks (hexa bench)"
+	@echo "make firmware - build the Arduino firmware (.hex) with Debian's AVR toolchain"
+	@echo "make setup  - only the set-up (venv, ROS 2 Jazzy wheels, hexa_msgs, toolchains)"
+
+setup:
+	@bash scripts/setup_env.sh
+
+firmware: setup
+	@if [ -f hexa_driver/firmware/Makefile ]; then $(MAKE) --no-print-directory -C hexa_driver/firmware; \
+	else echo "firmware: hexa_driver/firmware/Makefile not present yet"; fi
+
+# pytest exit code 5 means "no tests collected": that is a failure here, not a pass.
+test: setup firmware
+	@set -o pipefail; $(PY) -m pytest test/ -q -p no:cacheprovider $(PYTEST_ARGS); rc=$$?; \
+	if [ $$rc -eq 5 ]; then echo "make test: pytest collected no tests" >&2; exit 1; fi; exit $$rc
+
+demo: setup firmware
+	@$(VENV)/bin/hexa demo
+
+bench: setup
+	@$(VENV)/bin/hexa bench
+
+clean:
+	rm -rf build .pytest_cache
