@@ -1,0 +1,427 @@
+"""Python emulators of the two Arduino boards on pseudo-terminals, speaking the same protocol as the firmware.
+
+`UnoEmulator` (servo board) and `MegaEmulator` (current board) each open a pty; `.port` is the path the driver
+opens (the pty slave, or a stable symlink to it when `link=` is given, like a /dev/serial/by-id path). Each runs
+in a thread; `start()/stop()` or use them as context managers. `unplug()` closes the pty (the driver's reads fail
+like on a real USB unplug) and removes the symlink; `replug()` opens a fresh pty and points the symlink at it.
+
+    with UnoEmulator(on_targets=print) as uno, MegaEmulator(current_source=lambda t: [0.1] * 6) as mega:
+        driver.open(uno.port, mega.port)
+"""
+from __future__ import annotations
+
+import errno
+import os
+import select
+import threading
+import time
+import tty
+from pathlib import Path
+from typing import Callable, Sequence
+
+import numpy as np
+
+from hexa.protocol import frames as fr
+from hexa.protocol.sensor_model import DEFAULT_SENSOR, CurrentSensorModel
+
+FIRMWARE_VERSION = 0x0100
+DEFAULT_MIN_US = 500
+DEFAULT_MAX_US = 2500
+DEFAULT_WATCHDOG_MS = 500
+
+
+class EmulatorError(RuntimeError):
+    """Emulator misuse (e.g. a symlink path that exists and is not ours)."""
+
+
+class _BoardEmulator:
+    """Common pty + thread + frame handling of both boards."""
+
+    kind = 0
+
+    def __init__(self, link: str | os.PathLike | None = None, tx_filter: Callable[[bytes], bytes] | None = None,
+                 clock: Callable[[], float] = time.monotonic) -> None:
+        self._link = Path(link) if link is not None else None
+        self.tx_filter = tx_filter
+        self._clock = clock
+        self._t0 = clock()
+        self._master: int | None = None
+        self._slave: int | None = None
+        self._slave_name = ""
+        self._thread: threading.Thread | None = None
+        self._stop = threading.Event()
+        self._lock = threading.RLock()
+        self._parser = fr.FrameParser()
+        self._seq = 0
+        self.rx_frames = 0
+        self.rx_bad_frames = 0
+        self.tx_frames = 0
+        self.tx_dropped_bytes = 0
+        self.plugged = False
+
+    # ------------------------------------------------------------------ lifecycle
+    @property
+    def port(self) -> str:
+        """Path for the driver: the symlink if one was requested, else the pty slave device."""
+        return str(self._link) if self._link is not None else self._slave_name
+
+    @property
+    def rx_crc_errors(self) -> int:
+        return self._parser.stats.crc_errors
+
+    def start(self) -> "_BoardEmulator":
+        """Open the pty and start the board thread (idempotent)."""
+        if self._thread is not None:
+            return self
+        self._open_pty()
+        self._stop.clear()
+        self._thread = threading.Thread(target=self._run, name=type(self).__name__, daemon=True)
+        self._thread.start()
+        return self
+
+    def stop(self) -> None:
+        """Stop the thread and close the pty; removes the symlink."""
+        self._stop.set()
+        if self._thread is not None:
+            self._thread.join(timeout=2.0)
+            self._thread = None
+        self._close_pty()
+
+    def __enter__(self) -> "_BoardEmulator":
+        return self.start()
+
+    def __exit__(self, *exc: object) -> None:
+        self.stop()
+
+    def unplug(self) -> None:
+        """Simulate a USB unplug: the pty disappears (driver reads fail), the symlink is removed."""
+        with self._lock:
+            self._close_pty()
+
+    def replug(self) -> None:
+        """Simulate plugging the board back in: new pty, symlink updated, board state reset (like a reset)."""
+        with self._lock:
+            if self.plugged:
+                return
+            self._reset_board()
+            self._open_pty()
+
+    def _open_pty(self) -> None:
+        master, slave = os.openpty()
+        tty.setraw(slave)
+        tty.setraw(master)
+        os.set_blocking(master, False)
+        self._master, self._slave = master, slave
+        self._slave_name = os.ttyname(slave)
+        self._parser.reset()
+        if self._link is not None:
+            if self._link.is_symlink():
+                self._link.unlink()
+            elif self._link.exists():
+                raise EmulatorError(f"link path {self._link} exists and is not a symlink")
+            tmp = self._link.with_name(self._link.name + ".tmp")
+            if tmp.is_symlink():
+                tmp.unlink()
+            os.symlink(self._slave_name, tmp)
+            os.replace(tmp, self._link)
+        self.plugged = True
+
+    def _close_pty(self) -> None:
+        self.plugged = False
+        if self._link is not None and self._link.is_symlink():
+            try:
+                self._link.unlink()
+            except FileNotFoundError:
+                pass
+        for fd in (self._master, self._slave):
+            if fd is not None:
+                try:
+                    os.close(fd)
+                except OSError:
+                    pass
+        self._master = self._slave = None
+
+    # ------------------------------------------------------------------ I/O
+    def board_time_us(self) -> int:
+        """Board clock (us since the emulator was created, wraps at 2^32 like micros())."""
+        return int((self._clock() - self._t0) * 1e6) & 0xFFFFFFFF
+
+    def _send(self, msg_type: int, payload: bytes = b"") -> None:
+        data = fr.encode_frame(msg_type, self._seq, payload)
+        self._seq = (self._seq + 1) & 0xFF
+        self._write(data)
+        self.tx_frames += 1
+
+    def _write(self, data: bytes) -> None:
+        if self.tx_filter is not None:
+            data = self.tx_filter(data)
+        fd = self._master
+        if fd is None:
+            return
+        view = memoryview(data)
+        while view:
+            try:
+                n = os.write(fd, view)
+            except BlockingIOError:
+                self.tx_dropped_bytes += len(view)  # nobody reads: bytes are lost, like a UART
+                return
+            except OSError:
+                return
+            view = view[n:]
+
+    def _run(self) -> None:
+        while not self._stop.is_set():
+            with self._lock:
+                fd = self._master
+            if fd is None:
+                time.sleep(0.005)
+                continue
+            timeout = self._poll_timeout()
+            try:
+                r, _, _ = select.select([fd], [], [], timeout)
+            except (OSError, ValueError):
+                continue
+            with self._lock:
+                if fd != self._master:
+                    continue
+                if r:
+                    try:
+                        data = os.read(fd, 4096)
+                    except BlockingIOError:
+                        data = b""
+                    except OSError as e:
+                        if e.errno == errno.EIO:  # no slave open: nothing to read
+                            data = b""
+                            time.sleep(0.002)
+                        else:
+                            raise
+                    for frame in self._parser.feed(data):
+                        self.rx_frames += 1
+                        self._handle_frame(frame)
+                self._tick()
+
+    def _handle_frame(self, frame: fr.Frame) -> None:
+        size = fr.REQUEST_SIZES.get(frame.type)
+        if size is None or not self._accepts(frame.type):
+            self.rx_bad_frames += 1
+            self._send(fr.ERROR, fr.pack_error(fr.ERR_UNKNOWN_TYPE, frame.type, frame.seq))
+            return
+        if len(frame.payload) != size:
+            self.rx_bad_frames += 1
+            self._send(fr.ERROR, fr.pack_error(fr.ERR_BAD_LENGTH, frame.type, frame.seq, len(frame.payload)))
+            return
+        if frame.type == fr.HELLO:
+            version = fr.unpack_hello(frame.payload)
+            if version != fr.PROTOCOL_VERSION:
+                self._send(fr.ERROR, fr.pack_error(fr.ERR_BAD_VERSION, frame.type, frame.seq, version))
+            self._send(fr.HELLO_REPLY, fr.pack_hello_reply(self.kind, FIRMWARE_VERSION))
+        elif frame.type == fr.PING:
+            self._send(fr.PONG, fr.pack_pong(fr.unpack_ping(frame.payload), self.board_time_us()))
+        elif frame.type == fr.GET_STATUS:
+            self._send(fr.STATUS, self._status_payload())
+        else:
+            self._handle_board_frame(frame)
+
+    # ------------------------------------------------------------------ board-specific hooks
+    def _accepts(self, msg_type: int) -> bool:
+        return msg_type in (fr.HELLO, fr.PING, fr.GET_STATUS)
+
+    def _poll_timeout(self) -> float:
+        return 0.01
+
+    def _tick(self) -> None:
+        pass
+
+    def _reset_board(self) -> None:
+        self._seq = 0
+
+    def _status_payload(self) -> bytes:
+        raise NotImplementedError
+
+    def _handle_board_frame(self, frame: fr.Frame) -> None:
+        raise NotImplementedError
+
+
+class UnoEmulator(_BoardEmulator):
+    """The servo board (Arduino Uno): six pulse-width targets with limits and a hold-last-command watchdog.
+
+    Args:
+        on_targets: called with the six pulse widths (us, after clamping to the limits) of every SET_TARGETS,
+            from the emulator thread.
+        link: optional stable symlink path for `.port`.
+        tx_filter: optional function applied to every chunk the board sends (fault injection in tests).
+    """
+
+    kind = fr.BOARD_SERVO
+
+    def __init__(self, on_targets: Callable[[tuple[int, ...]], None] | None = None,
+                 link: str | os.PathLike | None = None, tx_filter: Callable[[bytes], bytes] | None = None,
+                 clock: Callable[[], float] = time.monotonic) -> None:
+        super().__init__(link=link, tx_filter=tx_filter, clock=clock)
+        self.on_targets = on_targets
+        self._reset_board()
+
+    def _reset_board(self) -> None:
+        super()._reset_board()
+        self.min_us = [DEFAULT_MIN_US] * fr.N_CHANNELS
+        self.max_us = [DEFAULT_MAX_US] * fr.N_CHANNELS
+        self.watchdog_ms = DEFAULT_WATCHDOG_MS
+        self.pulses_us: tuple[int, ...] = (0,) * fr.N_CHANNELS  # 0 = output off (no command yet)
+        self.outputs_enabled = False
+        self.clamped = False
+        self.last_command_time: float | None = None
+        self.commands = 0
+
+    @property
+    def targets(self) -> tuple[int, ...]:
+        """Pulse widths (us) currently output on the six channels (0 = off, before the first command)."""
+        return self.pulses_us
+
+    def _accepts(self, msg_type: int) -> bool:
+        return super()._accepts(msg_type) or msg_type in (fr.SET_TARGETS, fr.SET_LIMITS, fr.SET_WATCHDOG)
+
+    def _handle_board_frame(self, frame: fr.Frame) -> None:
+        if frame.type == fr.SET_TARGETS:
+            req = fr.unpack_targets(frame.payload)
+            out = tuple(min(max(p, lo), hi) for p, lo, hi in zip(req, self.min_us, self.max_us))
+            self.clamped = out != req
+            self.pulses_us = out
+            self.outputs_enabled = True
+            self.last_command_time = self._clock()
+            self.commands += 1
+            if self.on_targets is not None:
+                self.on_targets(out)
+        elif frame.type == fr.SET_LIMITS:
+            lo, hi = fr.unpack_limits(frame.payload)
+            if any(a > b for a, b in zip(lo, hi)):
+                self._send(fr.ERROR, fr.pack_error(fr.ERR_BAD_VALUE, frame.type, frame.seq))
+                return
+            self.min_us, self.max_us = list(lo), list(hi)
+            if self.outputs_enabled:
+                self.pulses_us = tuple(min(max(p, a), b) for p, a, b in zip(self.pulses_us, lo, hi))
+            self._send(fr.ACK, fr.pack_ack(frame.type, frame.seq))
+        elif frame.type == fr.SET_WATCHDOG:
+            self.watchdog_ms = fr.unpack_watchdog(frame.payload)
+            self._send(fr.ACK, fr.pack_ack(frame.type, frame.seq))
+
+    def _status_payload(self) -> bytes:
+        since = (0xFFFF if self.last_command_time is None
+                 else int((self._clock() - self.last_command_time) * 1000))
+        flags = 0
+        if self.outputs_enabled:
+            flags |= fr.FLAG_ACTIVE
+            if self.watchdog_ms and since > self.watchdog_ms:
+                flags |= fr.FLAG_WATCHDOG_HOLD
+        if self.clamped:
+            flags |= fr.FLAG_CLAMPED
+        return fr.pack_servo_status(fr.ServoStatus(
+            flags, self.rx_frames, self.rx_crc_errors, self.rx_bad_frames, self.board_time_us(),
+            self.pulses_us, min(since, 0xFFFF)))
+
+
+class MegaEmulator(_BoardEmulator):
+    """The current board (Arduino Mega 2560): six ADC channels streamed at the commanded rate.
+
+    Args:
+        current_source: called at each sample time with the board time (s) and returning six values: amps
+            (converted to counts by `sensor`, the default) or ADC counts when `units="counts"`. None: 0 A.
+        units: "amps" or "counts".
+        sensor: the current-sensor/ADC model (hexa.protocol.sensor_model).
+        noise_counts: standard deviation of Gaussian ADC noise (counts) added before rounding; 0 = none.
+        seed: noise RNG seed.
+        link, tx_filter, clock: as for UnoEmulator.
+    """
+
+    kind = fr.BOARD_CURRENT
+
+    def __init__(self, current_source: Callable[[float], Sequence[float]] | None = None, units: str = "amps",
+                 sensor: CurrentSensorModel = DEFAULT_SENSOR, noise_counts: float = 0.0, seed: int = 0,
+                 link: str | os.PathLike | None = None, tx_filter: Callable[[bytes], bytes] | None = None,
+                 clock: Callable[[], float] = time.monotonic) -> None:
+        if units not in ("amps", "counts"):
+            raise EmulatorError(f"units {units!r} must be 'amps' or 'counts'")
+        super().__init__(link=link, tx_filter=tx_filter, clock=clock)
+        self.current_source = current_source
+        self.units = units
+        self.sensor = sensor
+        self.noise_counts = float(noise_counts)
+        self._rng = np.random.default_rng(seed)
+        self._reset_board()
+
+    def _reset_board(self) -> None:
+        super()._reset_board()
+        self.rate_hz = 0
+        self.streaming = False
+        self.sample_seq = 0
+        self.overruns = 0
+        self._overrun_flag = False
+        self._next_t = 0.0
+        self._k = 0
+
+    def _accepts(self, msg_type: int) -> bool:
+        return super()._accepts(msg_type) or msg_type in (fr.START_STREAM, fr.STOP_STREAM)
+
+    def _handle_board_frame(self, frame: fr.Frame) -> None:
+        if frame.type == fr.START_STREAM:
+            rate = fr.unpack_start_stream(frame.payload)
+            if not fr.MIN_RATE_HZ <= rate <= fr.MAX_RATE_HZ:
+                self._send(fr.ERROR, fr.pack_error(fr.ERR_BAD_VALUE, frame.type, frame.seq))
+                return
+            self.rate_hz = rate
+            self.streaming = True
+            self._t_stream = self._clock()
+            self._k = 0
+            self._next_t = self._t_stream
+            self._send(fr.ACK, fr.pack_ack(frame.type, frame.seq))
+        elif frame.type == fr.STOP_STREAM:
+            self.streaming = False
+            self._send(fr.ACK, fr.pack_ack(frame.type, frame.seq))
+
+    def _poll_timeout(self) -> float:
+        if not self.streaming:
+            return 0.01
+        return max(0.0, min(0.01, self._next_t - self._clock()))
+
+    def sample_counts(self, t: float) -> tuple[int, ...]:
+        """The six ADC counts the board would read at board time `t` (s)."""
+        if self.current_source is None:
+            values = np.zeros(fr.N_CHANNELS)
+        else:
+            values = np.asarray(self.current_source(t), dtype=float).reshape(fr.N_CHANNELS)
+        if self.units == "amps":
+            volts = self.sensor.zero_voltage + self.sensor.sensitivity * values
+            if self.noise_counts:
+                volts = volts + self._rng.normal(0.0, self.noise_counts, fr.N_CHANNELS) * (
+                    self.sensor.vref / self.sensor.full_scale)
+            counts = self.sensor.counts_from_voltage(volts)
+        else:
+            if self.noise_counts:
+                values = values + self._rng.normal(0.0, self.noise_counts, fr.N_CHANNELS)
+            counts = np.clip(np.rint(values), 0, self.sensor.full_scale - 1).astype(np.int64)
+        return tuple(int(c) for c in counts)
+
+    def _tick(self) -> None:
+        if not self.streaming or self._master is None:
+            return
+        now = self._clock()
+        period = 1.0 / self.rate_hz
+        if now - self._next_t > 0.1:  # fell far behind (host machine stalled): skip, count an overrun
+            missed = int((now - self._next_t) / period)
+            self._k += missed
+            self._next_t = self._t_stream + self._k * period
+            self.overruns += 1
+            self._overrun_flag = True
+        while self._next_t <= now:
+            t_board = self._next_t - self._t0
+            counts = self.sample_counts(t_board)
+            self._send(fr.SAMPLE, fr.pack_sample(self.sample_seq, int(t_board * 1e6), counts))
+            self.sample_seq = (self.sample_seq + 1) & 0xFFFFFFFF
+            self._k += 1
+            self._next_t = self._t_stream + self._k * period
+
+    def _status_payload(self) -> bytes:
+        flags = (fr.FLAG_ACTIVE if self.streaming else 0) | (fr.FLAG_OVERRUN if self._overrun_flag else 0)
+        self._overrun_flag = False
+        return fr.pack_current_status(fr.CurrentStatus(
+            flags, self.rx_frames, self.rx_crc_errors, self.rx_bad_frames, self.board_time_us(),
+            self.rate_hz if self.streaming else 0, self.overruns, self.sample_seq))
