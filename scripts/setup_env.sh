@@ -69,6 +69,7 @@ fi
 h=$(hash_of hexa_msgs/CMakeLists.txt hexa_msgs/package.xml hexa_msgs/msg/* hexa_msgs/srv/* colcon.meta)
 if ! fresh msgs "$h" || ! "$VENV/bin/python" -c 'import hexa_msgs.msg' 2>/dev/null; then
   log "building hexa_msgs (colcon)"
+  mkdir -p build
   (
     export AMENT_PREFIX_PATH="$VENV" CMAKE_PREFIX_PATH="$VENV" PATH="$VENV/bin:$PATH"
     export PYTHONPATH="$VENV/lib/python3.11/site-packages"
