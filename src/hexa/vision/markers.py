@@ -1,0 +1,279 @@
+"""Plate pose from coloured markers: colour blobs → depth lift → rigid fit with any 3 of 4, outlier rejection.
+
+The same fitting (`fit_marker_set`) serves motion-capture rigid bodies (seed 003 §2.4: three markers per platform
+plus one redundant, any three enough to reconstruct the pose).
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from itertools import combinations
+from typing import Sequence
+
+import cv2
+import numpy as np
+
+from hexa.vision.camera import CameraModel
+from hexa.vision.rigid import RigidFitError, fit_rigid_transform, residuals
+
+
+class MarkerError(ValueError):
+    """Marker layout or input images are unusable (naming the value)."""
+
+
+@dataclass(frozen=True)
+class MarkerLayout:
+    """Marker names, their 3D points in the plate frame {P} as seen by a camera (m), and nominal colours (0..1)."""
+
+    names: tuple[str, ...]
+    points: np.ndarray
+    rgb: np.ndarray
+    radius: float = 0.01
+
+    @classmethod
+    def from_description(cls, desc) -> "MarkerLayout":
+        """Layout from the robot description's `markers` section (top face of each disc: position + plate
+        half-thickness + disc thickness along z of {P})."""
+        try:
+            mk = desc.section("markers")
+            ap = desc.section("appearance")
+        except Exception as exc:  # noqa: BLE001 - description without the vision sections
+            raise MarkerError(f"robot description has no markers/appearance section ({exc})") from exc
+        items = mk.get("items") or []
+        if len(items) < 3:
+            raise MarkerError(f"markers.items must list at least 3 markers; got {len(items)}")
+        lift = float(ap.get("plate_thickness", 0.0)) / 2.0 + float(mk.get("thickness", 0.0))
+        pts = np.array([np.asarray(it["position"], float) + [0.0, 0.0, lift] for it in items])
+        return cls(tuple(str(it["name"]) for it in items), pts, np.array([it["rgb"] for it in items], float),
+                   float(mk.get("radius", 0.01)))
+
+
+@dataclass
+class MarkerFit:
+    """Result of a marker-set fit: T_base_body (4x4), which markers were used/rejected, residuals and covariance."""
+
+    ok: bool
+    T: np.ndarray = field(default_factory=lambda: np.eye(4))
+    rms: float = float("nan")
+    used: tuple[int, ...] = ()
+    rejected: tuple[int, ...] = ()
+    covariance: np.ndarray = field(default_factory=lambda: np.full((6, 6), np.nan))
+    reason: str = ""
+
+    @property
+    def R(self) -> np.ndarray:
+        return self.T[:3, :3]
+
+    @property
+    def t(self) -> np.ndarray:
+        return self.T[:3, 3]
+
+
+def pose_covariance(R: np.ndarray, model_pts: np.ndarray, sigmas: np.ndarray) -> np.ndarray:
+    """6x6 covariance of (x, y, z, rot_x, rot_y, rot_z) (m, rad; rotations about base axes through the body origin)
+    of a rigid fit with isotropic point noise σ_i: (Σ J_iᵀ J_i / σ_i²)⁻¹, J_i = [I, −[R m_i]×]."""
+    A = np.zeros((6, 6))
+    for m, s in zip(np.asarray(model_pts, float), np.asarray(sigmas, float)):
+        q = R @ m
+        J = np.zeros((3, 6))
+        J[:, :3] = np.eye(3)
+        J[:, 3:] = -np.array([[0, -q[2], q[1]], [q[2], 0, -q[0]], [-q[1], q[0], 0]])
+        A += J.T @ J / (s * s)
+    try:
+        return np.linalg.inv(A)
+    except np.linalg.LinAlgError:
+        return np.full((6, 6), np.nan)
+
+
+def fit_marker_set(model_pts: np.ndarray, measured_pts: np.ndarray, tol: float = 0.004,
+                   sigmas: np.ndarray | None = None) -> MarkerFit:
+    """Rigid pose of a marker body from measured markers, any 3 or more; rows of NaN are missing markers.
+
+    The fit uses all present markers; if its largest residual exceeds `tol`, every subset with one marker fewer
+    (down to 3) is tried and the best consistent one kept (the dropped markers are reported as rejected). With only
+    3 markers present, the check is the residual of the 3-point fit (inter-marker distances must match the model).
+
+    Args:
+        model_pts: (N, 3) markers in the body frame (m).
+        measured_pts: (N, 3) measured markers (m); NaN rows are missing.
+        tol: largest per-marker residual (m) accepted.
+        sigmas: (N,) per-marker position noise (m) for the covariance (default tol/3).
+
+    Returns:
+        MarkerFit with ok False and a reason when fewer than 3 markers are present or no subset is consistent.
+    """
+    M = np.asarray(model_pts, float)
+    Q = np.asarray(measured_pts, float)
+    if M.shape != Q.shape or M.ndim != 2 or M.shape[1] != 3:
+        raise MarkerError(f"model {M.shape} and measured {Q.shape} must both be (N, 3)")
+    sig = np.full(M.shape[0], tol / 3.0) if sigmas is None else np.asarray(sigmas, float)
+    present = [i for i in range(M.shape[0]) if np.all(np.isfinite(Q[i]))]
+    if len(present) < 3:
+        return MarkerFit(False, reason=f"only {len(present)} marker(s) measured; need 3")
+    best: tuple[float, tuple[int, ...], np.ndarray, np.ndarray, float] | None = None
+    for k in range(len(present), 2, -1):
+        for sub in combinations(present, k):
+            idx = list(sub)
+            try:
+                R, t, rms = fit_rigid_transform(M[idx], Q[idx])
+            except RigidFitError:
+                continue
+            worst = float(residuals(R, t, M[idx], Q[idx]).max())
+            if worst <= tol and (best is None or rms < best[0]):
+                best = (rms, sub, R, t, worst)
+        if best is not None:
+            break
+    if best is None:
+        return MarkerFit(False, reason=f"no consistent subset of markers {present} within {tol * 1e3:.1f} mm")
+    rms, sub, R, t, _ = best
+    T = np.eye(4)
+    T[:3, :3], T[:3, 3] = R, t
+    cov = pose_covariance(R, M[list(sub)], sig[list(sub)])
+    rejected = tuple(i for i in present if i not in sub)
+    return MarkerFit(True, T, rms, tuple(sub), rejected, cov)
+
+
+@dataclass
+class MarkerObservation:
+    """One detected marker blob: centroid pixel, pixel count, 3D point in base (NaN if no valid depth)."""
+
+    index: int
+    pixel: np.ndarray
+    area: int
+    point: np.ndarray
+    n_depth: int
+
+
+def _hue_of(rgb01: np.ndarray) -> float:
+    px = np.clip(np.asarray(rgb01, float) * 255, 0, 255).astype(np.uint8).reshape(1, 1, 3)
+    return float(cv2.cvtColor(px, cv2.COLOR_RGB2HSV)[0, 0, 0])
+
+
+class MarkerDetector:
+    """Finds the layout's coloured discs in an RGB image, lifts them with the aligned depth, fits the plate pose.
+
+    Args:
+        layout: marker layout in {P}.
+        camera: the colour camera (aligned depth shares it).
+        hue_tol: accepted hue distance (OpenCV units, 0..180).
+        min_sat, min_val: minimum saturation / value (0..255) of a marker pixel.
+        min_area: smallest blob (px).
+        tol: largest per-marker fit residual (m).
+        depth_rel_sigma: depth noise relative to range, for the covariance.
+    """
+
+    def __init__(self, layout: MarkerLayout, camera: CameraModel, hue_tol: float = 10.0, min_sat: int = 90,
+                 min_val: int = 50, min_area: int = 6, tol: float = 0.006, depth_rel_sigma: float = 0.01) -> None:
+        self.layout = layout
+        self.camera = camera
+        self.hues = np.array([_hue_of(c) for c in layout.rgb])
+        self.hue_tol = hue_tol
+        self.min_sat, self.min_val, self.min_area = min_sat, min_val, min_area
+        self.tol = tol
+        self.depth_rel_sigma = depth_rel_sigma
+        self.rejected_fits = 0
+        self.missing_markers = 0
+
+    def detect(self, rgb: np.ndarray, depth_m: np.ndarray, roi: Sequence[float] | None = None
+               ) -> list[MarkerObservation | None]:
+        """One observation (or None) per layout marker.
+
+        Args:
+            rgb: (H, W, 3) uint8 RGB.
+            depth_m: (H, W) depth in m (NaN/0 invalid), aligned to rgb.
+            roi: optional box (u0, v0, u1, v1) in pixels to search in (e.g. the detector's plate box).
+
+        Raises:
+            MarkerError: rgb and depth sizes differ or do not match the camera.
+        """
+        if rgb.ndim != 3 or rgb.shape[2] != 3 or rgb.shape[:2] != depth_m.shape:
+            raise MarkerError(f"rgb {rgb.shape} and depth {depth_m.shape} are not an aligned pair")
+        H, W = depth_m.shape
+        if (W, H) != (self.camera.width, self.camera.height):
+            raise MarkerError(f"image {W}x{H} does not match camera {self.camera.width}x{self.camera.height}")
+        u0, v0, u1, v1 = 0, 0, W, H
+        if roi is not None:
+            u0, v0 = max(int(np.floor(roi[0])), 0), max(int(np.floor(roi[1])), 0)
+            u1, v1 = min(int(np.ceil(roi[2])) + 1, W), min(int(np.ceil(roi[3])) + 1, H)
+            if u1 <= u0 or v1 <= v0:
+                return [None] * len(self.layout.names)
+        hsv = cv2.cvtColor(np.ascontiguousarray(rgb[v0:v1, u0:u1]), cv2.COLOR_RGB2HSV)
+        h = hsv[:, :, 0].astype(np.int16)
+        sv_ok = (hsv[:, :, 1] >= self.min_sat) & (hsv[:, :, 2] >= self.min_val)
+        d = depth_m[v0:v1, u0:u1]
+        out: list[MarkerObservation | None] = []
+        for k, hue in enumerate(self.hues):
+            dh = np.abs(h - int(round(hue)))
+            dh = np.minimum(dh, 180 - dh)
+            mask = (sv_ok & (dh <= self.hue_tol)).astype(np.uint8)
+            n, labels, stats, cents = cv2.connectedComponentsWithStats(mask, connectivity=8)
+            if n <= 1:
+                out.append(None)
+                continue
+            j = 1 + int(np.argmax(stats[1:, cv2.CC_STAT_AREA]))
+            area = int(stats[j, cv2.CC_STAT_AREA])
+            if area < self.min_area:
+                out.append(None)
+                continue
+            vv, uu = np.nonzero(labels == j)
+            z = d[vv, uu]
+            good = np.isfinite(z) & (z > 0)
+            point = np.full(3, np.nan)
+            nd = int(good.sum())
+            if nd >= 3:
+                zg = z[good]
+                med = float(np.median(zg))
+                keep = np.abs(zg - med) <= max(3.0 * self.depth_rel_sigma * med, 0.004)
+                if keep.sum() >= 3:
+                    uv = np.stack([uu[good][keep] + u0, vv[good][keep] + v0], axis=1).astype(float)
+                    pts = self.camera.back_project(uv, zg[keep])
+                    point = pts.mean(axis=0)
+                    nd = int(keep.sum())
+            out.append(MarkerObservation(k, np.array([cents[j][0] + u0, cents[j][1] + v0]), area, point, nd))
+        return out
+
+    def estimate(self, rgb: np.ndarray, depth_m: np.ndarray, roi: Sequence[float] | None = None
+                 ) -> tuple[MarkerFit, list[MarkerObservation | None]]:
+        """Plate pose T_base_plate from one aligned RGB-D pair (see `detect` and `fit_marker_set`)."""
+        obs = self.detect(rgb, depth_m, roi)
+        meas = np.full((len(obs), 3), np.nan)
+        sig = np.full(len(obs), 1e-3)
+        for k, o in enumerate(obs):
+            if o is None or not np.all(np.isfinite(o.point)):
+                self.missing_markers += 1
+                continue
+            meas[k] = o.point
+            z = float(self.camera.to_camera(o.point)[2])
+            sig[k] = max(self.depth_rel_sigma * z / np.sqrt(max(o.n_depth, 1)), 2e-4)
+        fit = fit_marker_set(self.layout.points, meas, self.tol, sig)
+        if not fit.ok:
+            self.rejected_fits += 1
+        return fit, obs
+
+
+def pose_from_transform(T: np.ndarray) -> np.ndarray:
+    """[x, y, z, α, β, γ] (m, rad; Z-Y-X Tait–Bryan as seed 000 eq 38) of a 4x4 transform."""
+    R = np.asarray(T)[:3, :3]
+    beta = float(np.arcsin(np.clip(-R[2, 0], -1.0, 1.0)))
+    alpha = float(np.arctan2(R[1, 0], R[0, 0]))
+    gamma = float(np.arctan2(R[2, 1], R[2, 2]))
+    return np.array([T[0, 3], T[1, 3], T[2, 3], alpha, beta, gamma])
+
+
+def quaternion_from_matrix(R: np.ndarray) -> np.ndarray:
+    """Unit quaternion (x, y, z, w) of a rotation matrix."""
+    R = np.asarray(R, float)
+    tr = np.trace(R)
+    if tr > 0:
+        s = np.sqrt(tr + 1.0) * 2
+        q = [(R[2, 1] - R[1, 2]) / s, (R[0, 2] - R[2, 0]) / s, (R[1, 0] - R[0, 1]) / s, 0.25 * s]
+    elif R[0, 0] > R[1, 1] and R[0, 0] > R[2, 2]:
+        s = np.sqrt(1.0 + R[0, 0] - R[1, 1] - R[2, 2]) * 2
+        q = [0.25 * s, (R[0, 1] + R[1, 0]) / s, (R[0, 2] + R[2, 0]) / s, (R[2, 1] - R[1, 2]) / s]
+    elif R[1, 1] > R[2, 2]:
+        s = np.sqrt(1.0 + R[1, 1] - R[0, 0] - R[2, 2]) * 2
+        q = [(R[0, 1] + R[1, 0]) / s, 0.25 * s, (R[1, 2] + R[2, 1]) / s, (R[0, 2] - R[2, 0]) / s]
+    else:
+        s = np.sqrt(1.0 + R[2, 2] - R[0, 0] - R[1, 1]) * 2
+        q = [(R[0, 2] + R[2, 0]) / s, (R[1, 2] + R[2, 1]) / s, 0.25 * s, (R[1, 0] - R[0, 1]) / s]
+    q = np.array(q)
+    return q / np.linalg.norm(q)
