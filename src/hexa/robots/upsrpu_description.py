@@ -45,7 +45,8 @@ class UpsrpuDescription:
     actuator_wn: float
     actuator_damping: float
     actuator_v_max: float
-    actuator_force_gain: float
+    actuator_mass: float
+    actuator_stiffness: float
     home: np.ndarray                  # (4,)
     v_translation: float
     v_rotation: float
@@ -115,7 +116,8 @@ def load_upsrpu(path: str | Path | None = None) -> UpsrpuDescription:
     wn = require_float(data, "actuators.wn", positive=True)
     damping = require_float(data, "actuators.damping", positive=True)
     v_max = require_float(data, "actuators.v_max", positive=True)
-    force_gain = require_float(data, "actuators.force_gain", positive=True)
+    mass = require_float(data, "actuators.effective_mass", positive=True)
+    stiffness = require_float(data, "actuators.axial_stiffness", positive=True)
     home = require_array(data, "trajectories.home", (4,))
     v_tr = require_float(data, "trajectories.v_translation", positive=True, hi=1.0)
     v_rot = require_float(data, "trajectories.v_rotation", positive=True, hi=1.0)
@@ -137,7 +139,8 @@ def load_upsrpu(path: str | Path | None = None) -> UpsrpuDescription:
         path=str(p), geometry=g, base_joints=_read_only(base), platform_joints=_read_only(plat),
         q_min=q_min, q_max=q_max, spherical_max=spherical_max, det_jd_limit=det_lim, omega_limit=om_lim,
         nu_d=nu_d, t_s=t_s, wait_before_enable=wait, release_window=window, actuator_wn=wn,
-        actuator_damping=damping, actuator_v_max=v_max, actuator_force_gain=force_gain, home=home,
+        actuator_damping=damping, actuator_v_max=v_max, actuator_mass=mass,
+        actuator_stiffness=stiffness, home=home,
         v_translation=v_tr, v_rotation=v_rot, dwell_start=dwell, singular_poses=_read_only(np.array(poses)),
         singular_names=tuple(names), _raw=data,
     )
