@@ -1,0 +1,172 @@
+"""`hexa record` and `hexa play`: MCAP rosbag2 recording of live topics (raw CDR) and playback."""
+from __future__ import annotations
+
+import argparse
+import json
+import signal
+import sys
+import time
+
+SKIP_BY_DEFAULT = {"/rosout", "/parameter_events"}
+
+
+def register(sub: argparse._SubParsersAction) -> None:
+    pr = sub.add_parser("record", help="record live topics to an MCAP rosbag2 (closed cleanly on Ctrl-C)")
+    pr.add_argument("topics", nargs="*", help="topics to record (default: every topic, discovered continuously)")
+    pr.add_argument("-o", "--output", required=True, help="bag directory to create (must not exist)")
+    pr.add_argument("--duration", type=float, default=0.0, help="stop after this many seconds (0 = until Ctrl-C)")
+    pr.add_argument("--use-sim-time", action="store_true", help="stamp messages with /clock time")
+    pr.add_argument("--json", action="store_true", help="print a JSON summary at the end")
+    pr.set_defaults(func=run_record)
+
+    pp = sub.add_parser("play", help="publish the messages of a bag")
+    pp.add_argument("bag")
+    pp.add_argument("--rate", type=float, default=1.0, help="playback speed factor (0 = as fast as possible)")
+    pp.add_argument("--clock", action="store_true", help="publish /clock from the bag's time (for sim-time nodes)")
+    pp.add_argument("--topics", nargs="*", help="only these topics")
+    pp.add_argument("--wait", type=float, default=1.0, help="seconds to let subscribers connect before playing")
+    pp.add_argument("--json", action="store_true", help="print a JSON summary at the end")
+    pp.set_defaults(func=run_play)
+
+
+def _init(name: str, sim_time: bool = False):
+    from hexa_bringup.rosenv import apply_defaults
+
+    apply_defaults()
+    import os
+
+    import rclpy
+    from rclpy.parameter import Parameter
+
+    rclpy.init(signal_handler_options=rclpy.signals.SignalHandlerOptions.NO)
+    node = rclpy.create_node(f"{name}_{os.getpid()}", start_parameter_services=False,
+                             parameter_overrides=[Parameter("use_sim_time", value=sim_time)])
+    return rclpy, node
+
+
+def run_record(args: argparse.Namespace) -> int:
+    from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
+
+    from hexa_bringup.bag import BagError, BagRecorder
+    from hexa_bringup.msgutil import get_message_class
+
+    stop = False
+
+    def on_signal(_sig, _frm) -> None:
+        nonlocal stop
+        stop = True
+
+    signal.signal(signal.SIGINT, on_signal)
+    signal.signal(signal.SIGTERM, on_signal)
+    rclpy, node = _init("hexa_record", args.use_sim_time)
+    wanted = {t if t.startswith("/") else "/" + t for t in args.topics}
+    try:
+        recorder = BagRecorder(args.output)
+    except BagError as exc:
+        print(f"hexa record: {exc}", file=sys.stderr)
+        return 2
+    subs = {}
+    with recorder:
+        start = time.monotonic()
+        next_scan = 0.0
+        try:
+            while not stop and rclpy.ok():
+                now = time.monotonic()
+                if now >= next_scan:
+                    next_scan = now + 0.5
+                    for topic, types in node.get_topic_names_and_types():
+                        if topic in subs or (wanted and topic not in wanted) or (not wanted and topic in SKIP_BY_DEFAULT):
+                            continue
+                        infos = node.get_publishers_info_by_topic(topic)
+                        if not infos:
+                            continue
+                        reliable = all(i.qos_profile.reliability == ReliabilityPolicy.RELIABLE for i in infos)
+                        latched = all(i.qos_profile.durability == DurabilityPolicy.TRANSIENT_LOCAL for i in infos)
+                        try:
+                            cls = get_message_class(types[0])
+                            recorder.add_topic(topic, types[0], reliable, latched)
+                        except Exception as exc:  # noqa: BLE001 - keep recording the rest, say why
+                            print(f"hexa record: skipping {topic}: {exc}", file=sys.stderr)
+                            subs[topic] = None
+                            continue
+                        qos = QoSProfile(depth=100, reliability=ReliabilityPolicy.RELIABLE if reliable
+                                         else ReliabilityPolicy.BEST_EFFORT,
+                                         durability=DurabilityPolicy.TRANSIENT_LOCAL if latched
+                                         else DurabilityPolicy.VOLATILE)
+
+                        def on_raw(data: bytes, t=topic) -> None:
+                            recorder.write(t, node.get_clock().now().nanoseconds, data)
+
+                        subs[topic] = node.create_subscription(cls, topic, on_raw, qos, raw=True)
+                        print(f"hexa record: recording {topic} [{types[0]}]", file=sys.stderr, flush=True)
+                rclpy.spin_once(node, timeout_sec=0.05)
+                if args.duration and now - start >= args.duration:
+                    break
+        finally:
+            counts = dict(recorder.counts)
+    node.destroy_node()
+    if rclpy.ok():
+        rclpy.shutdown()
+    if args.json:
+        print(json.dumps({"bag": args.output, "counts": counts}))
+    else:
+        print(f"hexa record: wrote {sum(counts.values())} messages on {len(counts)} topics to {args.output}")
+    return 0
+
+
+def run_play(args: argparse.Namespace) -> int:
+    from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
+    from rosgraph_msgs.msg import Clock
+
+    from hexa_bringup.bag import BagError, bag_topics, paced, read_bag
+    from hexa_bringup.msgutil import get_message_class
+
+    try:
+        topics = bag_topics(args.bag)
+    except Exception as exc:  # noqa: BLE001
+        print(f"hexa play: cannot open bag {args.bag}: {exc}", file=sys.stderr)
+        return 2
+    stop = False
+
+    def on_signal(_sig, _frm) -> None:
+        nonlocal stop
+        stop = True
+
+    signal.signal(signal.SIGINT, on_signal)
+    signal.signal(signal.SIGTERM, on_signal)
+    rclpy, node = _init("hexa_play")
+    selected = [t for t in topics if not args.topics or t in args.topics]
+    pubs = {}
+    for topic in selected:
+        msgtype, _count, reliable = topics[topic]
+        qos = QoSProfile(depth=100, reliability=ReliabilityPolicy.RELIABLE if reliable else
+                         ReliabilityPolicy.BEST_EFFORT, durability=DurabilityPolicy.VOLATILE)
+        pubs[topic] = node.create_publisher(get_message_class(msgtype), topic, qos)
+    clock_pub = node.create_publisher(Clock, "/clock", 10) if args.clock else None
+    end = time.monotonic() + args.wait
+    while time.monotonic() < end:
+        rclpy.spin_once(node, timeout_sec=0.05)
+    sent = 0
+    try:
+        for topic, _msgtype, stamp, data in paced(read_bag(args.bag, selected), args.rate):
+            if stop:
+                break
+            if clock_pub is not None:
+                msg = Clock()
+                msg.clock.sec, msg.clock.nanosec = divmod(stamp, 1_000_000_000)
+                clock_pub.publish(msg)
+            pubs[topic].publish(data)
+            sent += 1
+    except BagError as exc:
+        print(f"hexa play: {exc}", file=sys.stderr)
+        return 2
+    finally:
+        time.sleep(0.3)  # let the last reliable messages go out
+        node.destroy_node()
+        if rclpy.ok():
+            rclpy.shutdown()
+    if args.json:
+        print(json.dumps({"bag": args.bag, "published": sent}))
+    else:
+        print(f"hexa play: published {sent} messages from {args.bag}")
+    return 0
