@@ -1,0 +1,189 @@
+"""ROS-free logic of the driver node: angle <-> pulse calibration, command checking, currents and torques.
+
+    pulse_us = zero_us + us_per_rad * (zeta - zeta_ref)       per servo (config/driver.yaml `servos`)
+    I        = sensor model (counts -> A), I - I_0 after the zero-current calibration
+    tau      = K_t * (I - I_0)                                (seed 000 §4: torque from the measured current)
+"""
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass, field
+from typing import Sequence
+
+import numpy as np
+
+from hexa.protocol.sensor_model import CurrentSensorModel
+
+N_JOINTS = 6
+JOINT_NAMES = tuple(f"arm_{i}" for i in range(1, N_JOINTS + 1))
+
+
+class DriverConfigError(ValueError):
+    """Invalid driver configuration (the message names the key and value)."""
+
+
+class CommandRejected(ValueError):
+    """A joint command that cannot be executed (NaN, wrong names or size); the message says why."""
+
+
+@dataclass(frozen=True)
+class ServoCalibration:
+    """Linear angle <-> pulse-width map of one servo and its pulse limits (us)."""
+
+    zero_us: float          # pulse width at zeta = zeta_ref
+    us_per_rad: float       # signed slope (negative if the horn turns the other way)
+    zeta_ref: float = 0.0   # rad
+    min_us: int = 500
+    max_us: int = 2500
+
+    def __post_init__(self) -> None:
+        if self.us_per_rad == 0 or not math.isfinite(self.us_per_rad):
+            raise DriverConfigError(f"us_per_rad {self.us_per_rad} must be finite and non-zero")
+        if not 0 < self.min_us <= self.max_us <= 0xFFFF:
+            raise DriverConfigError(f"pulse limits min_us={self.min_us} max_us={self.max_us} invalid")
+
+    def pulse_from_angle(self, zeta: float) -> int:
+        """Pulse width (us, rounded, clamped to the limits) for the arm angle `zeta` (rad)."""
+        p = self.zero_us + self.us_per_rad * (zeta - self.zeta_ref)
+        return int(min(max(round(p), self.min_us), self.max_us))
+
+    def angle_from_pulse(self, pulse_us: float) -> float:
+        """Arm angle (rad) commanded by a pulse width (us)."""
+        return self.zeta_ref + (pulse_us - self.zero_us) / self.us_per_rad
+
+
+def servo_calibrations_from_config(items: Sequence[dict]) -> list[ServoCalibration]:
+    """Six ServoCalibration from the `servos` list of driver.yaml.
+
+    Raises:
+        DriverConfigError: not six entries, or an entry with unknown/missing keys.
+    """
+    if len(items) != N_JOINTS:
+        raise DriverConfigError(f"servos: expected {N_JOINTS} entries, got {len(items)}")
+    out = []
+    for i, d in enumerate(items):
+        try:
+            out.append(ServoCalibration(**{k: (int(v) if k in ("min_us", "max_us") else float(v))
+                                           for k, v in d.items()}))
+        except TypeError as exc:
+            raise DriverConfigError(f"servos[{i}]: {exc}") from exc
+    return out
+
+
+@dataclass
+class CommandCounters:
+    accepted: int = 0
+    rejected_nan: int = 0
+    rejected_names: int = 0
+    clamped: int = 0
+    slew_limited: int = 0
+    coalesced: int = 0
+
+
+@dataclass
+class DriverCore:
+    """Command and telemetry conversions of the driver (one instance per robot).
+
+    Args:
+        servos: six calibrations.
+        zeta_min, zeta_max: joint limits (rad, scalar or six), from the robot description.
+        k_t: torque constant(s) at the horn (N·m/A), from the robot description.
+        sensor: current-sensor model.
+        max_speed: slew limit (rad/s) between consecutive commands; 0 = none.
+        joint_names: names expected in joint_commands / used in joint_states.
+    """
+
+    servos: list[ServoCalibration]
+    zeta_min: np.ndarray
+    zeta_max: np.ndarray
+    k_t: np.ndarray
+    sensor: CurrentSensorModel = field(default_factory=CurrentSensorModel)
+    max_speed: float = 0.0
+    joint_names: tuple[str, ...] = JOINT_NAMES
+    offsets: np.ndarray = field(default_factory=lambda: np.zeros(N_JOINTS))
+
+    def __post_init__(self) -> None:
+        self.zeta_min = np.broadcast_to(np.asarray(self.zeta_min, float), (N_JOINTS,)).copy()
+        self.zeta_max = np.broadcast_to(np.asarray(self.zeta_max, float), (N_JOINTS,)).copy()
+        self.k_t = np.broadcast_to(np.asarray(self.k_t, float), (N_JOINTS,)).copy()
+        self.offsets = np.broadcast_to(np.asarray(self.offsets, float), (N_JOINTS,)).copy()
+        if np.any(self.zeta_min > self.zeta_max):
+            raise DriverConfigError(f"joint limits zeta_min {self.zeta_min} above zeta_max {self.zeta_max}")
+        self.counters = CommandCounters()
+        self.commanded = np.full(N_JOINTS, np.nan)   # last commanded angles (rad), NaN before the first
+        self._last_cmd_time: float | None = None
+
+    # ------------------------------------------------------------------------------------------ commands
+    def order_command(self, names: Sequence[str], positions: Sequence[float]) -> np.ndarray:
+        """Positions (6,) in joint order from a JointState's names/positions (empty names: given order).
+
+        Raises:
+            CommandRejected: wrong size, unknown/missing names, or a non-finite value.
+        """
+        pos = np.asarray(positions, dtype=float)
+        if len(names) == 0:
+            if pos.shape != (N_JOINTS,):
+                self.counters.rejected_names += 1
+                raise CommandRejected(f"{pos.size} positions without names; expected {N_JOINTS}")
+            ordered = pos
+        else:
+            if len(names) != len(pos):
+                self.counters.rejected_names += 1
+                raise CommandRejected(f"{len(names)} names but {len(pos)} positions")
+            index = {n: i for i, n in enumerate(names)}
+            missing = [n for n in self.joint_names if n not in index]
+            if missing:
+                self.counters.rejected_names += 1
+                raise CommandRejected(f"joint command lacks {missing} (got {list(names)})")
+            ordered = np.array([pos[index[n]] for n in self.joint_names])
+        if not np.all(np.isfinite(ordered)):
+            self.counters.rejected_nan += 1
+            raise CommandRejected(f"non-finite joint command {ordered.tolist()}")
+        return ordered
+
+    def limit_command(self, zeta: np.ndarray, now: float | None = None) -> np.ndarray:
+        """Clamp to the joint limits and (if max_speed > 0) to the slew limit from the last command."""
+        now = time.monotonic() if now is None else now
+        z = np.clip(zeta, self.zeta_min, self.zeta_max)
+        if np.any(z != zeta):
+            self.counters.clamped += 1
+        if self.max_speed > 0 and self._last_cmd_time is not None and np.all(np.isfinite(self.commanded)):
+            step = self.max_speed * max(now - self._last_cmd_time, 1e-3)
+            zs = np.clip(z, self.commanded - step, self.commanded + step)
+            if np.any(zs != z):
+                self.counters.slew_limited += 1
+            z = zs
+        return z
+
+    def pulses_from_angles(self, zeta: np.ndarray) -> list[int]:
+        """Pulse widths (us) for six arm angles (rad)."""
+        return [s.pulse_from_angle(float(a)) for s, a in zip(self.servos, zeta)]
+
+    def accept(self, zeta: np.ndarray, now: float | None = None) -> list[int]:
+        """Record `zeta` as the commanded position and return its pulse widths (us)."""
+        self.commanded = np.asarray(zeta, float).copy()
+        self._last_cmd_time = time.monotonic() if now is None else now
+        self.counters.accepted += 1
+        return self.pulses_from_angles(self.commanded)
+
+    @property
+    def last_command_time(self) -> float | None:
+        return self._last_cmd_time
+
+    # ------------------------------------------------------------------------------------------ telemetry
+    def currents_from_counts(self, counts: Sequence[int]) -> np.ndarray:
+        """Motor currents I - I_0 (A) from six raw ADC counts."""
+        return self.sensor.current_from_counts(counts) - self.offsets
+
+    def torques_from_currents(self, currents: np.ndarray) -> np.ndarray:
+        """Actuator torques tau = K_t (I - I_0) (N·m) from offset-corrected currents (A)."""
+        return self.k_t * currents
+
+    def calibrate_offsets(self, raw_counts: np.ndarray) -> np.ndarray:
+        """Set I_0 to the mean current of `raw_counts` (N, 6) taken at rest; returns the offsets (A)."""
+        c = np.asarray(raw_counts, dtype=float)
+        if c.ndim != 2 or c.shape[1] != N_JOINTS or c.shape[0] == 0:
+            raise CommandRejected(f"calibration needs (N>0, 6) samples, got shape {c.shape}")
+        self.offsets = self.sensor.current_from_counts(c).mean(axis=0)
+        return self.offsets.copy()

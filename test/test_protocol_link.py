@@ -1,0 +1,107 @@
+"""Host-side links (hexa.protocol.link) against the pty emulators: handshake, streaming, gaps, reconnect."""
+from __future__ import annotations
+
+import threading
+import time
+
+import pytest
+
+from hexa.protocol import frames as fr
+from hexa.protocol.emulator import MegaEmulator, UnoEmulator
+from hexa.protocol.link import CONNECTED, DISCONNECTED, CurrentLink, LinkError, ServoLink
+
+
+def _wait(cond, timeout=3.0):
+    t_end = time.monotonic() + timeout
+    while time.monotonic() < t_end:
+        if cond():
+            return True
+        time.sleep(0.005)
+    return cond()
+
+
+def test_servo_link_configures_limits_and_commands_reach_board(tmp_path):
+    got = []
+    with UnoEmulator(on_targets=got.append, link=tmp_path / "uno") as uno:
+        with ServoLink(uno.port, min_us=[600] * 6, max_us=[2400] * 6, watchdog_ms=300) as link:
+            assert link.wait_connected(3.0)
+            assert uno.min_us == [600] * 6 and uno.max_us == [2400] * 6 and uno.watchdog_ms == 300
+            assert link.set_targets([500, 1000, 1500, 2000, 2500, 1234])
+            assert _wait(lambda: got)
+            assert got[0] == (600, 1000, 1500, 2000, 2400, 1234)
+            assert _wait(lambda: link.status is not None and link.status.pulses_us == got[0])
+            assert link.status.flags & fr.FLAG_CLAMPED
+            assert _wait(lambda: link.stats.rtt_s == link.stats.rtt_s)  # a PONG measured the round trip
+            assert link.stats.crc_errors == 0 and link.stats.dropped_frames == 0
+
+
+def test_servo_link_refuses_a_current_board(tmp_path):
+    with MegaEmulator(link=tmp_path / "mega") as mega:
+        link = ServoLink(mega.port, hello_timeout=0.3, reconnect_period=0.05).start()
+        try:
+            time.sleep(0.5)
+            assert link.stats.state != CONNECTED
+            assert "expected a servo (Uno) board" in link.stats.last_error
+        finally:
+            link.stop()
+
+
+def test_request_reports_board_error_naming_it(tmp_path):
+    with UnoEmulator(link=tmp_path / "uno") as uno, ServoLink(uno.port) as link:
+        assert link.wait_connected(3.0)
+        with pytest.raises(LinkError, match="BAD_VALUE"):
+            link.request(fr.SET_LIMITS, fr.pack_limits([2000] * 6, [1000] * 6))
+
+
+def test_current_link_streams_without_gaps_and_counts_injected_drops(tmp_path):
+    drop = threading.Event()
+    dropped = []
+
+    def tx_filter(data: bytes) -> bytes:
+        if drop.is_set() and data[3] == fr.SAMPLE and len(dropped) < 5:
+            dropped.append(data)
+            return b""
+        return data
+
+    samples = []
+    with MegaEmulator(current_source=lambda t: [0.25] * 6, link=tmp_path / "mega", tx_filter=tx_filter) as mega:
+        with CurrentLink(mega.port, rate_hz=500, on_sample=lambda s, t, g: samples.append((s, g))) as link:
+            assert link.wait_connected(3.0)
+            assert _wait(lambda: len(samples) >= 100)
+            assert link.sample_gaps == 0
+            drop.set()
+            assert _wait(lambda: len(dropped) == 5 and len(samples) >= 200)
+            assert link.sample_gaps == 5
+            assert link.stats.dropped_frames == 5
+            assert sum(g for _, g in samples) == 5
+
+
+def test_unplug_replug_recovers_under_two_seconds(tmp_path):
+    samples = []
+    with MegaEmulator(link=tmp_path / "mega") as mega:
+        with CurrentLink(mega.port, rate_hz=200, on_sample=lambda s, t, g: samples.append(t)) as link:
+            assert link.wait_connected(3.0)
+            assert _wait(lambda: len(samples) > 10)
+            mega.unplug()
+            assert _wait(lambda: link.stats.state == DISCONNECTED, 1.0)
+            time.sleep(0.3)
+            n_before = len(samples)
+            t_replug = time.monotonic()
+            mega.replug()
+            assert _wait(lambda: len(samples) > n_before, 2.0)
+            recovery = samples[n_before] - t_replug
+            assert recovery < 2.0
+            assert link.stats.disconnects == 1 and link.stats.connects == 2
+            assert link.stats.last_reconnect_s < 2.5
+
+
+def test_stale_stream_marks_stale_then_reconnects(tmp_path):
+    with MegaEmulator(link=tmp_path / "mega") as mega:
+        states = []
+        with CurrentLink(mega.port, rate_hz=100, stale_timeout=0.2, drop_after=0.3, poll_period=0,
+                         ping_period=0, on_state=states.append) as link:
+            assert link.wait_connected(3.0)
+            mega.streaming = False   # the board silently stops sending (hung firmware)
+            assert _wait(lambda: "STALE" in states, 1.0)
+            assert _wait(lambda: link.stats.connects >= 2, 3.0)  # dropped, reopened, stream restarted
+            assert mega.streaming
