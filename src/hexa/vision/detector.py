@@ -180,7 +180,7 @@ def export_onnx(model, path: Path | str = ONNX_PATH) -> Path:
 
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", DeprecationWarning)
-            torch.onnx.export(model, dummy, str(path), input_names=["image"], output_names=["grid"],
+        torch.onnx.export(model, dummy, str(path), input_names=["image"], output_names=["grid"],
                           opset_version=17, dynamo=False)
     return path
 
