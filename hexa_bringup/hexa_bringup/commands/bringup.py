@@ -1,0 +1,59 @@
+"""`hexa bringup sim|robot|replay`: start the whole graph, each node its own supervised process."""
+from __future__ import annotations
+
+import argparse
+import sys
+from pathlib import Path
+
+
+def register(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser("bringup", help="start and supervise the node graph (sim | robot | replay BAG)")
+    p.add_argument("mode", choices=["sim", "robot", "replay"])
+    p.add_argument("bag", nargs="?", help="bag to replay (mode replay)")
+    p.add_argument("--ns", default="/hexa", help="namespace of the graph (default /hexa)")
+    p.add_argument("--params", default=None, help="ROS parameters YAML for all nodes (default: shipped config)")
+    p.add_argument("--graph", help="YAML list of {name, cmd, required, respawn} to run instead of the built-in graph")
+    p.add_argument("--uno", help="robot mode: serial port of the Arduino Uno (servos)")
+    p.add_argument("--mega", help="robot mode: serial port of the Arduino Mega (currents)")
+    p.add_argument("--cameras", nargs="*", default=[], help="robot mode: camera serial numbers (top side)")
+    p.add_argument("--rate", type=float, default=1.0, help="replay: playback rate")
+    p.add_argument("--log-dir", default=None, help="write each node's output to DIR/<node>.log")
+    p.add_argument("--duration", type=float, default=0.0, help="stop after this many seconds (0 = until Ctrl-C)")
+    p.add_argument("--status-every", type=float, default=5.0, help="seconds between status tables")
+    p.set_defaults(func=run)
+
+
+def run(args: argparse.Namespace) -> int:
+    from hexa_bringup.graphs import DEFAULT_PARAMS, build_graph, load_graph_file
+    from hexa_bringup.rosenv import ros_env
+    from hexa_bringup.supervisor import NodeSpec, Supervisor, SupervisorError
+
+    try:
+        if args.graph:
+            specs = load_graph_file(args.graph)
+        else:
+            node_args: dict[str, list[str]] = {}
+            if args.mode == "robot":
+                if not (args.uno and args.mega):
+                    raise SupervisorError("robot mode needs --uno PORT and --mega PORT (e.g. /dev/serial/by-id/...)")
+                node_args["driver"] = ["-p", f"uno_port:={args.uno}", "-p", f"mega_port:={args.mega}"]
+                for name, serial in zip(("camera_top", "camera_side"), args.cameras):
+                    node_args[name] = ["-p", "source:=realsense", "-p", f"serial:={serial}"]
+            params = Path(args.params) if args.params else DEFAULT_PARAMS
+            specs = build_graph(args.mode, args.ns, params, node_args)
+            if args.mode == "replay":
+                if not args.bag:
+                    raise SupervisorError("replay mode needs a BAG argument")
+                if not Path(args.bag).exists():
+                    raise SupervisorError(f"bag {args.bag} does not exist")
+                specs.insert(0, NodeSpec("play", [sys.executable, "-m", "hexa_bringup.cli", "play", args.bag,
+                                                  "--clock", "--rate", str(args.rate), "--wait", "3"],
+                                                  required=True, respawn=False, ends_graph=True))
+        sup = Supervisor(specs, ros_env(None, localhost_only=False), log_dir=args.log_dir,
+                         status_every=args.status_every)
+    except SupervisorError as exc:
+        print(f"hexa bringup: {exc}", file=sys.stderr)
+        return 2
+    return sup.run(duration=args.duration)
+
+

@@ -1,0 +1,97 @@
+"""The node graphs `hexa bringup` starts: which node modules run, with which arguments, per mode."""
+from __future__ import annotations
+
+import importlib.util
+import sys
+from pathlib import Path
+
+import yaml
+
+from hexa_bringup.supervisor import NodeSpec, SupervisorError
+
+CONFIG_DIR = Path(__file__).resolve().parent / "config"
+DEFAULT_PARAMS = CONFIG_DIR / "hexa_params.yaml"
+
+# name, module, required, modes
+NODES: list[tuple[str, str, bool, tuple[str, ...]]] = [
+    ("sim", "hexa_bringup.sim_node", True, ("sim",)),
+    ("driver", "hexa_driver.driver_node", True, ("sim", "robot")),
+    ("camera_top", "hexa_vision.camera_node", True, ("robot",)),
+    ("camera_side", "hexa_vision.camera_node", True, ("robot",)),
+    ("pose", "hexa_vision.pose_node", True, ("sim", "robot", "replay")),
+    ("observer", "hexa_dynamics.observer_node", True, ("sim", "robot", "replay")),
+    ("isolation", "hexa_vision.isolation_node", True, ("sim", "robot", "replay")),
+    ("rnea", "hexa_dynamics.rnea_node", True, ("sim", "robot", "replay")),
+    ("singularity", "hexa_dynamics.singularity_node", False, ("sim", "robot", "replay")),
+    ("trajectory", "hexa_dynamics.trajectory_node", False, ("sim", "robot")),
+]
+
+
+def module_available(module: str) -> bool:
+    """True when `module` can be imported (without importing it)."""
+    try:
+        return importlib.util.find_spec(module) is not None
+    except ModuleNotFoundError:
+        return False
+
+
+def ros_args(name: str, namespace: str, params: Path | None, sim_time: bool, extra: list[str] | None = None
+             ) -> list[str]:
+    """The `--ros-args` part of a node's command line."""
+    args = ["--ros-args", "-r", f"__ns:={namespace}", "-r", f"__node:={name}",
+            "-p", f"use_sim_time:={'true' if sim_time else 'false'}"]
+    if params is not None and params.is_file():
+        args += ["--params-file", str(params)]
+    return args + (extra or [])
+
+
+def build_graph(mode: str, namespace: str = "/hexa", params: Path | None = DEFAULT_PARAMS,
+                node_args: dict[str, list[str]] | None = None) -> list[NodeSpec]:
+    """NodeSpecs for `mode` in {"sim", "robot", "replay"}.
+
+    Raises:
+        SupervisorError: a required node's module is not installed (names it and the package to build).
+    """
+    if mode not in ("sim", "robot", "replay"):
+        raise SupervisorError(f"unknown bringup mode {mode!r}; use sim, robot or replay")
+    specs = []
+    missing = []
+    for name, module, required, modes in NODES:
+        if mode not in modes:
+            continue
+        if not module_available(module):
+            if required:
+                missing.append(f"{name} ({module})")
+            continue
+        extra = (node_args or {}).get(name, [])
+        cmd = [sys.executable, "-m", module] + ros_args(name, namespace, params, mode != "robot", extra)
+        specs.append(NodeSpec(name, cmd, required=required))
+    if missing:
+        raise SupervisorError(f"cannot bring up '{mode}': required node module(s) not installed: "
+                              f"{', '.join(missing)}. Run `make setup`; if the module does not exist in this "
+                              f"checkout, that node is not written yet (see README, Status).")
+    return specs
+
+
+def load_graph_file(path: str | Path) -> list[NodeSpec]:
+    """NodeSpecs from a YAML file: a list of {name, cmd: [..], required, respawn, ends_graph}.
+
+    Raises:
+        SupervisorError: the file is missing or malformed (naming the entry).
+    """
+    p = Path(path)
+    if not p.is_file():
+        raise SupervisorError(f"graph file {p} does not exist")
+    data = yaml.safe_load(p.read_text())
+    if not isinstance(data, list):
+        raise SupervisorError(f"graph file {p} must be a list of nodes")
+    specs = []
+    for i, item in enumerate(data):
+        if not isinstance(item, dict) or "name" not in item or "cmd" not in item:
+            raise SupervisorError(f"graph file {p}: entry {i} needs 'name' and 'cmd'")
+        cmd = item["cmd"]
+        if isinstance(cmd, str) or not all(isinstance(c, str) for c in cmd):
+            raise SupervisorError(f"graph file {p}: entry {item['name']!r}: 'cmd' must be a list of strings")
+        specs.append(NodeSpec(str(item["name"]), list(cmd), bool(item.get("required", True)),
+                              bool(item.get("respawn", True)), bool(item.get("ends_graph", False))))
+    return specs

@@ -1,0 +1,82 @@
+"""The bringup supervisor: status table, respawn with back-off, signal forwarding, failure of required nodes."""
+from __future__ import annotations
+
+import signal
+import subprocess
+import sys
+import time
+
+import yaml
+
+PY = sys.executable
+
+
+def _graph(tmp_path, nodes) -> str:
+    path = tmp_path / "graph.yaml"
+    path.write_text(yaml.safe_dump(nodes))
+    return str(path)
+
+
+def _bringup(procs, tmp_path, nodes, *extra):
+    env = dict(__import__("os").environ)
+    return procs.start([PY, "-m", "hexa_bringup.cli", "bringup", "sim", "--graph", _graph(tmp_path, nodes),
+                        "--log-dir", str(tmp_path / "logs"), "--status-every", "1", *extra], env)
+
+
+def test_crashing_node_is_respawned_with_growing_backoff_and_logged(procs, tmp_path):
+    nodes = [{"name": "steady", "cmd": [PY, "-c", "import time; time.sleep(60)"]},
+             {"name": "crashy", "cmd": [PY, "-c", "import time; time.sleep(0.2); raise SystemExit(3)"],
+              "required": False}]
+    sup = _bringup(procs, tmp_path, nodes, "--duration", "5")
+    out, err = sup.communicate(timeout=60)
+    assert sup.returncode == 0, out + err
+    respawns = [line for line in out.splitlines() if "crashy: exited with code 3" in line]
+    assert len(respawns) >= 3
+    delays = [float(line.rsplit("respawning in ", 1)[1].split()[0]) for line in respawns]
+    assert delays[:3] == [0.5, 1.0, 2.0]
+    assert "steady" in out and "running" in out  # status table
+    assert (tmp_path / "logs" / "crashy.log").exists()
+
+
+def test_required_node_that_cannot_start_makes_bringup_exit_nonzero_naming_it(procs, tmp_path):
+    nodes = [{"name": "steady", "cmd": [PY, "-c", "import time; time.sleep(60)"]},
+             {"name": "broken", "cmd": [PY, "-c", "raise SystemExit(1)"]}]
+    sup = _bringup(procs, tmp_path, nodes, "--duration", "30")
+    out, err = sup.communicate(timeout=60)
+    assert sup.returncode == 1
+    assert "FAILED: required node broken exited with code 1 3 times" in out
+
+
+def test_missing_executable_of_a_required_node_fails_with_its_name(procs, tmp_path):
+    nodes = [{"name": "ghost", "cmd": ["/nonexistent/hexa-node"]}]
+    sup = _bringup(procs, tmp_path, nodes, "--duration", "10")
+    out, _err = sup.communicate(timeout=60)
+    assert sup.returncode == 1 and "ghost" in out and "cannot start" in out
+
+
+def test_sigint_is_forwarded_to_every_node_which_stops_cleanly(procs, tmp_path):
+    marker = tmp_path / "stopped"
+    code = ("import signal, sys, time, pathlib\n"
+            "def h(s, f):\n"
+            f"    pathlib.Path({str(marker)!r} + sys.argv[1]).write_text('ok'); sys.exit(0)\n"
+            "signal.signal(signal.SIGINT, h)\n"
+            "time.sleep(60)\n")
+    nodes = [{"name": f"n{i}", "cmd": [PY, "-c", code, str(i)]} for i in range(3)]
+    sup = _bringup(procs, tmp_path, nodes)
+    time.sleep(3)
+    sup.send_signal(signal.SIGINT)
+    out, _err = sup.communicate(timeout=30)
+    assert sup.returncode == 0, out
+    assert all((tmp_path / f"stopped{i}").exists() for i in range(3))
+    assert "stopping 3 nodes (signal SIGINT)" in out
+
+
+def test_bringup_without_installed_nodes_or_with_a_bad_graph_file_says_why(tmp_path):
+    bad = tmp_path / "g.yaml"
+    bad.write_text("- {name: x}\n")
+    r = subprocess.run([PY, "-m", "hexa_bringup.cli", "bringup", "sim", "--graph", str(bad)], capture_output=True,
+                       text=True, timeout=60)
+    assert r.returncode == 2 and "needs 'name' and 'cmd'" in r.stderr
+    r = subprocess.run([PY, "-m", "hexa_bringup.cli", "bringup", "robot"], capture_output=True, text=True,
+                       timeout=60)
+    assert r.returncode == 2 and ("--uno" in r.stderr or "not installed" in r.stderr)
