@@ -1,0 +1,170 @@
+"""Simulated RGB-D cameras: one-pass MuJoCo rendering of colour + aligned depth, D435-like noise and quantisation.
+
+Depth model (per pixel, z = range along the optical axis in m):
+    z_noisy = z * (1 + depth_noise_rel * n),  n ~ N(0, 1)        (sigma grows with range: 1 % of z by default)
+    depth_mm = round(1000 * z_noisy)  (uint16),  0 where z < depth_min, z > depth_max or nothing was hit
+Colour model: rgb = clip(render + rgb_noise_sigma * n, 0, 255) (uint8), n ~ N(0, 1) per channel.
+Noise is drawn from a seeded bank of standard normals read at a random offset each frame (fast and deterministic).
+"""
+from __future__ import annotations
+
+import os
+from dataclasses import dataclass
+
+import numpy as np
+
+from hexa.sim.config import CameraConfig
+
+os.environ.setdefault("MUJOCO_GL", "egl")
+
+import mujoco  # noqa: E402  (MUJOCO_GL must be set before the import)
+
+
+class RenderError(RuntimeError):
+    """Rendering failed (no GL context, unknown camera)."""
+
+
+@dataclass(frozen=True)
+class CameraInfo:
+    """What a driver's camera_info would say: intrinsics, size, extrinsics of the optical frame in base."""
+
+    name: str
+    frame_id: str
+    K: np.ndarray
+    width: int
+    height: int
+    T_base_camera: np.ndarray
+
+    def project(self, points_base: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Pixel coordinates (N,2) (u right, v down) and optical depth z (N,) of base points (N,3)."""
+        p = np.atleast_2d(np.asarray(points_base, dtype=float))
+        R, t = self.T_base_camera[:3, :3], self.T_base_camera[:3, 3]
+        pc = (p - t) @ R
+        z = pc[:, 2]
+        uv = (pc[:, :2] / z[:, None]) * np.diag(self.K)[:2] + self.K[:2, 2]
+        return uv, z
+
+
+def camera_info_of(cfg: CameraConfig) -> CameraInfo:
+    """CameraInfo from a validated camera configuration."""
+    return CameraInfo(cfg.name, cfg.frame_id, cfg.K, cfg.width, cfg.height, cfg.T_base_camera)
+
+
+def mjcf_camera(cfg: CameraConfig) -> str:
+    """The MJCF <camera> element (MuJoCo cameras look along -z with y up: x = optical x, y = -optical y)."""
+    R = cfg.R_base_optical
+    x, y = R[:, 0], -R[:, 1]
+    pos = " ".join(f"{v:.6g}" for v in cfg.position)
+    xy = " ".join(f"{v:.9g}" for v in (*x, *y))
+    return (f'<camera name="{cfg.name}" mode="fixed" pos="{pos}" xyaxes="{xy}" fovy="{cfg.fovy_deg:.9g}" '
+            f'resolution="{cfg.width} {cfg.height}"/>')
+
+
+class NoiseBank:
+    """A fixed block of standard normals, read at a seeded random offset: cheap per-frame noise, reproducible."""
+
+    def __init__(self, size: int, seed: int) -> None:
+        self._rng = np.random.default_rng(seed)
+        self._bank = self._rng.standard_normal(2 * size).astype(np.float32)
+        self._size = size
+
+    def draw(self, n: int) -> np.ndarray:
+        """n standard normals (a view; do not modify)."""
+        if n > self._size:
+            return self._rng.standard_normal(n).astype(np.float32)
+        off = int(self._rng.integers(0, self._size))
+        return self._bank[off:off + n]
+
+    @property
+    def rng(self) -> np.random.Generator:
+        return self._rng
+
+
+class RGBDRenderer:
+    """Offscreen EGL renderer of one model: colour and depth read from a single render pass per camera."""
+
+    def __init__(self, model: mujoco.MjModel, width: int, height: int) -> None:
+        self.model = model
+        self.width, self.height = width, height
+        try:
+            self._gl = mujoco.GLContext(width, height)
+            self._gl.make_current()
+        except Exception as exc:  # noqa: BLE001 - any GL back-end failure
+            raise RenderError(f"cannot create a headless GL context (MUJOCO_GL={os.environ.get('MUJOCO_GL')}): "
+                              f"{exc}") from exc
+        self._con = mujoco.MjrContext(model, mujoco.mjtFontScale.mjFONTSCALE_150.value)
+        mujoco.mjr_setBuffer(mujoco.mjtFramebuffer.mjFB_OFFSCREEN.value, self._con)
+        self._con.readDepthMap = mujoco.mjtDepthMap.mjDEPTH_ZEROFAR
+        self._scene = mujoco.MjvScene(model, maxgeom=2000)
+        self._opt = mujoco.MjvOption()
+        self._cam = mujoco.MjvCamera()
+        self._cam.type = mujoco.mjtCamera.mjCAMERA_FIXED
+        self._rect = mujoco.MjrRect(0, 0, width, height)
+        self._rgb = np.empty((height, width, 3), np.uint8)
+        self._depth = np.empty((height, width), np.float32)
+        extent = model.stat.extent
+        znear = np.float32(model.vis.map.znear * extent)
+        zfar = np.float32(model.vis.map.zfar * extent)
+        c = -(zfar + znear) / (zfar - znear)
+        d = -(np.float32(2) * zfar * znear) / (zfar - znear)
+        self._c = float(np.float32(-0.5) * c - np.float32(0.5))
+        self._d = float(np.float32(-0.5) * d)
+        self._zfar = float(zfar)
+
+    def render(self, data: mujoco.MjData, camera_id: int) -> tuple[np.ndarray, np.ndarray]:
+        """Colour (H,W,3 uint8, row 0 at the top) and metric depth along the optical axis (H,W float32 m; inf =
+        nothing hit) from camera `camera_id`."""
+        if not 0 <= camera_id < self.model.ncam:
+            raise RenderError(f"camera id {camera_id} outside 0..{self.model.ncam - 1}")
+        self._gl.make_current()
+        self._cam.fixedcamid = camera_id
+        mujoco.mjv_updateScene(self.model, data, self._opt, None, self._cam, mujoco.mjtCatBit.mjCAT_ALL.value,
+                               self._scene)
+        mujoco.mjr_render(self._rect, self._scene, self._con)
+        mujoco.mjr_readPixels(self._rgb, self._depth, self._rect, self._con)
+        rgb = np.flipud(self._rgb).copy()
+        buf = np.flipud(self._depth).astype(np.float64)
+        with np.errstate(divide="ignore"):
+            depth = (self._d / (buf + self._c)).astype(np.float32)
+        depth[(buf <= 0.0) | (depth >= self._zfar * 0.999)] = np.inf
+        return rgb, depth
+
+    def close(self) -> None:
+        if getattr(self, "_gl", None) is not None:
+            try:
+                self._gl.make_current()
+                self._con.free()
+            finally:
+                self._gl.free()
+                self._gl = None
+
+    def __del__(self) -> None:
+        try:
+            self.close()
+        except Exception:  # noqa: BLE001
+            pass
+
+
+def depth_image_mm(depth_m: np.ndarray, cfg: CameraConfig, rel_sigma: float, noise: NoiseBank | None
+                   ) -> np.ndarray:
+    """uint16 depth in mm with range-proportional Gaussian noise and 1 mm quantisation; 0 = invalid (see module)."""
+    z = depth_m
+    valid = np.isfinite(z) & (z >= cfg.depth_min) & (z <= cfg.depth_max)
+    if noise is not None and rel_sigma > 0:
+        n = noise.draw(z.size).reshape(z.shape)
+        zn = np.where(valid, z, 0.0) * (1.0 + rel_sigma * n)
+    else:
+        zn = np.where(valid, z, 0.0)
+    mm = np.rint(zn * 1000.0)
+    mm = np.clip(mm, 0, 65535).astype(np.uint16)
+    mm[~valid] = 0
+    return mm
+
+
+def noisy_rgb(rgb: np.ndarray, sigma: float, noise: NoiseBank | None) -> np.ndarray:
+    """uint8 colour with additive Gaussian noise of `sigma` levels (see module)."""
+    if noise is None or sigma <= 0:
+        return rgb
+    n = noise.draw(rgb.size).reshape(rgb.shape)
+    out = rgb.astype(np.float32) + sigma * n
+    return np.clip(np.rint(out), 0, 255).astype(np.uint8)

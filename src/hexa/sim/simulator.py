@@ -1,0 +1,525 @@
+"""The simulated Hexa: MuJoCo physics of the closed-loop model, hobby servos, scripted collisions, RGB-D cameras.
+
+    sim = Simulator(scenario="plate", seed=3)          # builds at the circle's start pose, follows it by IK
+    while sim.time < 5.0:
+        sim.step(10)
+        s = sim.state()                                # ζ, ζ̇, ζ̈, plate pose/twist, servo torques τ (one instant)
+        truth = sim.ground_truth()                     # contact wrench/point/link/chain at that same instant
+    rgb, depth_mm = sim.render("cam_top")
+
+Exactness (for validating the dynamic model): every `step` runs mj_step1 (positions, velocities at t), sets the
+servo commands and the external wrench for time t, then mj_step2 (accelerations at t, integration to t + dt).
+`state()` and `ground_truth()` return that consistent sample at time t = `time - timestep`, with q, q̇ copied before
+the integration and q̈ (`qacc`), τ (`actuator_force`) computed in the same call. External forces enter as
+`xfrc_applied = [f, (p − com) × f]` on the touched body, i.e. exactly mj_applyFT at the point p.
+"""
+from __future__ import annotations
+
+import threading
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from hexa.sim.camera import (CameraInfo, NoiseBank, RGBDRenderer, RenderError, camera_info_of, depth_image_mm,
+                             noisy_rgb)
+from hexa.sim.config import CAMERA_NAMES, SimConfig, sim_config_of
+from hexa.sim.mjcf import HOME_POSE, PARK_POS, build_mjcf
+from hexa.sim.scenarios import ScenarioSpec, ScriptedCollision, draw_collision, load_scenario
+
+import mujoco  # noqa: E402  (after hexa.sim.camera set MUJOCO_GL)
+
+LINK_CODES = {"plate": 0, "arm": 1, "rod": 2, "none": 255}   # as hexa_msgs/Contact (UNKNOWN = 255: no contact)
+
+
+class SimulatorError(RuntimeError):
+    """Bad use of the simulator (unknown link/chain/camera, non-finite command); the message names the value."""
+
+
+@dataclass(frozen=True)
+class SimState:
+    """One instant of the simulated robot (SI units, base frame).
+
+    zeta, zeta_dot, zeta_ddot: arm angles ζ_i (rad) and their rates (6,); pose: plate [x y z α β γ] (Z-Y-X, eq 38);
+    twist: plate [v (m/s) of P, ω (rad/s)] in base; accel: [a of P, ω̇] in base; tau: servo torques at the horns
+    (N·m, what the current sensors measure as K_t·I); u: universal-joint angles (6,2) (rad); time (s).
+    """
+
+    time: float
+    zeta: np.ndarray
+    zeta_dot: np.ndarray
+    zeta_ddot: np.ndarray
+    pose: np.ndarray
+    twist: np.ndarray
+    accel: np.ndarray
+    tau: np.ndarray
+    targets: np.ndarray
+    u: np.ndarray
+
+
+@dataclass(frozen=True)
+class GroundTruth:
+    """The "force sensor": the external wrench at its point of application, at the same instant as `state()`.
+
+    link: "plate", "arm", "rod" or "none"; chain: 1..6 (0 for the plate or none); point: base (m); force (N);
+    torque: moment about `point` (N·m, zero for a point contact); plate_pose as SimState.pose.
+    """
+
+    time: float
+    link: str
+    chain: int
+    point: np.ndarray
+    force: np.ndarray
+    torque: np.ndarray
+    plate_pose: np.ndarray
+
+    @property
+    def in_contact(self) -> bool:
+        return self.link != "none" and float(np.linalg.norm(self.force)) > 0.0
+
+
+@dataclass
+class _Contact:
+    link: str
+    chain: int
+    body: int
+    local_point: np.ndarray      # in the body frame
+    force: np.ndarray            # base frame
+
+
+@dataclass
+class _Log:
+    time: list = field(default_factory=list)
+    force: list = field(default_factory=list)
+    point: list = field(default_factory=list)
+    link: list = field(default_factory=list)
+    chain: list = field(default_factory=list)
+    pose: list = field(default_factory=list)
+    zeta: list = field(default_factory=list)
+    tau: list = field(default_factory=list)
+
+
+def zyx_from_matrix(R: np.ndarray) -> np.ndarray:
+    """Z-Y-X angles (α, β, γ) of a rotation matrix, R = Rz(α)·Ry(β)·Rx(γ) (seed 000 eq 38)."""
+    beta = -np.arcsin(np.clip(R[2, 0], -1.0, 1.0))
+    return np.array([np.arctan2(R[1, 0], R[0, 0]), beta, np.arctan2(R[2, 1], R[2, 2])])
+
+
+def _desc_default(desc: Any) -> Any:
+    if desc is not None:
+        return desc
+    from hexa.robots.hexa_description import load_hexa
+
+    return load_hexa()
+
+
+class Simulator:
+    """The Hexa in MuJoCo (see module docstring).
+
+    Args:
+        desc: HexaDescription (default: load_hexa()).
+        seed: seeds the scenario draw (when `randomize`), sensor offsets and image/current noise.
+        scenario: None, a bundled name ("plate", "arm", "rod"), a YAML path, a ScenarioSpec or a ScriptedCollision.
+        cameras: create the offscreen renderer (needs EGL); False for physics-only runs.
+        pose: assembly/start pose when there is no scenario (default HOME_POSE).
+        drive: "trajectory" (servo targets = IK of the scenario's trajectory at sim time t; default with a
+            scenario) or "external" (targets only from `set_servo_targets`, e.g. the virtual Uno; default without).
+        randomize: draw the scenario's collision from its ranges with `seed` (False: nominal values).
+        settle: seconds simulated before t = 0 holding the start targets, so the robot starts at rest under gravity.
+    """
+
+    def __init__(self, desc: Any = None, seed: int = 0, scenario: Any = None, cameras: bool = True,
+                 pose: np.ndarray | None = None, drive: str | None = None, randomize: bool = False,
+                 settle: float = 0.5) -> None:
+        self.desc = _desc_default(desc)
+        self.config: SimConfig = sim_config_of(self.desc)
+        self.seed = int(seed)
+        self._rng = np.random.default_rng(self.seed)
+        self.collision: ScriptedCollision | None = None
+        if scenario is not None:
+            if isinstance(scenario, ScriptedCollision):
+                self.collision = scenario
+            else:
+                spec = scenario if isinstance(scenario, ScenarioSpec) else load_scenario(scenario)
+                self.collision = draw_collision(spec, np.random.default_rng([self.seed, 1]) if randomize else None)
+        self.drive = drive or ("trajectory" if self.collision is not None else "external")
+        if self.drive not in ("trajectory", "external"):
+            raise SimulatorError(f"drive must be 'trajectory' or 'external', got {self.drive!r}")
+        if self.drive == "trajectory" and self.collision is None:
+            raise SimulatorError("drive='trajectory' needs a scenario (it names the trajectory)")
+
+        self._traj_targets: np.ndarray | None = None
+        if self.collision is not None:
+            from hexa import trajectories
+            from hexa.kinematics import hexa6rus as kin
+
+            fn = trajectories.TRAJECTORIES[self.collision.trajectory]
+            start_pose = np.asarray(fn(0.0)[0], dtype=float)
+            if self.drive == "trajectory":
+                dt = self.config.timestep
+                duration = max(self.collision.end_time + 1.0, 1.0)
+                t = np.arange(int(np.ceil(duration / dt)) + 1) * dt
+                poses = np.asarray(fn(t)[0], dtype=float)
+                self._traj_targets = kin.inverse_kinematics_batch(self.desc, poses)
+        else:
+            start_pose = HOME_POSE if pose is None else np.asarray(pose, dtype=float)
+        self.start_pose = start_pose
+
+        self.xml = build_mjcf(self.desc, start_pose, self.config)
+        self.model = mujoco.MjModel.from_xml_string(self.xml)
+        self.data = mujoco.MjData(self.model)
+        m = self.model
+        self._arm_qpos = np.array([m.jnt_qposadr[m.joint(f"arm_{i}").id] for i in range(1, 7)])
+        self._arm_dof = np.array([m.jnt_dofadr[m.joint(f"arm_{i}").id] for i in range(1, 7)])
+        self._u_qpos = np.array([[m.jnt_qposadr[m.joint(f"u{k}_{i}").id] for k in (1, 2)] for i in range(1, 7)])
+        pj = m.joint("plate").id
+        self._plate_qpos = int(m.jnt_qposadr[pj])
+        self._plate_dof = int(m.jnt_dofadr[pj])
+        self._plate_body = m.body("plate").id
+        self._arm_body = [m.body(f"arm_{i}").id for i in range(1, 7)]
+        self._rod_body = [m.body(f"rod_{i}").id for i in range(1, 7)]
+        self._object_mocap = int(m.body_mocapid[m.body("object").id])
+        self._cam_ids = {name: m.camera(name).id for name in CAMERA_NAMES}
+        self._omega_max = float(self.desc.servo_speed_max)
+        self._dt = float(m.opt.timestep)
+        self._lock = threading.RLock()
+
+        zeta0 = self.data.qpos[self._arm_qpos].copy()
+        self._targets = zeta0.copy()          # commanded (before the slew limit)
+        self.data.ctrl[:] = zeta0
+        self._manual: _Contact | None = None
+        self._scripted: _Contact | None = None
+        self._scripted_dir: np.ndarray | None = None
+        self._log = _Log()
+        self._log_enabled = True
+        self._step_count = 0
+        self._tau_hist_t = np.full(4096, -np.inf)
+        self._tau_hist = np.zeros((4096, 6))
+
+        # settle under gravity at the start targets, then restart the clock at t = 0
+        mujoco.mj_forward(m, self.data)
+        n_settle = int(round(settle / self._dt))
+        log_was = self._log_enabled
+        self._log_enabled = False
+        for _ in range(n_settle):
+            self._step_once(use_schedule=False)
+        self._log_enabled = log_was
+        self.data.time = 0.0
+        self._step_count = 0
+        self._tau_hist_t[:] = -np.inf
+        self._sample = None
+        self._step_once(use_schedule=True, advance=False)
+
+        self._renderer: RGBDRenderer | None = None
+        self._noise: dict[str, NoiseBank] = {}
+        if cameras:
+            w = max(c.width for c in self.config.cameras.values())
+            h = max(c.height for c in self.config.cameras.values())
+            self._renderer = RGBDRenderer(m, w, h)
+            for k, name in enumerate(CAMERA_NAMES):
+                c = self.config.cameras[name]
+                self._noise[name] = NoiseBank(c.width * c.height * 3, seed=self.seed * 7919 + 17 * (k + 1))
+
+    # ------------------------------------------------------------------ time and stepping
+    @property
+    def time(self) -> float:
+        """Simulation time (s); 0 at the start of the trajectory."""
+        return float(self.data.time)
+
+    @property
+    def timestep(self) -> float:
+        return self._dt
+
+    def set_servo_targets(self, zeta: np.ndarray) -> None:
+        """Command the six servo angles ζ (rad); the servos move there at most at their speed limit.
+
+        Switches `drive` to "external" (a trajectory drive stops following its table).
+
+        Raises:
+            SimulatorError: not six finite values.
+        """
+        z = np.asarray(zeta, dtype=float).reshape(-1)
+        if z.shape != (6,) or not np.all(np.isfinite(z)):
+            raise SimulatorError(f"servo targets must be six finite angles (rad), got {zeta!r}")
+        with self._lock:
+            self._targets = z.copy()
+            self.drive = "external"
+
+    def step(self, n: int = 1) -> None:
+        """Advance the physics by `n` timesteps."""
+        with self._lock:
+            for _ in range(int(n)):
+                self._step_once(use_schedule=True)
+
+    def run_until(self, t_end: float) -> None:
+        """Step until `time >= t_end`."""
+        n = int(np.ceil((t_end - self.time) / self._dt - 1e-9))
+        if n > 0:
+            self.step(n)
+
+    def _step_once(self, use_schedule: bool, advance: bool = True) -> None:
+        m, d = self.model, self.data
+        mujoco.mj_step1(m, d)
+        t = float(d.time)
+        if use_schedule and self.drive == "trajectory" and self._traj_targets is not None:
+            k = min(self._step_count, len(self._traj_targets) - 1)
+            self._targets = self._traj_targets[k]
+        step = self._omega_max * self._dt
+        d.ctrl[:] = d.ctrl + np.clip(self._targets - d.ctrl, -step, step)
+        if use_schedule and self.collision is not None:
+            self._update_scripted(t)
+        d.xfrc_applied[:] = 0.0
+        for c in (self._scripted, self._manual):
+            if c is not None:
+                R = d.xmat[c.body].reshape(3, 3)
+                p = d.xpos[c.body] + R @ c.local_point
+                d.xfrc_applied[c.body, :3] += c.force
+                d.xfrc_applied[c.body, 3:] += np.cross(p - d.xipos[c.body], c.force)
+        qpos = d.qpos.copy()
+        qvel = d.qvel.copy()
+        if advance:
+            mujoco.mj_step2(m, d)
+        else:
+            mujoco.mj_forward(m, d)
+        self._sample = (t, qpos, qvel, d.qacc.copy(), d.actuator_force.copy(), d.ctrl.copy(), self._truth_now(t))
+        k = self._step_count % len(self._tau_hist_t)
+        self._tau_hist_t[k] = t
+        self._tau_hist[k] = self._sample[4]
+        if self._log_enabled:
+            tr = self._sample[6]
+            lg = self._log
+            lg.time.append(t)
+            lg.force.append(tr.force)
+            lg.point.append(tr.point)
+            lg.link.append(LINK_CODES[tr.link])
+            lg.chain.append(tr.chain)
+            lg.pose.append(tr.plate_pose)
+            lg.zeta.append(qpos[self._arm_qpos])
+            lg.tau.append(self._sample[4])
+        if advance:
+            self._step_count += 1
+
+    # ------------------------------------------------------------------ external forces
+    def _body_of(self, link: str, chain: int) -> int:
+        if link == "plate":
+            return self._plate_body
+        if link not in ("arm", "rod"):
+            raise SimulatorError(f"link must be 'plate', 'arm' or 'rod', got {link!r}")
+        if not 1 <= int(chain) <= 6:
+            raise SimulatorError(f"chain must be 1..6 for link {link!r}, got {chain!r}")
+        return (self._arm_body if link == "arm" else self._rod_body)[int(chain) - 1]
+
+    def apply_external_force(self, link: str, chain: int, point_base: np.ndarray, force_base: np.ndarray) -> None:
+        """Apply `force_base` (N, base frame) at `point_base` (m, base) on a link, from the next step on.
+
+        The point is attached to the link (it moves with it); the force keeps its direction in base. It acts until
+        `clear_external_force()` or the next call. Equivalent to mj_applyFT at the point.
+
+        Raises:
+            SimulatorError: unknown link or chain, non-finite vectors.
+        """
+        body = self._body_of(link, chain)
+        p = np.asarray(point_base, dtype=float).reshape(3)
+        f = np.asarray(force_base, dtype=float).reshape(3)
+        if not (np.all(np.isfinite(p)) and np.all(np.isfinite(f))):
+            raise SimulatorError(f"point {point_base!r} and force {force_base!r} must be finite")
+        with self._lock:
+            mujoco.mj_kinematics(self.model, self.data)
+            R = self.data.xmat[body].reshape(3, 3)
+            local = R.T @ (p - self.data.xpos[body])
+            self._manual = _Contact(link, 0 if link == "plate" else int(chain), body, local, f.copy())
+
+    def clear_external_force(self) -> None:
+        """Remove the force set by `apply_external_force`."""
+        with self._lock:
+            self._manual = None
+
+    def _update_scripted(self, t: float) -> None:
+        c = self.collision
+        assert c is not None
+        if t < c.onset - c.approach_time or t >= c.end_time + c.approach_time:
+            self._scripted = None if t >= c.end_time else self._scripted
+            return
+        if self._scripted_dir is None:
+            self._init_scripted_contact()
+        assert self._scripted is not None and self._scripted_dir is not None
+        self._scripted.force = self._scripted_dir * c.force_magnitude(t)
+
+    def _init_scripted_contact(self) -> None:
+        """Fix the contact point on the link and the force direction (base) when the object starts its approach."""
+        c = self.collision
+        assert c is not None
+        d = self.data
+        body = self._body_of(c.link, c.chain)
+        R = d.xmat[body].reshape(3, 3)
+        o = d.xpos[body]
+        ap = self.config.appearance
+        if c.link == "plate":
+            local_axis = _hexagon_border_point(self._plate_outline(), c.position)
+            radius = 0.0
+            axis = None
+        else:
+            length = float(self.desc.l_a if c.link == "arm" else self.desc.l_d)
+            local_axis = np.array([c.position * length, 0.0, 0.0])
+            radius = ap["arm_radius" if c.link == "arm" else "rod_radius"]
+            axis = R[:, 0]
+        p_world = o + R @ local_axis
+        inward = -np.array([p_world[0], p_world[1], 0.0])
+        if np.linalg.norm(inward) < 1e-9:
+            inward = np.array([1.0, 0.0, 0.0])
+        inward /= np.linalg.norm(inward)
+        ca, sa = np.cos(c.azimuth), np.sin(c.azimuth)
+        inward = np.array([ca * inward[0] - sa * inward[1], sa * inward[0] + ca * inward[1], 0.0])
+        direction = np.cos(c.elevation) * inward + np.array([0.0, 0.0, np.sin(c.elevation)])
+        if axis is not None:
+            direction = direction - (direction @ axis) * axis
+        direction /= np.linalg.norm(direction)
+        surface_local = local_axis - radius * (R.T @ direction)
+        self._scripted_dir = direction
+        self._scripted = _Contact(c.link, c.chain, body, surface_local, np.zeros(3))
+
+    def _plate_outline(self) -> np.ndarray:
+        from hexa.sim.mjcf import _plate_outline
+
+        return _plate_outline(self.desc)
+
+    # ------------------------------------------------------------------ reading
+    def _plate_pose_of(self, qpos: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        a = self._plate_qpos
+        R = np.zeros(9)
+        mujoco.mju_quat2Mat(R, qpos[a + 3:a + 7])
+        R = R.reshape(3, 3)
+        return np.concatenate([qpos[a:a + 3], zyx_from_matrix(R)]), R
+
+    def _truth_now(self, t: float) -> GroundTruth:
+        d = self.data
+        pose, _ = self._plate_pose_of(d.qpos)
+        for c in (self._scripted, self._manual):
+            if c is not None and np.any(c.force != 0.0):
+                R = d.xmat[c.body].reshape(3, 3)
+                p = d.xpos[c.body] + R @ c.local_point
+                return GroundTruth(t, c.link, c.chain, p.copy(), c.force.copy(), np.zeros(3), pose)
+        return GroundTruth(t, "none", 0, np.zeros(3), np.zeros(3), np.zeros(3), pose)
+
+    def state(self) -> SimState:
+        """The last consistent sample of the robot (time = `time - timestep`; see module docstring)."""
+        with self._lock:
+            t, qpos, qvel, qacc, tau, ctrl, _ = self._sample
+        pose, R = self._plate_pose_of(qpos)
+        b = self._plate_dof
+        twist = np.concatenate([qvel[b:b + 3], R @ qvel[b + 3:b + 6]])
+        accel = np.concatenate([qacc[b:b + 3], R @ qacc[b + 3:b + 6]])
+        return SimState(time=t, zeta=qpos[self._arm_qpos].copy(), zeta_dot=qvel[self._arm_dof].copy(),
+                        zeta_ddot=qacc[self._arm_dof].copy(), pose=pose, twist=twist, accel=accel,
+                        tau=tau.copy(), targets=ctrl.copy(), u=qpos[self._u_qpos].copy())
+
+    def ground_truth(self) -> GroundTruth:
+        """Contact wrench, point, link and chain, and plate pose at the instant of `state()`."""
+        with self._lock:
+            return self._sample[6]
+
+    def truth_log(self) -> dict[str, np.ndarray]:
+        """Every step's ground truth since t = 0 as arrays: time (N,), force (N,3), point (N,3), link (N,) codes
+        (0 plate, 1 arm, 2 rod, 255 none), chain (N,), plate_pose (N,6), zeta (N,6), tau (N,6)."""
+        with self._lock:
+            lg = self._log
+            n = len(lg.time)
+            return {"time": np.asarray(lg.time, float), "force": np.asarray(lg.force, float).reshape(n, 3),
+                    "point": np.asarray(lg.point, float).reshape(n, 3), "link": np.asarray(lg.link, np.uint8),
+                    "chain": np.asarray(lg.chain, np.uint8), "plate_pose": np.asarray(lg.pose, float).reshape(n, 6),
+                    "zeta": np.asarray(lg.zeta, float).reshape(n, 6), "tau": np.asarray(lg.tau, float).reshape(n, 6)}
+
+    def tau_at(self, t: float) -> np.ndarray:
+        """Servo torques (N·m) of the last step at or before sim time `t` (recent history; used by the Mega)."""
+        ts = self._tau_hist_t
+        ok = ts <= t + 1e-12
+        if not np.any(ok):
+            return self._tau_hist[int(np.argmax(ts))].copy() if np.isfinite(ts.max()) else np.zeros(6)
+        k = int(np.argmax(np.where(ok, ts, -np.inf)))
+        return self._tau_hist[k].copy()
+
+    # ------------------------------------------------------------------ cameras
+    def camera_model(self, camera: str) -> CameraInfo:
+        """Intrinsics K, width, height and T_base_camera (optical frame → base) of `camera`."""
+        if camera not in self.config.cameras:
+            raise SimulatorError(f"unknown camera {camera!r}; cameras: {list(self.config.cameras)}")
+        return camera_info_of(self.config.cameras[camera])
+
+    def _place_object(self) -> None:
+        d = self.data
+        mujoco.mj_kinematics(self.model, d)
+        c = self.collision
+        pos, quat = np.array(PARK_POS, float), np.array([1.0, 0, 0, 0])
+        if c is not None and self._scripted is not None and self._scripted_dir is not None:
+            dist = c.object_distance(self.time)
+            if dist is not None:
+                sc = self._scripted
+                R = d.xmat[sc.body].reshape(3, 3)
+                p = d.xpos[sc.body] + R @ sc.local_point
+                tip = p - self._scripted_dir * (dist + 0.015)
+                # capsule along +z of the object body, from its origin (the tip) away from the link
+                z = -self._scripted_dir
+                x = np.cross(z, [0.0, 0.0, 1.0]) if abs(z[2]) < 0.95 else np.cross(z, [1.0, 0.0, 0.0])
+                x /= np.linalg.norm(x)
+                Rm = np.column_stack([x, np.cross(z, x), z])
+                mujoco.mju_mat2Quat(quat, Rm.ravel())
+                pos = tip
+        d.mocap_pos[self._object_mocap] = pos
+        d.mocap_quat[self._object_mocap] = quat
+        mujoco.mj_kinematics(self.model, d)
+
+    def render(self, camera: str, noise: bool = True) -> tuple[np.ndarray, np.ndarray]:
+        """Colour (H,W,3 uint8) and aligned depth (H,W uint16 mm, 0 = invalid) of `camera` at the current time.
+
+        Raises:
+            SimulatorError: unknown camera; RenderError: the simulator was built with cameras=False.
+        """
+        if camera not in self._cam_ids:
+            raise SimulatorError(f"unknown camera {camera!r}; cameras: {list(self._cam_ids)}")
+        if self._renderer is None:
+            raise RenderError("this Simulator was built with cameras=False")
+        cfg = self.config.cameras[camera]
+        with self._lock:
+            self._place_object()
+            rgb, depth = self._renderer.render(self.data, self._cam_ids[camera])
+        rgb = rgb[:cfg.height, :cfg.width]
+        depth = depth[:cfg.height, :cfg.width]
+        bank = self._noise.get(camera) if noise else None
+        return (noisy_rgb(rgb, self.config.rgb_noise_sigma, bank),
+                depth_image_mm(depth, cfg, self.config.depth_noise_rel, bank))
+
+    def render_raw(self, camera: str) -> tuple[np.ndarray, np.ndarray]:
+        """Noise-free colour and metric depth (float32 m, inf = nothing hit) of `camera`."""
+        if self._renderer is None:
+            raise RenderError("this Simulator was built with cameras=False")
+        with self._lock:
+            self._place_object()
+            return self._renderer.render(self.data, self._cam_ids[camera])
+
+    def close(self) -> None:
+        if self._renderer is not None:
+            self._renderer.close()
+            self._renderer = None
+
+    def __enter__(self) -> "Simulator":
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+
+def _hexagon_border_point(outline: np.ndarray, angle: float) -> np.ndarray:
+    """Point of the plate's hexagonal border (in {P}, z = 0) hit by the ray from the centre at polar `angle`."""
+    d = np.array([np.cos(angle), np.sin(angle)])
+    n = len(outline)
+    for k in range(n):
+        a, b = outline[k], outline[(k + 1) % n]
+        M = np.column_stack([d, a - b])
+        if abs(np.linalg.det(M)) < 1e-12:
+            continue
+        s, u = np.linalg.solve(M, a)
+        if s > 0 and -1e-9 <= u <= 1 + 1e-9:
+            p = s * d
+            return np.array([p[0], p[1], 0.0])
+    raise SimulatorError(f"no border point of the plate at angle {angle} rad")
