@@ -7,11 +7,15 @@
 from __future__ import annotations
 
 import math
+import os
+import sys
 import time
 from dataclasses import dataclass, field
+from pathlib import Path
 from typing import Sequence
 
 import numpy as np
+import yaml
 
 from hexa.protocol.sensor_model import CurrentSensorModel
 
@@ -187,3 +191,84 @@ class DriverCore:
             raise CommandRejected(f"calibration needs (N>0, 6) samples, got shape {c.shape}")
         self.offsets = self.sensor.current_from_counts(c).mean(axis=0)
         return self.offsets.copy()
+
+
+# ---------------------------------------------------------------------------------------------- configuration
+SCALAR_KEYS = ("uno_port", "mega_port", "baud", "stream_rate_hz", "stale_timeout", "drop_after", "reconnect_period",
+               "hello_timeout", "command_rate_hz", "max_speed", "watchdog_ms", "diagnostics_period",
+               "calibration_duration", "rest_quiet_time", "frame_id")
+REQUIRED_KEYS = SCALAR_KEYS + ("joint_names", "sensor", "current_offsets", "servos")
+
+
+def default_driver_config_path() -> Path:
+    """hexa_driver/config/driver.yaml of this source tree (editable install) or of the ament share directory."""
+    here = Path(__file__).resolve()
+    candidates = [here.parents[3] / "hexa_driver" / "config" / "driver.yaml"]
+    prefix = os.environ.get("AMENT_PREFIX_PATH", "")
+    candidates += [Path(p) / "share" / "hexa_driver" / "config" / "driver.yaml" for p in prefix.split(":") if p]
+    candidates.append(Path(sys.prefix) / "share" / "hexa_driver" / "config" / "driver.yaml")
+    for c in candidates:
+        if c.is_file():
+            return c
+    raise DriverConfigError(f"driver.yaml not found in {[str(c) for c in candidates]}")
+
+
+def load_driver_config(path: str | os.PathLike | None = None) -> dict:
+    """The driver configuration mapping (driver.yaml), checked for the required keys.
+
+    Raises:
+        DriverConfigError: the file is missing, not a mapping, or lacks a key (named).
+    """
+    p = Path(path) if path else default_driver_config_path()
+    try:
+        cfg = yaml.safe_load(p.read_text())
+    except OSError as exc:
+        raise DriverConfigError(f"cannot read driver config {p}: {exc}") from exc
+    if not isinstance(cfg, dict):
+        raise DriverConfigError(f"driver config {p} is not a mapping")
+    missing = [k for k in REQUIRED_KEYS if k not in cfg]
+    if missing:
+        raise DriverConfigError(f"driver config {p} lacks {missing}")
+    if cfg["servos"] is not None:
+        servo_calibrations_from_config(cfg["servos"])  # validate now
+    CurrentSensorModel.from_dict(cfg["sensor"])
+    return cfg
+
+
+def servo_calibrations_from_description(desc) -> list[ServoCalibration]:
+    """Six ServoCalibration from a HexaDescription's actuator pulse map (centre of the joint range at the centre
+    pulse, us_per_rad * direction_i, pulse limits).
+
+    Raises:
+        DriverConfigError: the description has no pulse map (naming the missing attribute).
+    """
+    names = ("pulse_center_us", "us_per_rad", "direction", "pulse_min_us", "pulse_max_us")
+    values = {}
+    for name in names:
+        if not hasattr(desc, name):
+            raise DriverConfigError(f"robot description has no `{name}`: set `servos` in driver.yaml")
+        values[name] = getattr(desc, name)
+    zeta_ref = 0.5 * (np.asarray(desc.zeta_min, float) + np.asarray(desc.zeta_max, float))
+    zeta_ref = np.broadcast_to(zeta_ref, (N_JOINTS,))
+    direction = np.broadcast_to(np.asarray(values["direction"], float), (N_JOINTS,))
+    return [ServoCalibration(zero_us=float(values["pulse_center_us"]),
+                             us_per_rad=float(values["us_per_rad"]) * float(direction[i]),
+                             zeta_ref=float(zeta_ref[i]), min_us=int(round(float(values["pulse_min_us"]))),
+                             max_us=int(round(float(values["pulse_max_us"]))))
+            for i in range(N_JOINTS)]
+
+
+def driver_core_from_config(cfg: dict, zeta_min, zeta_max, k_t,
+                            servos: list[ServoCalibration] | None = None) -> DriverCore:
+    """DriverCore from a driver config plus the robot description's joint limits and K_t.
+
+    `servos` (e.g. from servo_calibrations_from_description) is used when the config's `servos` is null.
+    """
+    if cfg["servos"] is not None:
+        servos = servo_calibrations_from_config(cfg["servos"])
+    if servos is None:
+        raise DriverConfigError("driver config `servos` is null and no calibration from the description was given")
+    return DriverCore(servos=servos, zeta_min=zeta_min, zeta_max=zeta_max,
+                      k_t=k_t, sensor=CurrentSensorModel.from_dict(cfg["sensor"]),
+                      max_speed=float(cfg["max_speed"]), joint_names=tuple(cfg["joint_names"]),
+                      offsets=np.asarray(cfg["current_offsets"], dtype=float))

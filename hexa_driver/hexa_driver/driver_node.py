@@ -1,0 +1,259 @@
+"""hexa_driver node: Uno servo board + Mega current board over serial -> joint_states, motor_currents, diagnostics.
+
+Thin ROS wrapper: the protocol, links and conversions live in hexa.protocol (link.py, driver_core.py).
+Topics (relative, run it in /hexa): sub `joint_commands` (sensor_msgs/JointState, rad); pub `joint_states`
+(position = commanded angle, effort = K_t (I - I_0)), `motor_currents` (hexa_msgs/MotorCurrents), `/diagnostics`.
+Service `calibrate_currents` (hexa_msgs/CalibrateCurrents). Parameters: config/driver.yaml (docs/driver.md).
+"""
+from __future__ import annotations
+
+import threading
+import time
+
+import numpy as np
+import rclpy
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
+from hexa_msgs.msg import MotorCurrents
+from hexa_msgs.srv import CalibrateCurrents
+from rclpy.callback_groups import MutuallyExclusiveCallbackGroup, ReentrantCallbackGroup
+from rclpy.executors import ExternalShutdownException, MultiThreadedExecutor
+from rclpy.node import Node
+from rclpy.qos import QoSProfile, ReliabilityPolicy, HistoryPolicy
+from sensor_msgs.msg import JointState
+
+from hexa.protocol import frames as fr
+from hexa.protocol.driver_core import (SCALAR_KEYS, CommandRejected, default_driver_config_path,
+                                       driver_core_from_config, load_driver_config,
+                                       servo_calibrations_from_description)
+from hexa.protocol.link import CONNECTED, STALE, CurrentLink, ServoLink
+
+OK, WARN, ERROR = DiagnosticStatus.OK, DiagnosticStatus.WARN, DiagnosticStatus.ERROR
+
+
+def _load_description(cfg: dict):
+    """The robot description (hexa.robots.hexa_description.load_hexa): joint limits, K_t, servo pulse map."""
+    from hexa.robots.hexa_description import load_hexa
+
+    return load_hexa(cfg.get("robot_description") or None)
+
+
+class DriverNode(Node):
+    """The serial driver: one ServoLink, one CurrentLink, conversions in DriverCore."""
+
+    def __init__(self) -> None:
+        super().__init__("hexa_driver")
+        cfg_path = self.declare_parameter("config", str(default_driver_config_path())).value
+        cfg = load_driver_config(cfg_path)
+        for key in SCALAR_KEYS:
+            cfg[key] = self.declare_parameter(key, cfg[key]).value
+        self.cfg = cfg
+        cfg["robot_description"] = self.declare_parameter("robot_description", "").value
+        desc = _load_description(cfg)
+        servos = None if cfg["servos"] is not None else servo_calibrations_from_description(desc)
+        self.core = driver_core_from_config(cfg, desc.zeta_min, desc.zeta_max, desc.K_t, servos)
+        self.frame_id = str(cfg["frame_id"])
+
+        reliable = QoSProfile(depth=50, reliability=ReliabilityPolicy.RELIABLE, history=HistoryPolicy.KEEP_LAST)
+        self.pub_states = self.create_publisher(JointState, "joint_states", reliable)
+        self.pub_currents = self.create_publisher(MotorCurrents, "motor_currents", reliable)
+        self.pub_diag = self.create_publisher(DiagnosticArray, "/diagnostics", 10)
+        self.create_subscription(JointState, "joint_commands", self._on_command, 10)
+        self.create_service(CalibrateCurrents, "calibrate_currents", self._on_calibrate,
+                            callback_group=ReentrantCallbackGroup())
+
+        self._lock = threading.Lock()
+        self._pending: np.ndarray | None = None
+        self._last_sent = 0.0
+        self._min_interval = 1.0 / float(cfg["command_rate_hz"])
+        self._calib: list | None = None
+        self._last_sample_time = 0.0
+        self._rate_mark = (time.monotonic(), 0)
+        self._rate_hz = 0.0
+        self.tx_failures = 0
+
+        common = dict(baud=int(cfg["baud"]), stale_timeout=float(cfg["stale_timeout"]),
+                      drop_after=float(cfg["drop_after"]), reconnect_period=float(cfg["reconnect_period"]),
+                      hello_timeout=float(cfg["hello_timeout"]))
+        servos = self.core.servos
+        self.uno = ServoLink(str(cfg["uno_port"]), min_us=[s.min_us for s in servos],
+                             max_us=[s.max_us for s in servos], watchdog_ms=int(cfg["watchdog_ms"]),
+                             on_state=lambda s: self._on_link_state("uno", s), **common)
+        self.mega = CurrentLink(str(cfg["mega_port"]), rate_hz=int(cfg["stream_rate_hz"]),
+                                on_sample=self._on_sample, on_state=lambda s: self._on_link_state("mega", s),
+                                **common)
+        self.uno.start()
+        self.mega.start()
+        timers = MutuallyExclusiveCallbackGroup()
+        self.create_timer(float(cfg["diagnostics_period"]), self._publish_diagnostics, callback_group=timers)
+        self.create_timer(self._min_interval, self._flush_command, callback_group=timers)
+        self.get_logger().info(f"hexa_driver: uno={cfg['uno_port']} mega={cfg['mega_port']} "
+                               f"rate={cfg['stream_rate_hz']} Hz")
+
+    def close(self) -> None:
+        self.uno.stop()
+        self.mega.stop()
+
+    # ------------------------------------------------------------------------------------------ links
+    def _on_link_state(self, board: str, state: str) -> None:
+        log = self.get_logger()
+        (log.info if state == CONNECTED else log.warning)(f"{board} link {state}")
+
+    # ------------------------------------------------------------------------------------------ commands
+    def _on_command(self, msg: JointState) -> None:
+        try:
+            zeta = self.core.order_command(list(msg.name), list(msg.position))
+        except CommandRejected as exc:
+            self.get_logger().warning(f"joint command rejected: {exc}", throttle_duration_sec=1.0)
+            return
+        with self._lock:
+            if self._pending is not None:
+                self.core.counters.coalesced += 1
+            self._pending = zeta
+        if time.monotonic() - self._last_sent >= self._min_interval:
+            self._flush_command()
+
+    def _flush_command(self) -> None:
+        with self._lock:
+            zeta, self._pending = self._pending, None
+            if zeta is None:
+                return
+            now = time.monotonic()
+            zeta = self.core.limit_command(zeta, now)
+            pulses = self.core.accept(zeta, now)
+            self._last_sent = now
+        if not self.uno.set_targets(pulses):
+            self.tx_failures += 1
+
+    # ------------------------------------------------------------------------------------------ telemetry
+    def _on_sample(self, sample: fr.Sample, t_rx: float, gap: int) -> None:
+        currents = self.core.currents_from_counts(sample.counts)
+        effort = self.core.torques_from_currents(currents)
+        stamp = self.get_clock().now().to_msg()
+        m = MotorCurrents()
+        m.header.stamp = stamp
+        m.header.frame_id = self.frame_id
+        m.current = [float(c) for c in currents]
+        m.raw = [int(c) for c in sample.counts]
+        m.sequence = int(sample.sequence)
+        m.board_time_us = int(sample.board_time_us)
+        m.gaps = int(self.mega.sample_gaps) & 0xFFFFFFFF
+        js = JointState()
+        js.header.stamp = stamp
+        js.header.frame_id = self.frame_id
+        js.name = list(self.core.joint_names)
+        js.position = [float(z) for z in self.core.commanded]
+        js.effort = [float(t) for t in effort]
+        self.pub_currents.publish(m)
+        self.pub_states.publish(js)
+        self._last_sample_time = t_rx
+        calib = self._calib
+        if calib is not None:
+            calib.append(sample.counts)
+
+    def _on_calibrate(self, req: CalibrateCurrents.Request, resp: CalibrateCurrents.Response):
+        duration = req.duration if req.duration > 0 else float(self.cfg["calibration_duration"])
+        quiet = float(self.cfg["rest_quiet_time"])
+        t_cmd = self.core.last_command_time
+        resp.offsets = [float(v) for v in self.core.offsets]
+        if self.mega.stats.state != CONNECTED:
+            resp.success, resp.message = False, f"current board link is {self.mega.stats.state}"
+            return resp
+        if t_cmd is not None and time.monotonic() - t_cmd < quiet:
+            resp.success, resp.message = False, f"not at rest: a joint command arrived less than {quiet} s ago"
+            return resp
+        n_cmd = self.core.counters.accepted
+        self._calib = samples = []
+        time.sleep(duration)
+        self._calib = None
+        if self.core.counters.accepted != n_cmd:
+            resp.success, resp.message = False, "not at rest: joint commands arrived during the calibration"
+            return resp
+        if len(samples) < 5:
+            resp.success, resp.message = False, f"only {len(samples)} samples in {duration} s"
+            return resp
+        offsets = self.core.calibrate_offsets(np.asarray(samples))
+        resp.success = True
+        resp.message = f"I_0 from {len(samples)} samples over {duration:.2f} s"
+        resp.offsets = [float(v) for v in offsets]
+        self.get_logger().info(f"zero-current calibration: I_0 = {np.round(offsets, 4).tolist()} A")
+        return resp
+
+    # ------------------------------------------------------------------------------------------ diagnostics
+    def _link_status(self, name: str, link, extra: list[tuple[str, object]]) -> DiagnosticStatus:
+        st = link.stats
+        d = DiagnosticStatus()
+        d.name = f"hexa_driver: {name}"
+        d.hardware_id = str(link.port)
+        if st.state == CONNECTED:
+            d.level, d.message = OK, "connected"
+        elif st.state == STALE:
+            d.level, d.message = ERROR, f"telemetry stale (no data for {time.monotonic() - st.last_rx:.2f} s)"
+        else:
+            d.level = ERROR
+            d.message = f"{st.state.lower()}: {st.last_error}" if st.last_error else st.state.lower()
+        rtt = st.rtt_s * 1e3 if st.rtt_s == st.rtt_s else float("nan")
+        values = [("state", st.state), ("port", link.port), ("connects", st.connects),
+                  ("disconnects", st.disconnects), ("last_reconnect_s", f"{st.last_reconnect_s:.3f}"),
+                  ("frames_rx", st.frames_rx), ("frames_tx", st.frames_tx), ("crc_errors", st.crc_errors),
+                  ("bad_length", st.bad_length), ("resyncs", st.resyncs), ("discarded_bytes", st.discarded_bytes),
+                  ("dropped_frames", st.dropped_frames), ("board_errors", st.board_errors),
+                  ("decode_errors", st.decode_errors), ("latency_rtt_ms", f"{rtt:.3f}"),
+                  ("firmware_version", hex(st.firmware_version)), ("last_error", st.last_error)] + extra
+        d.values = [KeyValue(key=k, value=str(v)) for k, v in values]
+        return d
+
+    def _publish_diagnostics(self) -> None:
+        now = time.monotonic()
+        t0, n0 = self._rate_mark
+        n = self.mega.samples
+        if now > t0:
+            self._rate_hz = (n - n0) / (now - t0)
+        self._rate_mark = (now, n)
+        age = now - self._last_sample_time if self._last_sample_time else float("inf")
+        c = self.core.counters
+        uno_status = self.uno.status
+        mega_extra = [("sample_rate_hz", f"{self._rate_hz:.1f}"), ("sample_rate_commanded_hz", self.mega.rate_hz),
+                      ("samples", self.mega.samples), ("sample_gaps", self.mega.sample_gaps),
+                      ("data_age_s", f"{age:.3f}"),
+                      ("board_overruns", self.mega.status.overruns if self.mega.status else "?")]
+        uno_extra = [("commands_accepted", c.accepted), ("commands_rejected_nan", c.rejected_nan),
+                     ("commands_rejected_names", c.rejected_names), ("commands_clamped", c.clamped),
+                     ("commands_slew_limited", c.slew_limited), ("commands_coalesced", c.coalesced),
+                     ("commands_unsent", self.tx_failures),
+                     ("board_pulses_us", list(uno_status.pulses_us) if uno_status else "?"),
+                     ("board_watchdog_hold", bool(uno_status.flags & fr.FLAG_WATCHDOG_HOLD) if uno_status else "?")]
+        mega = self._link_status("current board (Mega)", self.mega, mega_extra)
+        if mega.level == OK and age > float(self.cfg["stale_timeout"]):
+            mega.level, mega.message = ERROR, f"telemetry stale (no sample for {age:.2f} s)"
+        uno = self._link_status("servo board (Uno)", self.uno, uno_extra)
+        if uno.level == OK and uno_status is not None and uno_status.flags & fr.FLAG_WATCHDOG_HOLD and \
+                self.core.last_command_time is not None:
+            uno.level, uno.message = WARN, "holding last command (no joint_commands within the watchdog)"
+        arr = DiagnosticArray()
+        arr.header.stamp = self.get_clock().now().to_msg()
+        arr.status = [uno, mega]
+        self.pub_diag.publish(arr)
+
+
+def main(args: list[str] | None = None) -> int:
+    """Entry point `hexa-driver` (run with `--ros-args -r __ns:=/hexa -p uno_port:=... -p mega_port:=...`)."""
+    from hexa_bringup.rosenv import apply_defaults
+
+    apply_defaults()
+    rclpy.init(args=args)
+    node = DriverNode()
+    executor = MultiThreadedExecutor(num_threads=3)
+    executor.add_node(node)
+    try:
+        executor.spin()
+    except (KeyboardInterrupt, ExternalShutdownException):
+        pass
+    finally:
+        node.close()
+        node.destroy_node()
+        rclpy.try_shutdown()
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
