@@ -1,0 +1,13 @@
+"""Hexa dynamics: Lagrange model (seed 000 §2.3), residual observer (§3.1) and Newton–Euler identification (§3.3).
+
+Modules:
+- `lagrange`: mass properties from the robot description, inverse dynamics (λ, Q_7..Q_12, plate wrench),
+  generalized momentum and the terms of its time derivative (what the momentum observer integrates).
+- `observer`: momentum-form residual observer with detection events, and the paper's direct form.
+- `identification`: Newton–Euler contact force at a known contact point on the plate, an arm or a rod.
+"""
+from __future__ import annotations
+
+from hexa.dynamics.lagrange import DynamicsError, HexaDynamicParameters, MotionState
+
+__all__ = ["DynamicsError", "HexaDynamicParameters", "MotionState"]
