@@ -9,11 +9,10 @@ Noise is drawn from a seeded bank of standard normals read at a random offset ea
 from __future__ import annotations
 
 import os
-from dataclasses import dataclass
-
 import numpy as np
 
 from hexa.sim.config import CameraConfig
+from hexa.vision.camera import CameraModel
 
 os.environ.setdefault("MUJOCO_GL", "egl")
 
@@ -24,30 +23,10 @@ class RenderError(RuntimeError):
     """Rendering failed (no GL context, unknown camera)."""
 
 
-@dataclass(frozen=True)
-class CameraInfo:
-    """What a driver's camera_info would say: intrinsics, size, extrinsics of the optical frame in base."""
-
-    name: str
-    frame_id: str
-    K: np.ndarray
-    width: int
-    height: int
-    T_base_camera: np.ndarray
-
-    def project(self, points_base: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """Pixel coordinates (N,2) (u right, v down) and optical depth z (N,) of base points (N,3)."""
-        p = np.atleast_2d(np.asarray(points_base, dtype=float))
-        R, t = self.T_base_camera[:3, :3], self.T_base_camera[:3, 3]
-        pc = (p - t) @ R
-        z = pc[:, 2]
-        uv = (pc[:, :2] / z[:, None]) * np.diag(self.K)[:2] + self.K[:2, 2]
-        return uv, z
-
-
-def camera_info_of(cfg: CameraConfig) -> CameraInfo:
-    """CameraInfo from a validated camera configuration."""
-    return CameraInfo(cfg.name, cfg.frame_id, cfg.K, cfg.width, cfg.height, cfg.T_base_camera)
+def camera_model_of(cfg: CameraConfig) -> CameraModel:
+    """The pinhole CameraModel (hexa.vision.camera) of a validated camera configuration."""
+    return CameraModel(K=cfg.K, width=cfg.width, height=cfg.height, T_base_camera=cfg.T_base_camera, name=cfg.name,
+                       frame_id=cfg.frame_id)
 
 
 def mjcf_camera(cfg: CameraConfig) -> str:

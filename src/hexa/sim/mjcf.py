@@ -96,7 +96,7 @@ def build_mjcf(desc: Any, pose: np.ndarray | None = None, config: SimConfig | No
             raise MJCFError(f"chain {i + 1}: inverse kinematics does not close the loop at pose {pose.tolist()}")
     mp = desc_mass_properties(desc)
     servo = cfg.servo
-    tau_max = float(desc.servo_torque_max)
+    tau_max = float(desc.torque_max)
     lo, hi = float(desc.zeta_min), float(desc.zeta_max)
 
     out: list[str] = []
@@ -216,7 +216,7 @@ def desc_mass_properties(desc: Any) -> dict[str, dict[str, Any]]:
     """
     out = {}
     for link in ("plate", "arm", "rod"):
-        out[link] = {"mass": float(getattr(desc, f"m_{link}")),
-                     "com": np.asarray(getattr(desc, f"com_{link}"), dtype=float),
-                     "inertia": np.asarray(getattr(desc, f"I_{link}"), dtype=float)}
+        li = getattr(desc, link)
+        out[link] = {"mass": float(li.mass), "com": np.asarray(li.com, dtype=float),
+                     "inertia": np.asarray(li.inertia, dtype=float)}
     return out

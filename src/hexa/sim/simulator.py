@@ -22,10 +22,10 @@ from typing import Any
 
 import numpy as np
 
-from hexa.sim.camera import (CameraInfo, NoiseBank, RGBDRenderer, RenderError, camera_info_of, depth_image_mm,
-                             noisy_rgb)
+from hexa.sim.camera import NoiseBank, RGBDRenderer, RenderError, camera_model_of, depth_image_mm, noisy_rgb
 from hexa.sim.config import CAMERA_NAMES, SimConfig, sim_config_of
 from hexa.sim.mjcf import HOME_POSE, PARK_POS, build_mjcf
+from hexa.vision.camera import CameraModel
 from hexa.sim.scenarios import ScenarioSpec, ScriptedCollision, draw_collision, load_scenario
 
 import mujoco  # noqa: E402  (after hexa.sim.camera set MUJOCO_GL)
@@ -158,7 +158,7 @@ class Simulator:
             start_pose = np.asarray(fn(0.0)[0], dtype=float)
             if self.drive == "trajectory":
                 dt = self.config.timestep
-                duration = max(self.collision.end_time + 1.0, 1.0)
+                duration = max(self.collision.end_time + 3.0, 1.0)
                 t = np.arange(int(np.ceil(duration / dt)) + 1) * dt
                 poses = np.asarray(fn(t)[0], dtype=float)
                 self._traj_targets = kin.inverse_kinematics_batch(self.desc, poses)
@@ -181,7 +181,7 @@ class Simulator:
         self._rod_body = [m.body(f"rod_{i}").id for i in range(1, 7)]
         self._object_mocap = int(m.body_mocapid[m.body("object").id])
         self._cam_ids = {name: m.camera(name).id for name in CAMERA_NAMES}
-        self._omega_max = float(self.desc.servo_speed_max)
+        self._omega_max = float(self.desc.speed_max)
         self._dt = float(m.opt.timestep)
         self._lock = threading.RLock()
 
@@ -440,11 +440,11 @@ class Simulator:
         return self._tau_hist[k].copy()
 
     # ------------------------------------------------------------------ cameras
-    def camera_model(self, camera: str) -> CameraInfo:
+    def camera_model(self, camera: str) -> CameraModel:
         """Intrinsics K, width, height and T_base_camera (optical frame → base) of `camera`."""
         if camera not in self.config.cameras:
             raise SimulatorError(f"unknown camera {camera!r}; cameras: {list(self.config.cameras)}")
-        return camera_info_of(self.config.cameras[camera])
+        return camera_model_of(self.config.cameras[camera])
 
     def _place_object(self) -> None:
         d = self.data

@@ -1,0 +1,89 @@
+"""The simulator's two virtual Arduino boards on pseudo-terminals, using the project's protocol emulators.
+
+- Uno (servo board): every SET_TARGETS pulse width is turned into an arm angle with the same per-servo calibration
+  the driver uses (hexa_driver/config/driver.yaml `servos`, hexa.protocol.driver_core) and commanded to the servos.
+- Mega (current board): each sample at board time t reads the simulated servo torques τ at the sim time of that
+  sample and streams I = τ / K_t + I_0 through the ACS712-like sensor and the 10-bit ADC (hexa.protocol.sensor_model),
+  with Gaussian ADC noise; I_0 is a per-channel zero offset drawn once from the seed (what the driver's zero-current
+  calibration removes). Board time runs on *sim time*, so rates and stamps follow the simulation at any speed.
+"""
+from __future__ import annotations
+
+import os
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+
+from hexa.protocol.driver_core import load_driver_config, servo_calibrations_from_config
+from hexa.protocol.emulator import MegaEmulator, UnoEmulator
+from hexa.protocol.sensor_model import CurrentSensorModel
+
+if TYPE_CHECKING:
+    from hexa.sim.simulator import Simulator
+
+DEFAULT_LINK_DIR = Path("/tmp/hexa_sim")
+
+
+class VirtualBoards:
+    """Uno + Mega emulators wired to a Simulator (context manager; `uno.port` / `mega.port` are the tty paths).
+
+    Args:
+        sim: the simulator (its servos receive the Uno's targets; its torques feed the Mega).
+        link_dir: directory for stable symlinks `uno` and `mega` to the ptys (the driver's default ports); None: none.
+        driver_config: driver configuration mapping (default: hexa_driver/config/driver.yaml) for the servo
+            calibration and the sensor model.
+        seed: draws the per-channel zero offsets and the ADC noise.
+    """
+
+    def __init__(self, sim: "Simulator", link_dir: str | os.PathLike | None = DEFAULT_LINK_DIR,
+                 driver_config: dict[str, Any] | None = None, seed: int | None = None) -> None:
+        self.sim = sim
+        cfg = driver_config if driver_config is not None else load_driver_config()
+        self.servos = servo_calibrations_from_config(cfg["servos"])
+        self.sensor = CurrentSensorModel.from_dict(cfg.get("sensor", {}))
+        seed = sim.seed if seed is None else int(seed)
+        rng = np.random.default_rng([seed, 2])
+        self.offsets = rng.normal(0.0, sim.config.current_offset_sigma, 6)
+        self.k_t = float(sim.desc.K_t)
+        uno_link = mega_link = None
+        if link_dir is not None:
+            Path(link_dir).mkdir(parents=True, exist_ok=True)
+            uno_link, mega_link = Path(link_dir) / "uno", Path(link_dir) / "mega"
+        clock = self._clock
+        self.uno = UnoEmulator(on_targets=self._on_targets, link=uno_link, clock=clock)
+        self.mega = MegaEmulator(current_source=self._currents, units="amps", sensor=self.sensor,
+                                 noise_counts=sim.config.current_noise_counts, seed=seed, link=mega_link, clock=clock)
+        self._t0 = self._clock()
+
+    def _clock(self) -> float:
+        return self.sim.time
+
+    def angles_from_pulses(self, pulses_us: tuple[int, ...]) -> np.ndarray:
+        """Arm angles (rad) commanded by six pulse widths (us)."""
+        return np.array([s.angle_from_pulse(p) for s, p in zip(self.servos, pulses_us)])
+
+    def _on_targets(self, pulses_us: tuple[int, ...]) -> None:
+        self.sim.set_servo_targets(self.angles_from_pulses(pulses_us))
+
+    def currents_at(self, t_sim: float) -> np.ndarray:
+        """The six true motor currents (A) the Mega measures at sim time `t_sim`: τ/K_t + I_0."""
+        return self.sim.tau_at(t_sim) / self.k_t + self.offsets
+
+    def _currents(self, t_board: float) -> np.ndarray:
+        return self.currents_at(self._t0 + t_board)
+
+    def start(self) -> "VirtualBoards":
+        self.uno.start()
+        self.mega.start()
+        return self
+
+    def stop(self) -> None:
+        self.uno.stop()
+        self.mega.stop()
+
+    def __enter__(self) -> "VirtualBoards":
+        return self.start()
+
+    def __exit__(self, *exc: object) -> None:
+        self.stop()
