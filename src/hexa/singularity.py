@@ -167,9 +167,8 @@ def upsrpu_indices(desc: UpsrpuDescription, X: np.ndarray) -> SingularityReport:
     """
     from hexa.kinematics import upsrpu as kin
 
-    X = np.asarray(X, dtype=float)
-    return indices_from_screws(np.linalg.det(kin.jacobian_jd(desc, X)), kin.transmission_wrench_screws(desc, X),
-                               kin.constraint_wrench_screws(desc, X))
+    J, T, C = kin.jd_and_screws(desc, X)
+    return indices_from_screws(np.linalg.det(J), T, C)
 
 
 def hexa_indices(desc: Any, pose: np.ndarray, zeta: np.ndarray | None = None) -> SingularityReport:

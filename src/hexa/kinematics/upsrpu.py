@@ -20,7 +20,8 @@ __all__ = [
     "UnreachablePoseError", "ForwardKinematicsError", "rotation_yz", "inverse_kinematics",
     "inverse_kinematics_batch", "jacobian_jd", "forward_kinematics", "platform_joints_base",
     "spherical_joint_angles", "limb_unit_vectors", "actuators_within_limits", "transmission_wrench_screws",
-    "constraint_wrench_screws", "reference_data_dir", "load_reference_trajectory", "constant_velocity_path",
+    "constraint_wrench_screws", "forward_kinematics_terms", "spherical_angles_from", "jd_and_screws",
+    "wrenches_from", "reference_data_dir", "load_reference_trajectory", "constant_velocity_path",
     "table3_trajectory",
 ]
 
@@ -112,26 +113,37 @@ def inverse_kinematics_batch(desc: UpsrpuDescription, X: np.ndarray) -> np.ndarr
     return q
 
 
+def _q_and_jd(desc: UpsrpuDescription, X: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """(q (4,), J_D (4, 4), unit limb vectors u (4, 3), mobile joints in base (4, 3) with O_m last) in one pass."""
+    ct, st, cp, sp = math.cos(X[2]), math.sin(X[2]), math.cos(X[3]), math.sin(X[3])
+    P = desc.platform_joints
+    # rows of R, dR/dtheta, dR/dpsi stacked: R = Ry(theta) Rz(psi)
+    M = np.array([[ct * cp, -ct * sp, st], [sp, cp, 0.0], [-st * cp, st * sp, ct],
+                  [-st * cp, st * sp, ct], [0.0, 0.0, 0.0], [-ct * cp, ct * sp, -st],
+                  [-ct * sp, -ct * cp, 0.0], [cp, -sp, 0.0], [st * sp, st * cp, 0.0]])
+    PM = P @ M.T                                  # (3, 9): R p, dR/dtheta p, dR/dpsi p per limb
+    pts = np.empty((4, 3))
+    pts[:3] = PM[:, :3]
+    pts[:3, 0] += X[0]
+    pts[:3, 2] += X[1]
+    pts[3] = (X[0], 0.0, X[1])
+    d = pts - desc.base_joints
+    q = np.sqrt(np.einsum("ij,ij->i", d, d))
+    u = d / q[:, None]
+    J = np.zeros((4, 4))
+    J[:, 0] = u[:, 0]
+    J[:, 1] = u[:, 2]
+    J[:3, 2] = np.einsum("ij,ij->i", u[:3], PM[:, 3:6])
+    J[:3, 3] = np.einsum("ij,ij->i", u[:3], PM[:, 6:9])
+    return q, J, u, pts
+
+
 def jacobian_jd(desc: UpsrpuDescription, X: np.ndarray) -> np.ndarray:
     """Forward Jacobian J_D = dq_ind/dX (4, 4), analytic (seed 003 eq 2 with Phi = q - q(X)).
 
     Row i is u_i . d(limb vector)/dX with u_i the limb's unit vector; columns follow (x_m, z_m, theta, psi).
     """
-    R, dRt, dRp = _rotation_and_partials(X[2], X[3])
-    P = desc.platform_joints
-    om = np.array([X[0], 0.0, X[1]])
-    d = np.empty((4, 3))
-    d[:3] = om + P @ R.T - desc.base_joints[:3]
-    d[3] = om - desc.base_joints[3]
-    u = d / np.sqrt(np.einsum("ij,ij->i", d, d))[:, None]
-    J = np.empty((4, 4))
-    J[:, 0] = u[:, 0]
-    J[:, 1] = u[:, 2]
-    J[:3, 2] = np.einsum("ij,ij->i", u[:3], P @ dRt.T)
-    J[:3, 3] = np.einsum("ij,ij->i", u[:3], P @ dRp.T)
-    J[3, 2] = 0.0
-    J[3, 3] = 0.0
-    return J
+    return _q_and_jd(desc, np.asarray(X, dtype=float))[1]
 
 
 def forward_kinematics(desc: UpsrpuDescription, q: np.ndarray, X0: np.ndarray, tol: float = 1e-12,
@@ -144,34 +156,46 @@ def forward_kinematics(desc: UpsrpuDescription, q: np.ndarray, X0: np.ndarray, t
     Raises:
         ForwardKinematicsError: J_D is singular on the way or the residual is still above `tol` (m).
     """
+    return forward_kinematics_terms(desc, q, X0, tol, max_iter, max_step)[0]
+
+
+def forward_kinematics_terms(desc: UpsrpuDescription, q: np.ndarray, X0: np.ndarray, tol: float = 1e-12,
+                             max_iter: int = 30, max_step: float = 0.05
+                             ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """`forward_kinematics` also returning the unit limb vectors (4, 3) and mobile joints (4, 3) at the solution
+    (for the SRM's candidate checks without recomputing them)."""
     q = np.asarray(q, dtype=float)
     X = np.array(X0, dtype=float)
     for _ in range(max_iter):
-        r = q - inverse_kinematics(desc, X)
+        qx, J, u, pts = _q_and_jd(desc, X)
+        r = q - qx
         if float(np.max(np.abs(r))) < tol:
-            return X
+            return X, u, pts
         try:
-            dX = np.linalg.solve(jacobian_jd(desc, X), r)
+            dX = np.linalg.solve(J, r)
         except np.linalg.LinAlgError as exc:
             raise ForwardKinematicsError(f"singular J_D at X = {X.tolist()} solving FK for q = {q.tolist()}") from exc
         m = float(np.max(np.abs(dX)))
         if m > max_step:
             dX *= max_step / m
         X += dX
-    r = q - inverse_kinematics(desc, X)
-    if float(np.max(np.abs(r))) < max(tol, 1e-10):
-        return X
+    qx, _, u, pts = _q_and_jd(desc, X)
+    if float(np.max(np.abs(q - qx))) < max(tol, 1e-10):
+        return X, u, pts
     raise ForwardKinematicsError(
         f"FK for q = {q.tolist()} from X0 = {np.asarray(X0).tolist()} did not converge: residual "
-        f"{float(np.max(np.abs(r))):.3e} m after {max_iter} iterations")
+        f"{float(np.max(np.abs(q - qx))):.3e} m after {max_iter} iterations")
 
 
 def spherical_joint_angles(desc: UpsrpuDescription, X: np.ndarray) -> np.ndarray:
     """Angles (3,) in rad between each UPS limb and the platform normal R e_z (compare with spherical_max)."""
-    R = rotation_yz(X[2], X[3])
-    u = limb_unit_vectors(desc, X)[:3]
-    c = np.clip(u @ R[:, 2], -1.0, 1.0)
-    return np.arccos(c)
+    return spherical_angles_from(limb_unit_vectors(desc, X), X[2])
+
+
+def spherical_angles_from(u: np.ndarray, theta: float) -> np.ndarray:
+    """Spherical-joint angles from the unit limb vectors u (rows 0-2 used) and theta (R e_z = (sin, 0, cos))."""
+    c = u[:3, 0] * math.sin(theta) + u[:3, 2] * math.cos(theta)
+    return np.arccos(np.clip(c, -1.0, 1.0))
 
 
 def transmission_wrench_screws(desc: UpsrpuDescription, X: np.ndarray) -> np.ndarray:
@@ -181,21 +205,25 @@ def transmission_wrench_screws(desc: UpsrpuDescription, X: np.ndarray) -> np.nda
     unit force along D0 -> O_m through O_m. (The paper takes moments about O_m; the angles Omega only use the
     angular parts of the output twists, which do not depend on the reference point.)
     """
-    R = rotation_yz(X[2], X[3])
-    om = np.array([X[0], 0.0, X[1]])
-    pts = np.empty((4, 3))
-    pts[:3] = om + desc.platform_joints @ R.T
-    pts[3] = om
-    d = pts.copy()
-    d[:3] -= desc.base_joints[:3]
-    d[3] -= desc.base_joints[3]
-    u = d / np.sqrt(np.einsum("ij,ij->i", d, d))[:, None]
+    _, _, u, pts = _q_and_jd(desc, np.asarray(X, dtype=float))
+    return wrenches_from(u, pts)
+
+
+def wrenches_from(u: np.ndarray, pts: np.ndarray) -> np.ndarray:
+    """Transmission wrench screws (4, 6) from unit limb vectors and mobile joints (O_m last), about the origin."""
     out = np.empty((4, 6))
     out[:, :3] = u
     out[:, 3] = pts[:, 1] * u[:, 2] - pts[:, 2] * u[:, 1]     # pts x u (np.cross is slow on tiny arrays)
     out[:, 4] = pts[:, 2] * u[:, 0] - pts[:, 0] * u[:, 2]
     out[:, 5] = pts[:, 0] * u[:, 1] - pts[:, 1] * u[:, 0]
     return out
+
+
+def jd_and_screws(desc: UpsrpuDescription, X: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(J_D, transmission wrenches (4, 6), constraint wrenches (2, 6)) at X in one pass."""
+    X = np.asarray(X, dtype=float)
+    _, J, u, pts = _q_and_jd(desc, X)
+    return J, wrenches_from(u, pts), constraint_wrench_screws(desc, X)
 
 
 def constraint_wrench_screws(desc: UpsrpuDescription, X: np.ndarray) -> np.ndarray:

@@ -7,7 +7,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from hexa.kinematics import upsrpu as kin
-from hexa.singularity import SingularityReport, limb_pairs, upsrpu_indices
+from hexa.singularity import SingularityReport, limb_pairs, omega_angles, output_twist_screws, upsrpu_indices
 
 if TYPE_CHECKING:
     from hexa.robots.upsrpu_description import UpsrpuDescription
@@ -25,6 +25,25 @@ _PAIRS = limb_pairs(4)          # V_Omega order: 1-2, 1-3, 1-4, 2-3, 2-4, 3-4
 
 class SrmError(ValueError):
     """Bad SRM input: unknown variant or vector of the wrong length (the message names it)."""
+
+
+def _clipped(dX: np.ndarray, max_step: float = 0.05) -> np.ndarray:
+    m = float(np.max(np.abs(dX)))
+    return dX * (max_step / m) if m > max_step else dX
+
+
+def pair_omega(desc: UpsrpuDescription, X: np.ndarray, k: int) -> float:
+    """Omega of the k-th pair of V_Omega at X (rad), without det J_D and the other pairs."""
+    _, T, C = kin.jd_and_screws(desc, X)
+    return _pair_omega_from(T, C, k)
+
+
+def _pair_omega_from(T: np.ndarray, C: np.ndarray, k: int) -> float:
+    O = output_twist_screws(T, C)
+    i, j = _PAIRS[k]
+    if not (np.any(O[i]) and np.any(O[j])):
+        return 0.0
+    return float(omega_angles(O[[i, j]])[0][0])
 
 
 def implicated_limbs(min_index: int) -> tuple[np.ndarray, np.ndarray]:
@@ -107,20 +126,29 @@ class SingularityReleaseModule:
         n_ch = M_INC.shape[1]
         v_omega_ch = np.zeros(n_ch)
         feasible = np.zeros(n_ch, dtype=bool)
+        # The first Newton-Raphson step from X_c is shared by all candidates (same q(X_c) and J_D(X_c)), so
+        # each FK below is exactly "FK of q_ch with X_c as initial condition", one iteration cheaper.
+        q_xc = kin.inverse_kinematics(d, X_c)
+        try:
+            J_inv = np.linalg.inv(kin.jacobian_jd(d, X_c))
+        except np.linalg.LinAlgError:
+            J_inv = None
         for c1 in range(n_ch):
             q_ch = q_d.copy()
             q_ch[moved] += self.step_size * M_INC[:, c1]         # V1: rows i_ch; V2 (**): rows i_nc
             if not (np.all(d.q_min < q_ch) and np.all(q_ch < d.q_max)):
                 continue
             try:
-                X_ch = kin.forward_kinematics(d, q_ch, X_c)      # X_c as initial condition
+                X_1 = X_c if J_inv is None else X_c + _clipped(J_inv @ (q_ch - q_xc))
+                X_ch, u, pts = kin.forward_kinematics_terms(d, q_ch, X_1)   # X_c as initial condition
             except kin.ForwardKinematicsError:
                 continue
-            alpha_ch = kin.spherical_joint_angles(d, X_ch)
+            alpha_ch = kin.spherical_angles_from(u, X_ch[2])
             if not np.all(alpha_ch < d.spherical_max):
                 continue
             feasible[c1] = True
-            v_omega_ch[c1] = upsrpu_indices(d, X_ch).omega[k_min]  # Omega_ij with i, j = i_ch
+            v_omega_ch[c1] = _pair_omega_from(kin.wrenches_from(u, pts), kin.constraint_wrench_screws(d, X_ch),
+                                              k_min)                 # Omega_ij with i, j = i_ch
         info = SrmStepInfo(active=True, i_ch=tuple(int(i) for i in i_ch), v_omega_ch=v_omega_ch,
                            feasible=feasible)
         if feasible.any():
