@@ -7,6 +7,7 @@ Service `calibrate_currents` (hexa_msgs/CalibrateCurrents). Parameters: config/d
 """
 from __future__ import annotations
 
+import sys
 import threading
 import time
 
@@ -24,7 +25,7 @@ from sensor_msgs.msg import JointState
 from hexa.protocol import frames as fr
 from hexa.protocol.driver_core import (SCALAR_KEYS, CommandRejected, default_driver_config_path,
                                        driver_core_from_config, load_driver_config,
-                                       servo_calibrations_from_description)
+                                       servo_calibrations_from_config)
 from hexa.protocol.link import CONNECTED, STALE, CurrentLink, ServoLink
 
 OK, WARN, ERROR = DiagnosticStatus.OK, DiagnosticStatus.WARN, DiagnosticStatus.ERROR
@@ -49,7 +50,7 @@ class DriverNode(Node):
         self.cfg = cfg
         cfg["robot_description"] = self.declare_parameter("robot_description", "").value
         desc = _load_description(cfg)
-        servos = None if cfg["servos"] is not None else servo_calibrations_from_description(desc)
+        servos = servo_calibrations_from_config(cfg["servos"], desc)
         self.core = driver_core_from_config(cfg, desc.zeta_min, desc.zeta_max, desc.K_t, servos)
         self.frame_id = str(cfg["frame_id"])
 
@@ -143,6 +144,8 @@ class DriverNode(Node):
         js.name = list(self.core.joint_names)
         js.position = [float(z) for z in self.core.commanded]
         js.effort = [float(t) for t in effort]
+        if not self.context.ok():  # shutting down: the link thread outlives the context briefly
+            return
         self.pub_currents.publish(m)
         self.pub_states.publish(js)
         self._last_sample_time = t_rx
@@ -241,7 +244,12 @@ def main(args: list[str] | None = None) -> int:
 
     apply_defaults()
     rclpy.init(args=args)
-    node = DriverNode()
+    try:
+        node = DriverNode()
+    except Exception as exc:
+        print(f"hexa-driver: {type(exc).__name__}: {exc}", file=sys.stderr)
+        rclpy.try_shutdown()
+        return 1
     executor = MultiThreadedExecutor(num_threads=3)
     executor.add_node(node)
     try:

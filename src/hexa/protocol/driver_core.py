@@ -57,12 +57,22 @@ class ServoCalibration:
         return self.zeta_ref + (pulse_us - self.zero_us) / self.us_per_rad
 
 
-def servo_calibrations_from_config(items: Sequence[dict]) -> list[ServoCalibration]:
-    """Six ServoCalibration from the `servos` list of driver.yaml.
+def servo_calibrations_from_config(items: Sequence[dict] | None, desc=None) -> list[ServoCalibration]:
+    """Six ServoCalibration from the `servos` list of driver.yaml; None: from the robot description's pulse map.
+
+    Args:
+        items: the config's `servos` entries, or None.
+        desc: HexaDescription used when `items` is None (default: hexa.robots.hexa_description.load_hexa()).
 
     Raises:
         DriverConfigError: not six entries, or an entry with unknown/missing keys.
     """
+    if items is None:
+        if desc is None:
+            from hexa.robots.hexa_description import load_hexa
+
+            desc = load_hexa()
+        return servo_calibrations_from_description(desc)
     if len(items) != N_JOINTS:
         raise DriverConfigError(f"servos: expected {N_JOINTS} entries, got {len(items)}")
     out = []
@@ -242,7 +252,7 @@ def servo_calibrations_from_description(desc) -> list[ServoCalibration]:
     Raises:
         DriverConfigError: the description has no pulse map (naming the missing attribute).
     """
-    names = ("pulse_center_us", "us_per_rad", "direction", "pulse_min_us", "pulse_max_us")
+    names = ("pulse_center_us", "us_per_rad", "servo_direction", "pulse_min_us", "pulse_max_us")
     values = {}
     for name in names:
         if not hasattr(desc, name):
@@ -250,7 +260,7 @@ def servo_calibrations_from_description(desc) -> list[ServoCalibration]:
         values[name] = getattr(desc, name)
     zeta_ref = 0.5 * (np.asarray(desc.zeta_min, float) + np.asarray(desc.zeta_max, float))
     zeta_ref = np.broadcast_to(zeta_ref, (N_JOINTS,))
-    direction = np.broadcast_to(np.asarray(values["direction"], float), (N_JOINTS,))
+    direction = np.broadcast_to(np.asarray(values["servo_direction"], float), (N_JOINTS,))
     return [ServoCalibration(zero_us=float(values["pulse_center_us"]),
                              us_per_rad=float(values["us_per_rad"]) * float(direction[i]),
                              zeta_ref=float(zeta_ref[i]), min_us=int(round(float(values["pulse_min_us"]))),
@@ -264,7 +274,7 @@ def driver_core_from_config(cfg: dict, zeta_min, zeta_max, k_t,
 
     `servos` (e.g. from servo_calibrations_from_description) is used when the config's `servos` is null.
     """
-    if cfg["servos"] is not None:
+    if cfg["servos"] is not None or servos is None:
         servos = servo_calibrations_from_config(cfg["servos"])
     if servos is None:
         raise DriverConfigError("driver config `servos` is null and no calibration from the description was given")

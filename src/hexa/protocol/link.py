@@ -50,6 +50,7 @@ class LinkStats:
     dropped_frames: int = 0      # gaps in the board's frame sequence numbers
     board_errors: int = 0        # ERROR frames received
     decode_errors: int = 0       # frames with a good CRC but an undecodable payload
+    callback_errors: int = 0     # exceptions raised by on_sample / on_frame consumers
     tx_failures: int = 0         # writes attempted while disconnected or failing
     last_rx: float = 0.0
     connected_since: float = 0.0
@@ -364,6 +365,9 @@ class BoardLink:
         except fr.ProtocolError as exc:
             st.decode_errors += 1
             st.last_error = str(exc)
+        except Exception as exc:  # a consumer callback failed: keep the link alive, say so
+            st.callback_errors += 1
+            st.last_error = f"callback failed: {type(exc).__name__}: {exc}"
 
     def _run(self) -> None:
         while not self._stop.is_set():

@@ -1,0 +1,131 @@
+"""The driver node (hexa-driver process) against the pty board emulators: commands, currents, torques,
+zero-current calibration, diagnostics, stale telemetry and unplug/replug recovery."""
+from __future__ import annotations
+
+import math
+import time
+
+import numpy as np
+import pytest
+
+from hexa.protocol.driver_core import servo_calibrations_from_config
+from hexa.protocol.emulator import MegaEmulator, UnoEmulator
+from hexa.protocol.sensor_model import DEFAULT_SENSOR
+from hexa.robots.hexa_description import load_hexa
+from test_driver_helpers import RosProbe, driver_args, kv, wait_for
+
+
+@pytest.fixture
+def probe(ros_env, monkeypatch):
+    p = RosProbe(ros_env, monkeypatch)
+    try:
+        yield p
+    finally:
+        p.close()
+
+
+def test_driver_commands_pulses_publishes_currents_and_effort_and_calibrates(tmp_path, procs, ros_env, probe):
+    desc = load_hexa()
+    servos = servo_calibrations_from_config(None, desc)
+    amps = [0.3, -0.2, 0.5, 1.0, 0.0, -1.0]
+    got = []
+    with UnoEmulator(on_targets=got.append, link=tmp_path / "uno") as uno, \
+            MegaEmulator(current_source=lambda t: amps, link=tmp_path / "mega") as mega:
+        procs.start(driver_args(uno.port, mega.port, "max_speed:=0.0", "stream_rate_hz:=200",
+                                "rest_quiet_time:=0.3"), ros_env)
+        assert wait_for(lambda: len(probe.currents) >= 20, 30.0), "no motor_currents from the driver"
+        # telemetry: counts -> amps through the sensor model, effort = K_t * I, position NaN before any command
+        _, m = probe.currents[-1]
+        counts = DEFAULT_SENSOR.counts_from_current(amps)
+        assert list(m.raw) == counts.tolist()
+        assert np.allclose(m.current, DEFAULT_SENSOR.current_from_counts(counts))
+        assert m.header.frame_id == "base" and m.gaps == 0
+        _, js = probe.states[-1]
+        assert list(js.name) == [f"arm_{i}" for i in range(1, 7)]
+        assert np.allclose(js.effort, desc.K_t * np.asarray(m.current), atol=1e-9)
+        assert all(math.isnan(p) for p in js.position)
+
+        # a command within limits -> the calibrated pulses on the Uno; joint_states.position = commanded angle
+        zeta = np.full(6, desc.zeta_center) + np.array([0.1, -0.1, 0.2, -0.2, 0.3, -0.3])
+        probe.command(zeta)
+        expected = tuple(s.pulse_from_angle(z) for s, z in zip(servos, zeta))
+        assert wait_for(lambda: expected in got, 5.0), (expected, got[-3:])
+        assert wait_for(lambda: np.allclose(probe.states[-1][1].position, zeta), 3.0)
+
+        # NaN is rejected (nothing sent), out-of-range is clamped to the joint limits
+        n = len(got)
+        probe.command([float("nan")] + list(zeta[1:]))
+        time.sleep(0.3)
+        assert len(got) == n
+        probe.command([desc.zeta_max + 1.0] + list(zeta[1:]))
+        clamped = (servos[0].pulse_from_angle(desc.zeta_max),) + expected[1:]
+        assert wait_for(lambda: got[-1] == clamped, 5.0), (clamped, got[-1])
+        t_diag = time.monotonic()
+        uno_diag = wait_for(lambda: probe.diag_status("servo board", since=t_diag), 5.0)
+        d = kv(uno_diag)
+        assert int(d["commands_rejected_nan"]) == 1 and int(d["commands_clamped"]) >= 1
+
+        # zero-current calibration at rest: I_0 = the mean current; afterwards currents read ~0
+        time.sleep(0.4)
+        resp = probe.calibrate(0.4)
+        assert resp.success, resp.message
+        assert np.allclose(resp.offsets, DEFAULT_SENSOR.current_from_counts(counts), atol=1e-9)
+        t_cal = time.monotonic()
+        assert wait_for(lambda: probe.currents[-1][0] > t_cal + 0.05, 3.0)
+        assert np.allclose(probe.currents[-1][1].current, 0.0, atol=1e-9)
+        assert np.allclose(probe.states[-1][1].effort, 0.0, atol=1e-9)
+        # not at rest -> refused
+        probe.command(zeta)
+        resp = probe.calibrate(0.2)
+        assert not resp.success and "not at rest" in resp.message
+        assert mega.rx_crc_errors == 0 and uno.rx_crc_errors == 0
+
+
+def test_driver_recovers_from_unplug_within_two_seconds_and_diagnostics_show_it(tmp_path, procs, ros_env, probe):
+    with UnoEmulator(link=tmp_path / "uno") as uno, MegaEmulator(link=tmp_path / "mega") as mega:
+        procs.start(driver_args(uno.port, mega.port, "stream_rate_hz:=200", "diagnostics_period:=0.1"), ros_env)
+        assert wait_for(lambda: len(probe.currents) >= 20, 30.0), "no motor_currents from the driver"
+        uno.unplug()
+        mega.unplug()
+        t_unplug = time.monotonic()
+        down = wait_for(lambda: (s := probe.diag_status("current board", since=t_unplug)) is not None
+                        and _level(s) == 2 and s, 3.0)
+        assert down, "diagnostics did not report the unplugged board"
+        assert kv(probe.diag_status("current board"))["state"] == "DISCONNECTED"
+        time.sleep(0.5)
+        t_replug = time.monotonic()
+        uno.replug()
+        mega.replug()
+        assert wait_for(lambda: probe.currents[-1][0] > t_replug, 5.0)
+        first = next(t for t, _ in probe.currents if t > t_replug)
+        recovery = first - t_replug
+        print(f"unplug/replug recovery: {recovery * 1e3:.0f} ms")
+        assert recovery < 2.0
+        t_ok = time.monotonic()
+        st = wait_for(lambda: (s := probe.diag_status("current board", since=t_ok)) is not None and
+                      _level(s) == 0 and s, 3.0)
+        assert st, "diagnostics did not return to OK"
+        d = kv(st)
+        assert d["state"] == "CONNECTED" and int(d["disconnects"]) == 1 and int(d["connects"]) == 2
+        assert float(d["last_reconnect_s"]) < 2.5
+        assert wait_for(lambda: kv(probe.diag_status("servo board"))["state"] == "CONNECTED", 3.0)
+
+
+def _level(status) -> int:
+    lv = status.level
+    return lv[0] if isinstance(lv, (bytes, bytearray)) else int(lv)
+
+
+def test_driver_reports_stale_telemetry_as_error(tmp_path, procs, ros_env, probe):
+    with UnoEmulator(link=tmp_path / "uno") as uno, MegaEmulator(link=tmp_path / "mega") as mega:
+        procs.start(driver_args(uno.port, mega.port, "stream_rate_hz:=100", "diagnostics_period:=0.1",
+                                "drop_after:=30.0"), ros_env)
+        assert wait_for(lambda: len(probe.currents) >= 10, 30.0), "no motor_currents from the driver"
+        mega.streaming = False  # the board stops sending without closing the port
+        t_stop = time.monotonic()
+        st = wait_for(lambda: (s := probe.diag_status("current board", since=t_stop + 0.3)) is not None
+                      and _level(s) == 2 and s, 3.0)
+        assert st and "stale" in st.message
+        n = len(probe.currents)
+        time.sleep(0.3)
+        assert len(probe.currents) == n  # nothing published while stale
