@@ -120,15 +120,20 @@ def test_tr15_min_omega_along_the_path_is_below_the_limit():
     assert math.degrees(mins[0]) > 1.8       # it starts outside the singular region
 
 
-def test_hexa_indices_give_fifteen_pairs():
+def test_hexa_indices_give_fifteen_pairs_and_match_rod_wrench_screws():
     pytest.importorskip("hexa.kinematics.hexa6rus", reason="Hexa kinematics (H1) not available yet")
+    from hexa.kinematics import hexa6rus
     from hexa.robots.hexa_description import load_hexa
 
     h = load_hexa()
-    from hexa.kinematics import hexa6rus
-
-    pose = np.asarray(getattr(hexa6rus, "HOME_POSE", None) if getattr(hexa6rus, "HOME_POSE", None) is not None
-                      else h.section("sim").get("home_pose", [0, 0, 0.45, 0, 0, 0]), dtype=float)
-    r = sg.hexa_indices(h, pose)
-    assert len(r.omega) == 15 and r.pairs[-1] == "5-6"
-    assert 0 <= r.min_omega <= math.pi / 2
+    rng = np.random.default_rng(0)
+    for k in range(5):
+        step = rng.uniform(-1, 1, 6) * np.array([0.02, 0.02, 0.02, 0.05, 0.05, 0.05])
+        pose = np.asarray(hexa6rus.HOME_POSE, dtype=float) + (0.0 if k == 0 else step)
+        r = sg.hexa_indices(h, pose)
+        assert len(r.omega) == 15 and r.pairs[-1] == "5-6" and r.pairs[0] == "1-2"
+        assert 0 <= r.min_omega <= math.pi / 2 and r.min_omega == r.omega.min()
+        ref, _ = sg.omega_angles(sg.output_twist_screws(hexa6rus.rod_wrench_screws(h, pose)))
+        np.testing.assert_allclose(r.omega, ref, atol=1e-8)
+        J_D, _ = hexa6rus.constraint_jacobians(h, pose, hexa6rus.inverse_kinematics(h, pose))
+        assert r.det_jd == pytest.approx(np.linalg.det(J_D))

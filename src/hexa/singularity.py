@@ -174,8 +174,10 @@ def upsrpu_indices(desc: UpsrpuDescription, X: np.ndarray) -> SingularityReport:
 def hexa_indices(desc: Any, pose: np.ndarray, zeta: np.ndarray | None = None) -> SingularityReport:
     """det J_D and the fifteen Omega_ij of the Hexa at `pose` (x, y, z, alpha, beta, gamma).
 
-    Transmission wrench screws: unit force along each rod through its spherical joint (DESIGN.md), from H1's
-    `rod_wrench_screws`; J_D from H1's `constraint_jacobians` at the IK arm angles (or `zeta` when given).
+    Transmission wrench screws: unit force along each rod through its spherical joint (DESIGN.md). H1's
+    `constraint_jacobians` rows [n_i, r_i x n_i] are exactly these screws with moments about the plate centre
+    (H1's `rod_wrench_screws` gives the same screws about the base origin; Omega does not depend on the
+    reference point, see the tests), so one call yields both J_D and the wrenches. `zeta` defaults to the IK.
     """
     from hexa.kinematics import hexa6rus as kin
 
@@ -183,4 +185,4 @@ def hexa_indices(desc: Any, pose: np.ndarray, zeta: np.ndarray | None = None) ->
     if zeta is None:
         zeta = kin.inverse_kinematics(desc, pose)
     J_D, _ = kin.constraint_jacobians(desc, pose, zeta)
-    return indices_from_screws(np.linalg.det(J_D), kin.rod_wrench_screws(desc, pose))
+    return indices_from_screws(np.linalg.det(J_D), J_D)

@@ -48,7 +48,10 @@ def run(args: argparse.Namespace) -> int:
             raise SystemExit("hexa singularity: --robot hexa needs --pose x y z alpha beta gamma")
         desc = load_hexa(args.description)
         pose = np.array(args.pose)
-        report = singularity.hexa_indices(desc, pose)
+        try:
+            report = singularity.hexa_indices(desc, pose)
+        except ValueError as exc:
+            raise SystemExit(f"hexa singularity: {exc}") from exc
         det_lim, om_lim = None, math.radians(1.8)
         names = ("x", "y", "z", "alpha", "beta", "gamma")
     out = report.as_dict()
