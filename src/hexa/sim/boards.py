@@ -70,8 +70,12 @@ class VirtualBoards:
         """The six true motor currents (A) the Mega measures at sim time `t_sim`: τ/K_t + I_0."""
         return self.sim.tau_at(t_sim) / self.k_t + self.offsets
 
+    def sim_time_of(self, t_board: float) -> float:
+        """Sim time (s) of a Mega board time (s since the boards were created)."""
+        return self._t0 + t_board
+
     def _currents(self, t_board: float) -> np.ndarray:
-        return self.currents_at(self._t0 + t_board)
+        return self.currents_at(self.sim_time_of(t_board))
 
     def start(self) -> "VirtualBoards":
         self.uno.start()
