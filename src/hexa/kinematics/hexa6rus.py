@@ -79,24 +79,23 @@ def rotation_zyz(phi: float | np.ndarray, theta: float | np.ndarray, psi: float 
 def rotation_to_zyz(R: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Z-Y-Z angles (φ, θ ∈ [0, π], ψ) of rotation(s) R (…, 3, 3), inverse of eq 1.
 
-    Robust at θ = 0: φ + ψ comes from (R21 − R12, R11 + R22) = (1 + cos θ)(sin, cos)(φ + ψ) and φ − ψ from
-    (−(R21 + R12), R22 − R11) = (1 − cos θ)(sin, cos)(φ − ψ); at θ = 0 exactly the split is φ = ψ.
+    Robust at θ = 0: the sum φ + ψ comes from (R21 − R12, R11 + R22) = (1 + cos θ)(sin, cos)(φ + ψ), which is
+    well conditioned for θ < π/2; φ = atan2(R23, R13) as long as that direction is defined (else φ = ψ at θ = 0),
+    and ψ = (φ + ψ) − φ. For θ > π/2 the difference φ − ψ from (−(R21 + R12), R22 − R11) = (1 − cos θ)(sin, cos)(φ − ψ)
+    is used with ψ = atan2(R32, −R31). The returned angles always rebuild R to round-off.
     """
     R = np.asarray(R, dtype=float)
-    theta = np.arctan2(np.hypot(R[..., 0, 2], R[..., 1, 2]), R[..., 2, 2])
+    r13, r23 = R[..., 0, 2], R[..., 1, 2]
+    theta = np.arctan2(np.hypot(r13, r23), R[..., 2, 2])
     s = np.arctan2(R[..., 1, 0] - R[..., 0, 1], R[..., 0, 0] + R[..., 1, 1])
     d = np.arctan2(-(R[..., 1, 0] + R[..., 0, 1]), R[..., 1, 1] - R[..., 0, 0])
-    # Where θ ≈ π the sum is undefined; use the difference-only formulas there (R13, R23, R31, R32 are then ~0 too).
-    phi = 0.5 * (s + d)
-    psi = 0.5 * (s - d)
-    # The half-angle split is defined modulo π; pick the representative consistent with R13, R23 when θ is not ~0.
-    st = np.sin(theta)
-    big = st > 1e-6
-    phi_direct = np.arctan2(R[..., 1, 2], R[..., 0, 2])
-    psi_direct = np.arctan2(R[..., 2, 1], -R[..., 2, 0])
-    phi = np.where(big, phi_direct, _wrap_pi(phi))
-    psi = np.where(big, psi_direct, _wrap_pi(psi))
-    return phi, theta, psi
+    defined = (r13 != 0.0) | (r23 != 0.0)
+    phi_low = np.where(defined, np.arctan2(r23, r13), 0.5 * s)
+    psi_low = s - phi_low
+    psi_high = np.arctan2(R[..., 2, 1], -R[..., 2, 0])
+    phi_high = d + psi_high
+    low = theta <= 0.5 * math.pi
+    return _wrap_pi(np.where(low, phi_low, phi_high)), theta, _wrap_pi(np.where(low, psi_low, psi_high))
 
 
 def rotation_to_zyx(R: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -192,7 +191,8 @@ def _consts(desc: "HexaDescription") -> tuple:
     ca, sa = np.cos(desc.alpha), np.sin(desc.alpha)
     Cp = np.ascontiguousarray(desc.C.T)  # (3, 6)
     entry = (desc, ca, sa, desc.A[:, 0].copy(), desc.A[:, 1].copy(), desc.A[:, 2].copy(), Cp[0].copy(),
-             Cp[1].copy(), Cp[2].copy(), desc.l_d ** 2 - desc.l_a ** 2, 2.0 * desc.l_a, desc.zeta_center)
+             Cp[1].copy(), Cp[2].copy(), desc.l_d ** 2 - desc.l_a ** 2, 2.0 * desc.l_a, desc.zeta_center,
+             tuple(tuple(float(v) for v in row) for row in np.column_stack([desc.A, desc.C, ca, sa])))
     if len(_CACHE) > 64:
         _CACHE.clear()
     _CACHE[id(desc)] = entry
@@ -228,16 +228,6 @@ def ik_coefficients(desc: "HexaDescription", pose: np.ndarray) -> tuple[np.ndarr
     return a, b, c
 
 
-def _solve_eq18(desc: "HexaDescription", a: np.ndarray, b: np.ndarray, c: np.ndarray,
-                zc: float) -> tuple[np.ndarray, np.ndarray]:
-    r = np.hypot(b, c)
-    ratio = a / r
-    with np.errstate(invalid="ignore"):
-        zeta = np.arctan2(c, b) + desc.branch * np.arccos(ratio)
-    zeta = zc + (zeta - zc + math.pi) % TWO_PI - math.pi
-    return zeta, ratio
-
-
 def _check_ik(desc: "HexaDescription", zeta: np.ndarray, ratio: np.ndarray, index: int | None) -> None:
     """Raise UnreachablePoseError for the first chain out of reach / alignment margin / joint range."""
     where = "" if index is None else f" (pose {index})"
@@ -262,6 +252,8 @@ def _check_ik(desc: "HexaDescription", zeta: np.ndarray, ratio: np.ndarray, inde
 def inverse_kinematics(desc: "HexaDescription", pose: np.ndarray, check: bool = True) -> np.ndarray:
     """Arm angles ζ (6,) for pose [x, y, z, α, β, γ] (m, rad) in closed form (seed 000, eqs 14–18).
 
+    Scalar code path (a few µs per chain); `inverse_kinematics_batch` is the vectorised twin.
+
     Args:
         desc: the Hexa description.
         pose: position of P in {O} and Z-Y-X angles of eq 38.
@@ -274,56 +266,108 @@ def inverse_kinematics(desc: "HexaDescription", pose: np.ndarray, check: bool = 
     k = _consts(desc)
     x, y, z, al, be, ga = (float(v) for v in pose)
     ca, sa, cb, sb, cg, sg = math.cos(al), math.sin(al), math.cos(be), math.sin(be), math.cos(ga), math.sin(ga)
-    cpx, cpy, cpz = k[6], k[7], k[8]
-    # d = A − C, C = p + R c (eq 14)
-    dx = k[3] - (x + ca * cb * cpx + (ca * sb * sg - sa * cg) * cpy + (ca * sb * cg + sa * sg) * cpz)
-    dy = k[4] - (y + sa * cb * cpx + (sa * sb * sg + ca * cg) * cpy + (sa * sb * cg - ca * sg) * cpz)
-    dz = k[5] - (z - sb * cpx + cb * sg * cpy + cb * cg * cpz)
-    a = k[9] - (dx * dx + dy * dy + dz * dz)
-    b = -k[10] * (k[1] * dx + k[2] * dy)
-    c = k[10] * dz
-    zeta, ratio = _solve_eq18(desc, a, b, c, k[11])
-    if check:
-        if not (np.all(np.abs(ratio) <= desc.max_alignment) and np.all(zeta >= desc.zeta_min)
-                and np.all(zeta <= desc.zeta_max)):
-            _check_ik(desc, zeta, ratio, None)
+    r00, r01, r02 = ca * cb, ca * sb * sg - sa * cg, ca * sb * cg + sa * sg
+    r10, r11, r12 = sa * cb, sa * sb * sg + ca * cg, sa * sb * cg - ca * sg
+    r20, r21, r22 = -sb, cb * sg, cb * cg
+    L, la2, zc, br, lim = k[9], k[10], k[11], float(desc.branch), desc.max_alignment
+    hi, lo = zc + math.pi, zc - math.pi
+    zmin, zmax = desc.zeta_min, desc.zeta_max
+    out = [0.0] * 6
+    ok = True
+    ratios = [0.0] * 6
+    for i, (ax, ay, az, px, py, pz, c_, s_) in enumerate(k[12]):
+        # d = A_i − C_i with C_i = r_P + R c_i (eq 14); a, b, c of eq 17
+        dx = ax - x - r00 * px - r01 * py - r02 * pz
+        dy = ay - y - r10 * px - r11 * py - r12 * pz
+        dz = az - z - r20 * px - r21 * py - r22 * pz
+        a = L - dx * dx - dy * dy - dz * dz
+        b = -la2 * (c_ * dx + s_ * dy)
+        c = la2 * dz
+        q = a / math.hypot(b, c)
+        ratios[i] = q
+        if not -1.0 <= q <= 1.0:
+            ok = False
+            out[i] = math.nan
+            continue
+        zi = math.atan2(c, b) + br * math.acos(q)
+        if zi >= hi:
+            zi -= TWO_PI
+        elif zi < lo:
+            zi += TWO_PI
+        out[i] = zi
+        if not (-lim <= q <= lim and zmin <= zi <= zmax):
+            ok = False
+    zeta = np.array(out)
+    if check and not ok:
+        _check_ik(desc, zeta, np.array(ratios), None)
     return zeta
+
+
+_CHUNK = 4096
 
 
 def inverse_kinematics_batch(desc: "HexaDescription", poses: np.ndarray, check: bool = True) -> np.ndarray:
     """ζ (N, 6) for poses (N, 6), vectorised eqs 14–18 (same branch and range as `inverse_kinematics`).
 
+    Works in cache-sized chunks without temporaries per pose.
+
     Raises:
-        UnreachablePoseError: naming the first bad pose index and chain when `check`; otherwise that row is NaN
-            where |a_i| > √(b_i²+c_i²) and the other rows are returned unchecked.
+        UnreachablePoseError: naming the first bad pose index and chain when `check`; otherwise rows with
+            |a_i| > √(b_i²+c_i²) hold NaN and the others are returned unchecked.
     """
     k = _consts(desc)
     P = np.asarray(poses, dtype=float)
     if P.ndim != 2 or P.shape[1] != 6:
         raise KinematicsError(f"poses must have shape (N, 6), got {P.shape}")
-    x, y, z = P[:, 0:1], P[:, 1:2], P[:, 2:3]
-    ca, sa = np.cos(P[:, 3:4]), np.sin(P[:, 3:4])
-    cb, sb = np.cos(P[:, 4:5]), np.sin(P[:, 4:5])
-    cg, sg = np.cos(P[:, 5:6]), np.sin(P[:, 5:6])
-    cpx, cpy, cpz = k[6], k[7], k[8]
-    sbsg, sbcg = sb * sg, sb * cg
-    dx = k[3] - x - (ca * cb) * cpx - (ca * sbsg - sa * cg) * cpy
-    dy = k[4] - y - (sa * cb) * cpx - (sa * sbsg + ca * cg) * cpy
-    dz = k[5] - z + sb * cpx - (cb * sg) * cpy
-    if np.any(cpz):
-        dx -= (ca * sbcg + sa * sg) * cpz
-        dy -= (sa * sbcg - ca * sg) * cpz
-        dz -= (cb * cg) * cpz
-    a = k[9] - (dx * dx + dy * dy + dz * dz)
-    b = -k[10] * (k[1] * dx + k[2] * dy)
-    c = k[10] * dz
-    zeta, ratio = _solve_eq18(desc, a, b, c, k[11])
-    if check:
-        bad = ~((np.abs(ratio) <= desc.max_alignment) & (zeta >= desc.zeta_min) & (zeta <= desc.zeta_max))
-        if np.any(bad):
-            n = int(np.argmax(bad.any(axis=1)))
-            _check_ik(desc, zeta[n], ratio[n], n)
-    return zeta
+    out = np.empty((len(P), 6))
+    _ca, _sa, Ax, Ay, Az, cpx, cpy, cpz, L, la2, zc = k[1:12]
+    bx, by = -la2 * _ca, -la2 * _sa
+    has_z = bool(np.any(cpz))
+    hi = zc + math.pi
+    lo = zc - math.pi
+    for s in range(0, len(P), _CHUNK):
+        Q = P[s:s + _CHUNK]
+        ca, sa, cb, sb = np.cos(Q[:, 3]), np.sin(Q[:, 3]), np.cos(Q[:, 4]), np.sin(Q[:, 4])
+        cg, sg = np.cos(Q[:, 5]), np.sin(Q[:, 5])
+        sbsg = sb * sg
+        r00, r10, r20 = ca * cb, sa * cb, -sb
+        r01, r11, r21 = ca * sbsg - sa * cg, sa * sbsg + ca * cg, cb * sg
+        dx = np.subtract.outer(-Q[:, 0], -Ax)
+        dx -= np.multiply.outer(r00, cpx)
+        dx -= np.multiply.outer(r01, cpy)
+        dy = np.subtract.outer(-Q[:, 1], -Ay)
+        dy -= np.multiply.outer(r10, cpx)
+        dy -= np.multiply.outer(r11, cpy)
+        dz = np.subtract.outer(-Q[:, 2], -Az)
+        dz -= np.multiply.outer(r20, cpx)
+        dz -= np.multiply.outer(r21, cpy)
+        if has_z:
+            sbcg = sb * cg
+            dx -= np.multiply.outer(ca * sbcg + sa * sg, cpz)
+            dy -= np.multiply.outer(sa * sbcg - ca * sg, cpz)
+            dz -= np.multiply.outer(cb * cg, cpz)
+        b = dx * bx
+        b += dy * by
+        c = dz * la2
+        a = dx * dx
+        a += dy * dy
+        a += dz * dz
+        np.subtract(L, a, out=a)
+        a /= np.hypot(b, c)                          # a_i / sqrt(b_i² + c_i²)
+        with np.errstate(invalid="ignore"):
+            z = np.arccos(a)
+        if desc.branch < 0:
+            np.negative(z, out=z)
+        z += np.arctan2(c, b)
+        z[z >= hi] -= TWO_PI
+        z[z < lo] += TWO_PI
+        out[s:s + _CHUNK] = z
+        if check:
+            bad = ~((np.abs(a) <= desc.max_alignment) & (z >= desc.zeta_min) & (z <= desc.zeta_max))
+            if bad.any():
+                n = int(np.argmax(bad.any(axis=1)))
+                _check_ik(desc, z[n], a[n], s + n)
+    return out
 
 
 def inverse_kinematics_derivatives(desc: "HexaDescription", pose: np.ndarray, pose_dot: np.ndarray,
@@ -440,66 +484,90 @@ def loop_closure_residual(desc: "HexaDescription", pose: np.ndarray, zeta: np.nd
     return (np.einsum("...ij,...ij->...i", d, d) - desc.l_d ** 2) / (2.0 * desc.l_d)
 
 
+#: Sum of squared rod-length errors (m²) below which the NR iterate is converged: |Φ| ≤ 1e-13 m, so that the pose
+#: error (|Φ| times the condition of J_D·T, < 1e3 inside the workspace) is below 1e-10 m / 1e-10 rad.
+_FK_RESIDUAL_SQ = 1e-26
+
+
+def _fk_residual(chains: tuple, Bl: list, l_d: float, p: list) -> tuple[list, list, float]:
+    """Rod residuals Φ and the data for their Jacobian at pose p (pure-Python scalar code, 6 chains)."""
+    x, y, z, al, be, ga = p
+    ca, sa, cb, sb, cg, sg = math.cos(al), math.sin(al), math.cos(be), math.sin(be), math.cos(ga), math.sin(ga)
+    r00, r01, r02 = ca * cb, ca * sb * sg - sa * cg, ca * sb * cg + sa * sg
+    r10, r11, r12 = sa * cb, sa * sb * sg + ca * cg, sa * sb * cg - ca * sg
+    r20, r21, r22 = -sb, cb * sg, cb * cg
+    inv2l, l2 = 0.5 / l_d, l_d * l_d
+    phi = [0.0] * 6
+    geo = [None] * 6
+    f = 0.0
+    for i in range(6):
+        px, py, pz = chains[i][3], chains[i][4], chains[i][5]
+        bx, by, bz = Bl[i]
+        rx = r00 * px + r01 * py + r02 * pz
+        ry = r10 * px + r11 * py + r12 * pz
+        rz = r20 * px + r21 * py + r22 * pz
+        nx, ny, nz = x + rx - bx, y + ry - by, z + rz - bz
+        v = (nx * nx + ny * ny + nz * nz - l2) * inv2l
+        phi[i] = v
+        f += v * v
+        geo[i] = (rx, ry, rz, nx, ny, nz)
+    return phi, geo, f
+
+
 def forward_kinematics(desc: "HexaDescription", zeta: np.ndarray, guess: np.ndarray | None = None,
                        tol: float = 1e-10, max_iter: int = 50) -> np.ndarray:
     """Pose [x y z α β γ] for arm angles ζ by damped Newton–Raphson on the loop closures (seed 000 §2.2.2).
 
-    Iterates Δx = −(∂Φ/∂x)⁻¹Φ with ∂Φ/∂x = J_D(x)·T(x) (rod lengths Φ of `loop_closure_residual`), halving the
-    step while it does not reduce |Φ|, until the step is below `tol` (m, rad) — then |Φ| is at round-off level.
+    Iterates Δx = −(∂Φ/∂x)⁻¹Φ with ∂Φ/∂x = J_D(x)·T(x) (rod-length residuals Φ of `loop_closure_residual`),
+    halving the step while it does not reduce |Φ|, until a full step is below `tol` (m, rad); |Φ| is then at
+    round-off level (quadratic convergence); it also stops once |Φ| ≤ 1e-13 m. Converges to the assembly mode nearest the guess.
 
     Args:
         guess: starting pose (default the home pose); pass the last solution to warm-start.
     Raises:
         ForwardKinematicsError: no convergence in `max_iter` steps or a singular Jacobian.
     """
+    k = _consts(desc)
+    chains = k[12]
     zeta = np.asarray(zeta, dtype=float)
-    x = np.array(desc.home_pose if guess is None else guess, dtype=float)
-    B = elbows(desc, zeta)
-    Cp = desc.C
-    l_d, inv2l = desc.l_d, 0.5 / desc.l_d
+    la = desc.l_a
+    Bl = []
+    for (ax, ay, az, _px, _py, _pz, c_, s_), zi in zip(chains, zeta.tolist()):
+        cz, sz = math.cos(zi), math.sin(zi)
+        Bl.append((ax - la * c_ * cz, ay - la * s_ * cz, az + la * sz))      # B_i = A_i + l_a u_i (eq 10)
+    x = [float(v) for v in (desc.home_pose if guess is None else guess)]
+    l_d = desc.l_d
+    inv_l = 1.0 / l_d
     J = np.empty((6, 6))
-
-    def residual(p: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, float]:
-        ca, sa, cb, sb = math.cos(p[3]), math.sin(p[3]), math.cos(p[4]), math.sin(p[4])
-        cg, sg = math.cos(p[5]), math.sin(p[5])
-        R = np.array([[ca * cb, ca * sb * sg - sa * cg, ca * sb * cg + sa * sg],
-                      [sa * cb, sa * sb * sg + ca * cg, sa * sb * cg - ca * sg],
-                      [-sb, cb * sg, cb * cg]])
-        r = Cp @ R.T
-        n = p[:3] + r - B
-        phi = (np.einsum("ij,ij->i", n, n) - l_d * l_d) * inv2l
-        E = np.array([[0.0, -sa, ca * cb], [0.0, ca, sa * cb], [1.0, 0.0, -sb]])
-        return r, n, phi, float(np.dot(phi, phi))
-
-    r, n, phi, f = residual(x)
+    phi, geo, f = _fk_residual(chains, Bl, l_d, x)
     for _ in range(max_iter):
         ca, sa, cb, sb = math.cos(x[3]), math.sin(x[3]), math.cos(x[4]), math.sin(x[4])
-        E = np.array([[0.0, -sa, ca * cb], [0.0, ca, sa * cb], [1.0, 0.0, -sb]])
-        J[:, :3] = n
-        rxn = np.empty((6, 3))
-        rxn[:, 0] = r[:, 1] * n[:, 2] - r[:, 2] * n[:, 1]
-        rxn[:, 1] = r[:, 2] * n[:, 0] - r[:, 0] * n[:, 2]
-        rxn[:, 2] = r[:, 0] * n[:, 1] - r[:, 1] * n[:, 0]
-        J[:, 3:] = rxn @ E
-        J *= 1.0 / l_d
+        e0, e1, e2, e3, e4 = -sa, ca * cb, ca, sa * cb, -sb   # E = [[0, e0, e1], [0, e2, e3], [1, 0, e4]]
+        rows = []
+        for rx, ry, rz, nx, ny, nz in geo:
+            mx, my, mz = ry * nz - rz * ny, rz * nx - rx * nz, rx * ny - ry * nx     # r × n
+            rows.append((nx * inv_l, ny * inv_l, nz * inv_l, mz * inv_l, (mx * e0 + my * e2) * inv_l,
+                         (mx * e1 + my * e3 + mz * e4) * inv_l))
+        J[:] = rows
         try:
-            dx = np.linalg.solve(J, -phi)
+            dx = np.linalg.solve(J, phi).tolist()
         except np.linalg.LinAlgError as exc:
-            raise ForwardKinematicsError(f"singular loop-closure Jacobian at pose {x.tolist()}") from exc
+            raise ForwardKinematicsError(f"singular loop-closure Jacobian at pose {x}") from exc
         step = 1.0
-        for _halving in range(30):
-            xn = x + step * dx
-            rn, nn, phin, fn = residual(xn)
-            if fn < f or fn < 1e-28:
+        for _halving in range(40):
+            xn = [xi - step * di for xi, di in zip(x, dx)]
+            phin, geon, fn = _fk_residual(chains, Bl, l_d, xn)
+            if fn < f or fn < 1e-30:
                 break
             step *= 0.5
         else:
-            raise ForwardKinematicsError(f"Newton–Raphson stalled at pose {x.tolist()} for zeta {zeta.tolist()}")
-        x, r, n, phi, f = xn, rn, nn, phin, fn
-        if step == 1.0 and float(np.max(np.abs(dx))) < tol:
-            return x
+            raise ForwardKinematicsError(f"Newton–Raphson stalled at pose {x} for zeta {zeta.tolist()}")
+        x, phi, geo, f = xn, phin, geon, fn
+        if step == 1.0 and (max(abs(di) for di in dx) < tol or fn < _FK_RESIDUAL_SQ):
+            return np.array(x)
     raise ForwardKinematicsError(
-        f"forward kinematics did not converge in {max_iter} steps for zeta {zeta.tolist()} (residual {math.sqrt(f):.3g} m)")
+        f"forward kinematics did not converge in {max_iter} steps for zeta {zeta.tolist()} "
+        f"(residual {math.sqrt(f):.3g} m)")
 
 
 class ForwardKinematicsSolver:
