@@ -1,0 +1,67 @@
+"""The Hexa test trajectories of seed 000 (circle eq 37, helix eq 40, ellipse eq 41) in SI units, with derivatives.
+
+Each function maps time t (s, scalar or array) to `(pose, pose_dot, pose_ddot)`, each (…, 6): x y z (m) and the
+Z-Y-X Tait–Bryan angles α β γ (rad) of eq 38, then their first and second time derivatives. The paper gives the
+formulas in mm and degrees; they are converted here. All three share ω = 0.4π rad/s (period 5 s) and start at
+(x, y) = (a, 0) with non-zero velocity, as in the paper; `DURATIONS` is the run length used by the demo (two turns).
+"""
+from __future__ import annotations
+
+import math
+from typing import Callable
+
+import numpy as np
+
+OMEGA = 0.4 * math.pi          # rad/s (eqs 37, 40, 41)
+Z0 = -0.550                    # m
+ALPHA = math.radians(-6.0)     # rad
+OFFSET = math.radians(1.0)     # rad, the "1 +" / "1 −" of β and γ
+
+Trajectory = Callable[[float | np.ndarray], tuple[np.ndarray, np.ndarray, np.ndarray]]
+
+
+def _planar(t: float | np.ndarray, ax: float, ay: float, z_rate: float,
+            tilt: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    t = np.asarray(t, dtype=float)
+    w = OMEGA
+    c, s = np.cos(w * t), np.sin(w * t)
+    zero, one = np.zeros_like(t), np.ones_like(t)
+    pose = np.stack([ax * c, ay * s, Z0 + z_rate * t, ALPHA * one, OFFSET - tilt * c, OFFSET + tilt * s], -1)
+    vel = np.stack([-ax * w * s, ay * w * c, z_rate * one, zero, tilt * w * s, tilt * w * c], -1)
+    acc = np.stack([-ax * w * w * c, -ay * w * w * s, zero, zero, tilt * w * w * c, -tilt * w * w * s], -1)
+    return pose, vel, acc
+
+
+def circle(t: float | np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Circle of radius 0.1 m at z = −0.55 m, β = 1° − 30° cos ωt, γ = 1° + 30° sin ωt (seed 000, eq 37)."""
+    return _planar(t, 0.100, 0.100, 0.0, math.radians(30.0))
+
+
+def helix(t: float | np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Helix: the circle rising 5 mm/s from z = −0.55 m, tilts of 25° (seed 000, eq 40)."""
+    return _planar(t, 0.100, 0.100, 0.005, math.radians(25.0))
+
+
+def ellipse(t: float | np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Ellipse with semi-axes 0.08 m (x) and 0.11 m (y) at z = −0.55 m, tilts of 30° (seed 000, eq 41)."""
+    return _planar(t, 0.080, 0.110, 0.0, math.radians(30.0))
+
+
+TRAJECTORIES: dict[str, Trajectory] = {"circle": circle, "helix": helix, "ellipse": ellipse}
+
+#: Run length (s) of each trajectory: two periods; covers the paper's collision instants (3.4–5.6 s).
+DURATIONS: dict[str, float] = {"circle": 10.0, "helix": 10.0, "ellipse": 10.0}
+
+
+def sample(name: str, rate_hz: float = 100.0,
+           duration: float | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Times (N,) and pose, pose_dot, pose_ddot (N, 6) of trajectory `name` sampled at `rate_hz`.
+
+    Raises:
+        KeyError: unknown trajectory name (the message lists the known ones).
+    """
+    if name not in TRAJECTORIES:
+        raise KeyError(f"unknown trajectory {name!r}; known: {sorted(TRAJECTORIES)}")
+    T = DURATIONS[name] if duration is None else float(duration)
+    t = np.arange(int(round(T * rate_hz)) + 1) / rate_hz
+    return (t, *TRAJECTORIES[name](t))
