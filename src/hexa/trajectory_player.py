@@ -1,0 +1,144 @@
+"""Plays a plate trajectory through inverse kinematics as arm-angle commands, with the collision reaction
+an operator expects of a safety stack: hold (default), retract along the residual force, or ignore."""
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import TYPE_CHECKING, Callable
+
+import numpy as np
+
+if TYPE_CHECKING:
+    from hexa.robots.hexa_description import HexaDescription
+
+POLICIES = ("hold", "retract", "ignore")
+
+
+class TrajectoryPlayerError(ValueError):
+    """Bad player configuration (unknown policy or trajectory, non-positive durations)."""
+
+
+@dataclass
+class Command:
+    """One command: arm angles ζ (rad), their rates (rad/s), the plate pose commanded, and the player state."""
+
+    zeta: np.ndarray
+    zeta_dot: np.ndarray
+    pose: np.ndarray
+    state: str  # "running" | "held" | "retracting" | "resuming" | "finished"
+    trajectory_time: float
+
+
+def _smoothstep(s: float) -> float:
+    s = min(1.0, max(0.0, s))
+    return s * s * (3.0 - 2.0 * s)
+
+
+class TrajectoryPlayer:
+    """Samples `trajectory(t) -> (pose, pose_dot, pose_ddot)` and converts poses to ζ by IK.
+
+    Args:
+        desc: the Hexa description.
+        trajectory: callable of trajectory time (s) returning pose (6,) [x y z α β γ] and its derivatives.
+        duration: trajectory length (s); after it the last pose is held ("finished") unless `loop`.
+        policy: reaction to a collision START: "hold", "retract" or "ignore".
+        retract_distance: how far (m) the plate backs off along the external force in "retract".
+        retract_time: seconds the retraction and the return blend take.
+        loop: restart the trajectory after `duration`.
+    """
+
+    def __init__(self, desc: "HexaDescription", trajectory: Callable[[float], tuple], duration: float,
+                 policy: str = "hold", retract_distance: float = 0.02, retract_time: float = 0.5,
+                 loop: bool = False) -> None:
+        if policy not in POLICIES:
+            raise TrajectoryPlayerError(f"unknown collision policy {policy!r}; use one of {POLICIES}")
+        if not duration > 0 or not retract_time > 0 or retract_distance < 0:
+            raise TrajectoryPlayerError(f"durations must be > 0 and distance >= 0, got duration={duration}, "
+                                        f"retract_time={retract_time}, retract_distance={retract_distance}")
+        from hexa.kinematics import hexa6rus
+
+        self._ik = hexa6rus.inverse_kinematics
+        self._ik_rates = hexa6rus.inverse_kinematics_derivatives
+        self.desc = desc
+        self.trajectory = trajectory
+        self.duration = float(duration)
+        self.policy = policy
+        self.retract_distance = float(retract_distance)
+        self.retract_time = float(retract_time)
+        self.loop = loop
+        self._offset = 0.0          # wall/sim time spent held, subtracted from trajectory time
+        self._held_since: float | None = None
+        self._hold_pose: np.ndarray | None = None
+        self._retract_dir = np.zeros(3)
+        self._resume_at: float | None = None
+        self._resume_from: np.ndarray | None = None
+        self._last: Command | None = None
+        self.ik_failures = 0
+
+    # -- events --------------------------------------------------------------------------------------------------
+    def on_collision(self, t: float, external_force: np.ndarray | None = None) -> str:
+        """React to a collision START at time t; returns the new state."""
+        if self.policy == "ignore" or self._held_since is not None:
+            return self.state_at(t)
+        self._held_since = t
+        self._hold_pose = None if self._last is None else self._last.pose.copy()
+        f = np.zeros(3) if external_force is None else np.asarray(external_force, dtype=float)[:3]
+        norm = float(np.linalg.norm(f))
+        self._retract_dir = f / norm if (self.policy == "retract" and norm > 1e-9) else np.zeros(3)
+        return "retracting" if self._retract_dir.any() else "held"
+
+    def resume(self, t: float) -> bool:
+        """Resume after a hold: blend back onto the trajectory over `retract_time`. False if not held."""
+        if self._held_since is None:
+            return False
+        self._offset += t - self._held_since
+        self._resume_from = None if self._last is None else self._last.pose.copy()
+        self._resume_at = t
+        self._held_since = None
+        return True
+
+    def state_at(self, t: float) -> str:
+        return self._last.state if self._last is not None else "running"
+
+    # -- sampling ------------------------------------------------------------------------------------------------
+    def _trajectory_pose(self, tt: float) -> tuple[np.ndarray, np.ndarray]:
+        if self.loop:
+            tt = tt % self.duration
+        tt = min(max(tt, 0.0), self.duration)
+        pose, pose_dot, _ = self.trajectory(tt)
+        return np.asarray(pose, dtype=float), np.asarray(pose_dot, dtype=float)
+
+    def command(self, t: float) -> Command:
+        """The command at time t (s, sim or wall clock, monotonic).
+
+        Raises:
+            hexa.kinematics.hexa6rus.UnreachablePoseError: the pose cannot be reached (counted in ik_failures;
+                the previous command is then the caller's to keep).
+        """
+        if self._held_since is not None:
+            base = self._hold_pose if self._hold_pose is not None else self._trajectory_pose(self._held_since
+                                                                                            - self._offset)[0]
+            s = _smoothstep((t - self._held_since) / self.retract_time)
+            pose = base.copy()
+            pose[:3] += self._retract_dir * self.retract_distance * s
+            state = "retracting" if self._retract_dir.any() and s < 1.0 else "held"
+            pose_dot = np.zeros(6)
+            tt = self._held_since - self._offset
+        else:
+            tt = t - self._offset
+            pose, pose_dot = self._trajectory_pose(tt)
+            state = "finished" if (not self.loop and tt >= self.duration) else "running"
+            if self._resume_at is not None and self._resume_from is not None:
+                s = _smoothstep((t - self._resume_at) / self.retract_time)
+                if s < 1.0:
+                    pose = self._resume_from + (pose - self._resume_from) * s
+                    state = "resuming"
+                else:
+                    self._resume_at = None
+        try:
+            zeta = np.asarray(self._ik(self.desc, pose), dtype=float)
+            zeta_dot = self._ik_rates(self.desc, pose, pose_dot, np.zeros(6), check=False)[1]
+        except Exception:
+            self.ik_failures += 1
+            raise
+        self._last = Command(zeta, zeta_dot, pose, state, tt)
+        return self._last
