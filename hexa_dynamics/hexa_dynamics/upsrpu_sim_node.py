@@ -1,0 +1,142 @@
+"""Simulated 3UPS+RPU node for the SRM (seed 003 sec 3.1): actuators under their inner loop, pose by
+branch-continuous FK, optional push by hand; publishes what the 3D tracking system and encoders would.
+
+Thin wrapper over hexa.srm.plant / hexa.srm.tracking. Run in /upsrpu. Parameters: `description`,
+`initial_pose` [x_m, z_m, theta, psi] (default the description's home), `rate_hz` (100 = 1/t_s; the plant
+advances t_s per tick), `push_at` (s after start, < 0 = never), `push_force` (N), `publish_markers` (bool),
+`marker_noise` (m, default from the description), `seed`.
+Topics: sub `joint_commands` (sensor_msgs/JointState, limb_1..limb_4, metres); pub `pose`
+(geometry_msgs/PoseStamped in frame `upsrpu_base`, X_c with the push deflection), `pose_fk` (FK of the encoder
+lengths), `joint_states` (position q_c m, velocity m/s, effort tau N), `markers/fixed`, `markers/mobile`
+(geometry_msgs/PoseArray in frame `tracking_world`).
+"""
+from __future__ import annotations
+
+import sys
+
+import numpy as np
+import rclpy
+from geometry_msgs.msg import Pose, PoseArray, PoseStamped
+from rclpy.executors import ExternalShutdownException
+from rclpy.node import Node
+from sensor_msgs.msg import JointState
+
+from hexa_dynamics.conversions import UPSRPU_JOINTS, upsrpu_pose_to_msg_fields
+
+
+def _pose_msg(X: np.ndarray) -> Pose:
+    p, q = upsrpu_pose_to_msg_fields(X)
+    m = Pose()
+    m.position.x, m.position.y, m.position.z = p
+    m.orientation.x, m.orientation.y, m.orientation.z, m.orientation.w = q
+    return m
+
+
+class UpsrpuSimNode(Node):
+    """The simulated robot: one plant step of t_s per timer tick."""
+
+    def __init__(self) -> None:
+        super().__init__("upsrpu_sim")
+        from hexa.robots.upsrpu_description import load_upsrpu
+        from hexa.srm.plant import SimulatedUpsrpu, half_sine_push
+        from hexa.srm.tracking import tracking_model
+
+        self.desc = load_upsrpu(str(self.declare_parameter("description", "").value) or None)
+        X0 = list(self.declare_parameter("initial_pose", [float(v) for v in self.desc.home]).value)
+        if len(X0) != 4:
+            raise ValueError(f"parameter initial_pose must have 4 values (x_m, z_m, theta, psi), got {X0}")
+        rate = float(self.declare_parameter("rate_hz", 1.0 / self.desc.t_s).value)
+        push_at = float(self.declare_parameter("push_at", -1.0).value)
+        push_force = float(self.declare_parameter("push_force", 10.0).value)
+        self.publish_markers = bool(self.declare_parameter("publish_markers", True).value)
+        self.tracking = tracking_model(self.desc)
+        noise = float(self.declare_parameter("marker_noise", self.tracking.marker_noise).value)
+        self.noise = noise
+        seed = int(self.declare_parameter("seed", 0).value)
+        self.rng = np.random.default_rng(seed)
+        push = half_sine_push(push_at, 2.0, np.array([push_force, 0, 0, 0.1 * push_force])) if push_at >= 0 else None
+        self.plant = SimulatedUpsrpu(self.desc, np.array(X0, dtype=float), push=push)
+        self.q_d = self.plant.q.copy()
+        self.pub_pose = self.create_publisher(PoseStamped, "pose", 10)
+        self.pub_fk = self.create_publisher(PoseStamped, "pose_fk", 10)
+        self.pub_js = self.create_publisher(JointState, "joint_states", 10)
+        self.pub_fixed = self.create_publisher(PoseArray, "markers/fixed", 10)
+        self.pub_mobile = self.create_publisher(PoseArray, "markers/mobile", 10)
+        self.create_subscription(JointState, "joint_commands", self._on_command, 10)
+        self.rejected = 0
+        self.create_timer(1.0 / rate, self._tick)
+
+    def _on_command(self, msg: JointState) -> None:
+        try:
+            idx = [list(msg.name).index(n) for n in UPSRPU_JOINTS] if msg.name else list(range(4))
+            q = np.array([msg.position[i] for i in idx], dtype=float)
+        except (ValueError, IndexError):
+            self.rejected += 1
+            self.get_logger().warn(f"joint_commands need {UPSRPU_JOINTS}, got {list(msg.name)}",
+                                   throttle_duration_sec=2.0)
+            return
+        if not np.all(np.isfinite(q)):
+            self.rejected += 1
+            return
+        # the actuators' own end stops
+        self.q_d = np.clip(q, self.desc.q_min, self.desc.q_max)
+
+    def _tick(self) -> None:
+        from hexa.kinematics.upsrpu import ForwardKinematicsError
+        from hexa.srm.tracking import markers_from_pose
+
+        try:
+            s = self.plant.advance(self.q_d, self.desc.t_s)
+        except ForwardKinematicsError as exc:
+            self.get_logger().error(f"plant FK failed: {exc}", throttle_duration_sec=2.0)
+            return
+        stamp = self.get_clock().now().to_msg()
+        ps = PoseStamped()
+        ps.header.stamp = stamp
+        ps.header.frame_id = "upsrpu_base"
+        ps.pose = _pose_msg(s.X)
+        self.pub_pose.publish(ps)
+        fk = PoseStamped()
+        fk.header = ps.header
+        fk.pose = _pose_msg(s.X_kin)
+        self.pub_fk.publish(fk)
+        js = JointState()
+        js.header.stamp = stamp
+        js.name = list(UPSRPU_JOINTS)
+        js.position = [float(v) for v in s.q]
+        js.velocity = [float(v) for v in s.q_dot]
+        js.effort = [float(v) for v in s.tau]
+        self.pub_js.publish(js)
+        if self.publish_markers:
+            fixed, mobile = markers_from_pose(self.tracking, s.X, self.rng, self.noise)
+            for pub, pts in ((self.pub_fixed, fixed), (self.pub_mobile, mobile)):
+                arr = PoseArray()
+                arr.header.stamp = stamp
+                arr.header.frame_id = "tracking_world"
+                for p in pts:
+                    m = Pose()
+                    m.position.x, m.position.y, m.position.z = (float(v) for v in p)
+                    m.orientation.w = 1.0
+                    arr.poses.append(m)
+                pub.publish(arr)
+
+
+def main(argv: list[str] | None = None) -> int:
+    from hexa_bringup.rosenv import apply_defaults
+
+    apply_defaults()
+    rclpy.init(args=argv if argv is not None else sys.argv)
+    node = UpsrpuSimNode()
+    try:
+        rclpy.spin(node)
+    except (KeyboardInterrupt, ExternalShutdownException):
+        pass
+    finally:
+        node.destroy_node()
+        if rclpy.ok():
+            rclpy.shutdown()
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
