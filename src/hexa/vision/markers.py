@@ -28,6 +28,7 @@ class MarkerLayout:
     points: np.ndarray
     rgb: np.ndarray
     radius: float = 0.01
+    surface_offset: float = 0.0   # height of the marker tops above the plate surface (m)
 
     @classmethod
     def from_description(cls, desc) -> "MarkerLayout":
@@ -44,7 +45,7 @@ class MarkerLayout:
         lift = float(ap.get("plate_thickness", 0.0)) / 2.0 + float(mk.get("thickness", 0.0))
         pts = np.array([np.asarray(it["position"], float) + [0.0, 0.0, lift] for it in items])
         return cls(tuple(str(it["name"]) for it in items), pts, np.array([it["rgb"] for it in items], float),
-                   float(mk.get("radius", 0.01)))
+                   float(mk.get("radius", 0.01)), float(mk.get("thickness", 0.0)))
 
 
 @dataclass
@@ -172,10 +173,44 @@ class MarkerDetector:
         self.depth_rel_sigma = depth_rel_sigma
         self.rejected_fits = 0
         self.missing_markers = 0
+        self.plane_region_scale = 3.2
+        self.plate_gray_tol = 30
+
+    def _blobs(self, rgb: np.ndarray, roi: Sequence[float] | None) -> tuple[list, tuple[int, int]]:
+        """Saturated colour blobs (one connected-components pass) assigned to the layout's markers by hue."""
+        H, W = rgb.shape[:2]
+        u0, v0, u1, v1 = 0, 0, W, H
+        if roi is not None:
+            u0, v0 = max(int(np.floor(roi[0])), 0), max(int(np.floor(roi[1])), 0)
+            u1, v1 = min(int(np.ceil(roi[2])) + 1, W), min(int(np.ceil(roi[3])) + 1, H)
+            if u1 <= u0 or v1 <= v0:
+                return [None] * len(self.layout.names), (u0, v0)
+        hsv = cv2.cvtColor(np.ascontiguousarray(rgb[v0:v1, u0:u1]), cv2.COLOR_RGB2HSV)
+        sat = ((hsv[:, :, 1] >= self.min_sat) & (hsv[:, :, 2] >= self.min_val)).astype(np.uint8)
+        n, labels, stats, cents = cv2.connectedComponentsWithStats(sat, connectivity=8)
+        best: list = [None] * len(self.layout.names)
+        if n <= 1:
+            return best, (u0, v0)
+        big = [j for j in range(1, n) if stats[j, cv2.CC_STAT_AREA] >= self.min_area]
+        for j in big:
+            x, y, w, h = stats[j, :4]
+            sub = labels[y:y + h, x:x + w] == j
+            hue = hsv[y:y + h, x:x + w, 0][sub].astype(float) * (np.pi / 90.0)
+            mean_h = (np.degrees(np.arctan2(np.sin(hue).mean(), np.cos(hue).mean())) / 2.0) % 180.0
+            dh = np.abs(self.hues - mean_h)
+            dh = np.minimum(dh, 180 - dh)
+            k = int(np.argmin(dh))
+            if dh[k] <= self.hue_tol and (best[k] is None or stats[j, cv2.CC_STAT_AREA] > best[k][1]):
+                best[k] = (j, int(stats[j, cv2.CC_STAT_AREA]), (x, y, w, h), cents[j])
+        return [None if b is None else (b, labels) for b in best], (u0, v0)
 
     def detect(self, rgb: np.ndarray, depth_m: np.ndarray, roi: Sequence[float] | None = None
                ) -> list[MarkerObservation | None]:
-        """One observation (or None) per layout marker.
+        """One observation (or None) per layout marker: blob centroid, and its 3D point.
+
+        The 3D point is the viewing ray through the blob centroid intersected with the plate plane (fitted to the
+        depth of the plate around the markers, robustly) lifted by the marker thickness; with fewer than three
+        blobs, or when the plane fit fails, the mean of the blob's own back-projected depth pixels.
 
         Args:
             rgb: (H, W, 3) uint8 RGB.
@@ -190,46 +225,90 @@ class MarkerDetector:
         H, W = depth_m.shape
         if (W, H) != (self.camera.width, self.camera.height):
             raise MarkerError(f"image {W}x{H} does not match camera {self.camera.width}x{self.camera.height}")
-        u0, v0, u1, v1 = 0, 0, W, H
-        if roi is not None:
-            u0, v0 = max(int(np.floor(roi[0])), 0), max(int(np.floor(roi[1])), 0)
-            u1, v1 = min(int(np.ceil(roi[2])) + 1, W), min(int(np.ceil(roi[3])) + 1, H)
-            if u1 <= u0 or v1 <= v0:
-                return [None] * len(self.layout.names)
-        hsv = cv2.cvtColor(np.ascontiguousarray(rgb[v0:v1, u0:u1]), cv2.COLOR_RGB2HSV)
-        h = hsv[:, :, 0].astype(np.int16)
-        sv_ok = (hsv[:, :, 1] >= self.min_sat) & (hsv[:, :, 2] >= self.min_val)
-        d = depth_m[v0:v1, u0:u1]
+        blobs, (u0, v0) = self._blobs(rgb, roi)
+        cam = self.camera
+        Kinv = np.linalg.inv(cam.K)
         out: list[MarkerObservation | None] = []
-        for k, hue in enumerate(self.hues):
-            dh = np.abs(h - int(round(hue)))
-            dh = np.minimum(dh, 180 - dh)
-            mask = (sv_ok & (dh <= self.hue_tol)).astype(np.uint8)
-            n, labels, stats, cents = cv2.connectedComponentsWithStats(mask, connectivity=8)
-            if n <= 1:
+        for k, b in enumerate(blobs):
+            if b is None:
                 out.append(None)
                 continue
-            j = 1 + int(np.argmax(stats[1:, cv2.CC_STAT_AREA]))
-            area = int(stats[j, cv2.CC_STAT_AREA])
-            if area < self.min_area:
-                out.append(None)
-                continue
-            vv, uu = np.nonzero(labels == j)
-            z = d[vv, uu]
+            (j, area, (x, y, w, h), cent), labels = b
+            vv, uu = np.nonzero(labels[y:y + h, x:x + w] == j)
+            vv, uu = vv + y + v0, uu + x + u0
+            z = depth_m[vv, uu]
             good = np.isfinite(z) & (z > 0)
-            point = np.full(3, np.nan)
-            nd = int(good.sum())
-            if nd >= 3:
+            point_c = np.full(3, np.nan)
+            nd = 0
+            if good.sum() >= 3:
                 zg = z[good]
                 med = float(np.median(zg))
                 keep = np.abs(zg - med) <= max(3.0 * self.depth_rel_sigma * med, 0.004)
                 if keep.sum() >= 3:
-                    uv = np.stack([uu[good][keep] + u0, vv[good][keep] + v0], axis=1).astype(float)
-                    pts = self.camera.back_project(uv, zg[keep])
-                    point = pts.mean(axis=0)
+                    uv1 = np.column_stack([uu[good][keep], vv[good][keep], np.ones(int(keep.sum()))])
+                    point_c = ((uv1 @ Kinv.T) * zg[keep][:, None]).mean(axis=0)
                     nd = int(keep.sum())
-            out.append(MarkerObservation(k, np.array([cents[j][0] + u0, cents[j][1] + v0]), area, point, nd))
+            pix = np.array([cent[0] + u0, cent[1] + v0])
+            out.append(MarkerObservation(k, pix, area, point_c, nd))
+        self._lift_on_plane(out, rgb, depth_m, Kinv)
+        for o in out:
+            if o is not None and np.all(np.isfinite(o.point)):
+                o.point = cam.to_base(o.point)
         return out
+
+    def _lift_on_plane(self, obs: list[MarkerObservation | None], rgb: np.ndarray, depth_m: np.ndarray,
+                       Kinv: np.ndarray) -> None:
+        """Replace the camera-frame marker points by centroid rays ∩ the fitted plate plane (see `detect`).
+
+        Plate pixels: inside the markers' hull scaled by `plane_region_scale`, unsaturated, of the region's median
+        grey level (± `plate_gray_tol`: the plate is one colour; rods and markers differ) and near the markers'
+        depth; the plane is refitted three times keeping residuals within 2.5 σ of the depth noise."""
+        seen = [o for o in obs if o is not None and np.all(np.isfinite(o.point))]
+        if len(seen) < 3:
+            return
+        H, W = depth_m.shape
+        cents = np.array([o.pixel for o in seen])
+        mid = cents.mean(axis=0)
+        hull = cv2.convexHull(np.round(mid + self.plane_region_scale * (cents - mid)).astype(np.int32))
+        x, y, w, h = cv2.boundingRect(hull)
+        x0, y0, x1, y1 = max(x, 0), max(y, 0), min(x + w, W), min(y + h, H)
+        if x1 - x0 < 3 or y1 - y0 < 3:
+            return
+        region = np.zeros((y1 - y0, x1 - x0), np.uint8)
+        cv2.fillConvexPoly(region, hull - [x0, y0], 1)
+        d = depth_m[y0:y1, x0:x1]
+        hsv = cv2.cvtColor(np.ascontiguousarray(rgb[y0:y1, x0:x1]), cv2.COLOR_RGB2HSV)
+        inside = (region > 0) & np.isfinite(d) & (d > 0) & (hsv[:, :, 1] < self.min_sat)
+        if inside.sum() < 50:
+            return
+        gray = hsv[:, :, 2].astype(np.int16)
+        g0 = int(np.median(gray[inside]))
+        vv, uu = np.nonzero(inside & (np.abs(gray - g0) <= self.plate_gray_tol))
+        if vv.size < 50:
+            return
+        step = max(1, vv.size // 6000)
+        vv, uu = vv[::step], uu[::step]
+        z = d[vv, uu].astype(float)
+        pts = np.column_stack([uu + x0, vv + y0, np.ones(vv.size)]) @ Kinv.T * z[:, None]
+        zmed = float(np.median(np.array([o.point[2] for o in seen])))
+        keep = np.abs(z - zmed) < 0.05
+        for _ in range(3):
+            if keep.sum() < 50:
+                return
+            c = pts[keep].mean(axis=0)
+            _, sv, vt = np.linalg.svd(pts[keep] - c, full_matrices=False)
+            n = vt[2] if vt[2][2] < 0 else -vt[2]          # normal towards the camera
+            r = (pts - c) @ n
+            sigma = max(self.depth_rel_sigma * zmed, 1e-3)
+            keep = np.abs(r) < 2.5 * sigma
+        c = c + n * self.layout.surface_offset
+        for o in seen:
+            ray = Kinv @ np.array([o.pixel[0], o.pixel[1], 1.0])
+            den = float(n @ ray)
+            if abs(den) < 1e-6:
+                continue
+            o.point = ray * float(n @ c) / den
+            o.n_depth = int(keep.sum())
 
     def estimate(self, rgb: np.ndarray, depth_m: np.ndarray, roi: Sequence[float] | None = None
                  ) -> tuple[MarkerFit, list[MarkerObservation | None]]:

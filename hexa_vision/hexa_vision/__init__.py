@@ -1,0 +1,1 @@
+"""hexa_vision: camera, pose (detector + markers) and isolation nodes; the algorithms live in hexa.vision."""
