@@ -144,8 +144,11 @@ class BoardLink:
         return self.stats.state == CONNECTED
 
     # --------------------------------------------------------------------------------------------- sending
-    def send(self, msg_type: int, payload: bytes = b"") -> int | None:
-        """Write one frame; returns its sequence number, or None if the port is not open (counted)."""
+    def send(self, msg_type: int, payload: bytes = b"", on_seq: Callable[[int], None] | None = None) -> int | None:
+        """Write one frame; returns its sequence number, or None if the port is not open (counted).
+
+        `on_seq(seq)` is called before the bytes are written (so a reply cannot overtake its registration).
+        """
         with self._wlock:
             ser = self._ser
             if ser is None:
@@ -153,6 +156,8 @@ class BoardLink:
                 return None
             seq = self._seq
             self._seq = (seq + 1) & 0xFF
+            if on_seq is not None:
+                on_seq(seq)
             try:
                 ser.write(fr.encode_frame(msg_type, seq, payload))
             except (serial.SerialException, OSError) as exc:
@@ -186,10 +191,9 @@ class BoardLink:
         with self._wait_lock:
             self._waiters.append(waiter)
         try:
-            seq = self.send(msg_type, payload)
+            seq = self.send(msg_type, payload, on_seq=seq_holder.append)
             if seq is None:
                 raise LinkError(f"{self.port}: not connected, cannot send {fr.TYPE_NAMES.get(msg_type, msg_type)}")
-            seq_holder.append(seq)
             t_end = time.monotonic() + timeout
             in_thread = threading.current_thread() is self._thread
             while not event.is_set():
@@ -348,7 +352,9 @@ class BoardLink:
                 if not event.is_set() and match(frame):
                     box.append(frame)
                     event.set()
-                    return
+                    if frame.type in (fr.ACK, fr.ERROR, fr.HELLO_REPLY):
+                        return
+                    break  # a STATUS/PONG/SAMPLE reply is also handled as usual below
         try:
             if frame.type == fr.PONG:
                 pong = fr.unpack_pong(frame.payload)
