@@ -236,7 +236,8 @@ def _check_ik(desc: "HexaDescription", zeta: np.ndarray, ratio: np.ndarray, inde
         if not abs(q) <= 1.0:
             raise UnreachablePoseError(
                 f"chain {i + 1} cannot close{where}: |a_{i + 1}| / sqrt(b² + c²) = {abs(q):.4f} > 1 "
-                f"(rod too {'short' if q > 0 else 'long'} for the arm)", i + 1, "out_of_reach", index)
+                f"(spherical joint C_{i + 1} too {'close to' if q > 0 else 'far from'} motor A_{i + 1} for arm + rod)",
+                i + 1, "out_of_reach", index)
         if abs(q) > desc.max_alignment:
             raise UnreachablePoseError(
                 f"chain {i + 1} near its serial singularity{where}: |a_{i + 1}| / sqrt(b² + c²) = {abs(q):.4f} "
