@@ -11,6 +11,9 @@ from typing import Iterator
 
 import pytest
 
+# Headless MuJoCo rendering (EGL) for every test, also when pytest is run without the Makefile.
+os.environ.setdefault("MUJOCO_GL", "egl")
+
 REPO = Path(__file__).resolve().parents[1]
 TEST_DIR = Path(__file__).resolve().parent
 if str(TEST_DIR) not in sys.path:
