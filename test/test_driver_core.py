@@ -1,0 +1,102 @@
+"""ROS-free driver conversions (hexa.protocol.driver_core): calibration, command checks, currents, torques."""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from hypothesis import given, strategies as st
+
+from hexa.protocol.driver_core import (CommandRejected, DriverConfigError, ServoCalibration, driver_core_from_config,
+                                       load_driver_config, servo_calibrations_from_config)
+from hexa.protocol.sensor_model import CurrentSensorModel, SensorModelError
+from hexa.robots.hexa_description import load_hexa
+
+
+@pytest.fixture(scope="module")
+def desc():
+    return load_hexa()
+
+
+@pytest.fixture
+def core(desc):
+    cfg = load_driver_config()
+    c = driver_core_from_config(cfg, desc.zeta_min, desc.zeta_max, desc.K_t)
+    c.max_speed = 0.0
+    return c
+
+
+def test_default_servo_map_comes_from_the_description(desc):
+    servos = servo_calibrations_from_config(None, desc)
+    assert [s.pulse_from_angle(desc.zeta_center) for s in servos] == [round(desc.pulse_center_us)] * 6
+    step = 0.1
+    for s, d in zip(servos, desc.servo_direction):
+        assert s.pulse_from_angle(desc.zeta_center + step) - desc.pulse_center_us == round(d * desc.us_per_rad * step)
+
+
+@given(st.floats(-4.0, -1.2))
+def test_pulse_angle_round_trip_within_half_a_microsecond(zeta):
+    s = ServoCalibration(zero_us=1500, us_per_rad=-636.62, zeta_ref=-2.618, min_us=500, max_us=2500)
+    p = s.pulse_from_angle(zeta)
+    if 500 < p < 2500:
+        assert abs(s.angle_from_pulse(p) - zeta) <= 0.5 / 636.62 + 1e-12
+    else:
+        assert p in (500, 2500)
+
+
+def test_servo_calibration_rejects_zero_slope_and_bad_limits():
+    with pytest.raises(DriverConfigError, match="us_per_rad 0"):
+        ServoCalibration(zero_us=1500, us_per_rad=0.0)
+    with pytest.raises(DriverConfigError, match="min_us=2000 max_us=1000"):
+        ServoCalibration(zero_us=1500, us_per_rad=600, min_us=2000, max_us=1000)
+    with pytest.raises(DriverConfigError, match="expected 6 entries"):
+        servo_calibrations_from_config([{"zero_us": 1500, "us_per_rad": 600}])
+
+
+def test_order_command_by_name_and_rejections(core):
+    names = ["arm_3", "arm_1", "arm_2", "arm_6", "arm_5", "arm_4"]
+    z = core.order_command(names, [3, 1, 2, 6, 5, 4])
+    assert z.tolist() == [1, 2, 3, 4, 5, 6]
+    with pytest.raises(CommandRejected, match="non-finite"):
+        core.order_command([], [1, 2, float("nan"), 4, 5, 6])
+    with pytest.raises(CommandRejected, match="lacks \\['arm_4'\\]"):
+        core.order_command(names[:5] + ["wrist"], [1] * 6)
+    with pytest.raises(CommandRejected, match="5 positions without names"):
+        core.order_command([], [1] * 5)
+    assert core.counters.rejected_nan == 1 and core.counters.rejected_names == 2
+
+
+def test_limit_command_clamps_to_joint_limits_and_slew(core, desc):
+    z = core.limit_command(np.full(6, desc.zeta_max + 1.0), now=0.0)
+    assert np.allclose(z, desc.zeta_max) and core.counters.clamped == 1
+    core.accept(np.full(6, desc.zeta_center), now=10.0)
+    core.max_speed = 2.0
+    z = core.limit_command(np.full(6, desc.zeta_center + 1.0), now=10.1)
+    assert np.allclose(z, desc.zeta_center + 0.2) and core.counters.slew_limited == 1
+
+
+def test_currents_torques_and_zero_current_calibration(core, desc):
+    sensor = core.sensor
+    amps = np.array([0.3, -0.3, 1.0, -1.0, 2.0, 0.0])
+    counts = sensor.counts_from_current(amps)
+    i = core.currents_from_counts(counts)
+    assert np.all(np.abs(i - amps) <= sensor.amps_per_count)
+    assert np.allclose(core.torques_from_currents(i), desc.K_t * i)
+    rest = np.tile(sensor.counts_from_current([0.05] * 6), (50, 1))
+    offsets = core.calibrate_offsets(rest)
+    assert np.allclose(offsets, sensor.current_from_counts(rest[0]))
+    assert np.allclose(core.currents_from_counts(rest[0]), 0.0)
+
+
+@given(st.floats(-5.0, 5.0))
+def test_sensor_model_inverse_within_one_step(amps):
+    s = CurrentSensorModel()
+    c = s.counts_from_current(amps)
+    assert abs(float(s.current_from_counts(c)) - amps) <= s.amps_per_count / 2 + 1e-9
+
+
+def test_sensor_model_clips_and_validates():
+    s = CurrentSensorModel()
+    assert s.counts_from_current(100.0) == 1023 and s.counts_from_current(-100.0) == 0
+    with pytest.raises(SensorModelError, match="sensitivity -1"):
+        CurrentSensorModel(sensitivity=-1)
+    with pytest.raises(SensorModelError, match="unknown sensor-model key"):
+        CurrentSensorModel.from_dict({"gain": 1})
