@@ -32,7 +32,8 @@ def run(args: argparse.Namespace) -> int:
         from hexa.srm.report import run_all, write_report
 
         results = run_all(desc, push=args.push)
-        md = write_report(desc, results, Path(args.out), plots=not args.no_plots)
+        push_demo = run_release_experiment(desc, 1, 1, push=True)
+        md = write_report(desc, results, Path(args.out), plots=not args.no_plots, push_demo=push_demo)
         if args.json:
             print(json.dumps({n: {f"v{v}": r.summary() for v, r in by.items()} for n, by in results.items()},
                              indent=2))

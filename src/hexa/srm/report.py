@@ -105,8 +105,12 @@ def run_all(desc: UpsrpuDescription, include_reference: bool = True, push: bool 
 
 
 def write_report(desc: UpsrpuDescription, results: dict[str, dict[int, ReleaseResult]], out_dir: Path,
-                 plots: bool = True) -> Path:
-    """Write report.md, results.json and the PNG figures into `out_dir`; return the Markdown path."""
+                 plots: bool = True, push_demo: ReleaseResult | None = None) -> Path:
+    """Write report.md, results.json and the PNG figures into `out_dir`; return the Markdown path.
+
+    `push_demo` (a run with the push by hand during the wait) adds a row and the Figure 12-style plot of
+    x_m measured by the tracking system against the FK estimate of the encoder lengths.
+    """
     out_dir.mkdir(parents=True, exist_ok=True)
     lines = ["# SRM-V1 / SRM-V2 release of the 3UPS+RPU in simulation (seed 003 Table 4 style)", "",
              "Ours: simulated robot of hexa.srm.plant (PD inner loop, FK pose, no push, no tracking noise); "
@@ -147,6 +151,14 @@ def write_report(desc: UpsrpuDescription, results: dict[str, dict[int, ReleaseRe
             lines.append(f"| {name} | V{v} | {r.det_jd[r.k]:.4f} | {math.degrees(r.min_omega[r.k]):.2f} | "
                          f"{r.det_jd[-1]:.4f} | {math.degrees(r.min_omega[-1]):.2f} | {list(r.implicated)} | "
                          f"{list(r.moved_limbs)} | {list(r.final_delta)} |")
+    if push_demo is not None:
+        r, m = push_demo, push_demo.metrics
+        dev = np.max(np.abs(r.X_c - r.X_kin), axis=0)
+        lines += ["", f"Push by hand during the wait (trajectory {r.trajectory}, SRM-V{r.variant}): the tracking "
+                  f"system sees x_m move by up to {dev[0] * 1e3:.2f} mm, theta {math.degrees(dev[2]):.2f} deg, "
+                  f"psi {math.degrees(dev[3]):.2f} deg while the encoders (FK estimate) see nothing; released "
+                  f"{'yes' if r.released else 'NO'}, MAE {_mm(m['mae_m'])} mm, MDSR {_mm(m['mdsr_m'])} mm, "
+                  f"AVR {m['avr_n']:.2f} N."]
     lines += ["", "Paper Table 5 (experiment, SRM-V1; MAE mm, MAPE %, MDSR mm, AVR N): " +
               "; ".join(f"{k}: {v}" for k, v in PAPER_TABLE5.items()), ""]
     if plots:
@@ -163,6 +175,10 @@ def write_report(desc: UpsrpuDescription, results: dict[str, dict[int, ReleaseRe
             plot_limb(r1, limb, f_limb)
             lines += [f"### Trajectory {name}", f"![indices]({f_idx.name})", f"![x_m]({f_xm.name})",
                       f"![limb {limb}]({f_limb.name})", ""]
+        if push_demo is not None:
+            f_push = out_dir / f"xm_traj{push_demo.trajectory}_v{push_demo.variant}_push.png"
+            plot_xm(push_demo, f_push)
+            lines += ["### Push by hand during the wait", f"![x_m with push]({f_push.name})", ""]
     md = out_dir / "report.md"
     md.write_text("\n".join(lines) + "\n", encoding="utf-8")
     summary: dict[str, Any] = {name: {f"v{v}": r.summary() for v, r in by_v.items()} for name, by_v in results.items()}
