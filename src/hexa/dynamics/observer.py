@@ -32,9 +32,10 @@ from typing import TYPE_CHECKING, Iterable
 
 import numpy as np
 
-from hexa.dynamics.lagrange import (DynamicsError, HexaDynamicParameters, MotionState, _Geometry, _momentum_terms,
-                                    _Velocity, _accelerations, _cross, inverse_dynamics, momentum_terms,
-                                    motion_from_joint_rates, pose_to_position_rotation, rotation_to_zyx, wrench_to_generalized_zyz)
+from hexa.dynamics._kernel import KernelError, SampleKernel, exp_rotate
+from hexa.dynamics.lagrange import (DynamicsError, HexaDynamicParameters, MotionState, _Geometry, _Velocity,
+                                    inverse_dynamics, momentum_terms, motion_from_joint_rates,
+                                    wrench_to_generalized_zyz)
 
 if TYPE_CHECKING:
     from numpy.typing import NDArray
@@ -184,6 +185,17 @@ def _finite(*arrays: NDArray | None) -> bool:
 class _ArmSample:
     __slots__ = ("t", "zeta", "tau", "zeta_dot", "pi", "u", "p", "R", "V", "Q")
 
+    t: float
+    zeta: list
+    tau: list
+    zeta_dot: list
+    pi: list | None
+    u: list | None
+    p: tuple
+    R: tuple
+    V: list
+    Q: NDArray | None
+
 
 class ResidualObserver:
     """Momentum-form residual observer with detection (see module docstring).
@@ -203,12 +215,13 @@ class ResidualObserver:
         self.config = config or ObserverConfig()
         self.form = form
         self._K = np.asarray(self.config.gains, dtype=float)
+        self._kernel = SampleKernel(params)
         self.detector = CollisionDetector(self.config)
         self.rejected: dict[str, int] = {k: 0 for k in REJECT_REASONS}
         self.accepted = 0
-        self._pose_p: NDArray | None = None
-        self._pose_R: NDArray | None = None
-        self._pose_t = -math.inf
+        self._est: tuple | None = None  # (t, p, R, V) of the last accepted sample (pose tracked from it)
+        self._cam: tuple | None = None  # (t, p, R) newest camera pose not yet used
+        self._cam_t = -math.inf
         self._offset = np.zeros(6)
         self._calib: list[NDArray] | None = None
         self.reset()
@@ -217,7 +230,7 @@ class ResidualObserver:
     def reset(self) -> None:
         """Re-zero: r = 0, integration restarts at the next sample; pose estimate, counters and calibration kept."""
         self._prev: _ArmSample | None = None
-        self._angles: tuple[float, NDArray] | None = None
+        self._angles: tuple[float, list] | None = None
         self._last_t = -math.inf
         self.r = np.zeros(6)
         self.detector.reset()
@@ -247,72 +260,87 @@ class ResidualObserver:
     # ------------------------------------------------------------------ inputs
     def update_pose(self, t: float, pose: NDArray) -> bool:
         """A plate pose [x y z α β γ] (m, rad; Z-Y-X) at time t (camera). Returns False when rejected."""
-        pose = np.asarray(pose, dtype=float).reshape(-1)
-        if pose.shape != (6,):
+        q = _floats(pose)
+        if q is None or len(q) != 6:
             self._reject("bad_shape")
             return False
-        if not (math.isfinite(t) and _finite(pose)):
+        if not (math.isfinite(t) and _all_finite(q)):
             self._reject("non_finite")
             return False
-        if t <= self._pose_t:
+        if t <= self._cam_t:
             self._reject("time_not_increasing")
             return False
-        p, R = pose_to_position_rotation(pose[None])
-        self._pose_p, self._pose_R, self._pose_t = p, R, float(t)
+        self._cam = (float(t), tuple(q[:3]), _rotation_zyx_flat(q[3], q[4], q[5]))
+        self._cam_t = float(t)
         return True
 
     def update_arm(self, t: float, zeta: NDArray, tau: NDArray, zeta_dot: NDArray | None = None,
                    pose: NDArray | None = None, zeta_ddot: NDArray | None = None) -> ResidualSample | None:
         """One arm sample: angles ζ (rad), torques τ = K_t·I (N·m), optional ζ̇ (rad/s), optional plate pose at the
         same instant (else tracked), ζ̈ (direct form only; else differentiated). Returns None when rejected."""
-        zeta = np.asarray(zeta, dtype=float).reshape(-1)
-        tau = np.asarray(tau, dtype=float).reshape(-1)
-        zd = None if zeta_dot is None else np.asarray(zeta_dot, dtype=float).reshape(-1)
-        if zeta.shape != (6,) or tau.shape != (6,) or (zd is not None and zd.shape != (6,)):
+        z = _floats(zeta)
+        tq = _floats(tau)
+        zd = None if zeta_dot is None else _floats(zeta_dot)
+        q = None if pose is None else _floats(pose)
+        if (z is None or tq is None or len(z) != 6 or len(tq) != 6
+                or (zeta_dot is not None and (zd is None or len(zd) != 6))
+                or (pose is not None and (q is None or len(q) != 6))):
             self._reject("bad_shape")
             return None
-        if not (math.isfinite(t) and _finite(zeta, tau, zd)):
+        if not (math.isfinite(t) and _all_finite(z) and _all_finite(tq) and (zd is None or _all_finite(zd))
+                and (q is None or _all_finite(q))):
             self._reject("non_finite")
             return None
-        if pose is not None:
-            pose = np.asarray(pose, dtype=float).reshape(-1)
-            if pose.shape != (6,) or not _finite(pose):
-                self._reject("non_finite" if pose.shape == (6,) else "bad_shape")
-                return None
         if t <= self._last_t:
             self._reject("time_not_increasing")
             return None
-        if self._prev is not None and t - self._last_t > self.config.max_gap:
+        if self._last_t > -math.inf and t - self._last_t > self.config.max_gap:
             self._reject("gap")  # do not integrate across the gap; r is kept, integration restarts here
             self._prev = None
             self._angles = None
-        if pose is not None:
-            p, R = pose_to_position_rotation(pose[None])
-        elif self._pose_p is None:
-            self._reject("no_pose")
-            return None
-        else:
-            try:
-                p, R = self._track_pose(zeta, self._pose_p, self._pose_R)
-            except (DynamicsError, np.linalg.LinAlgError):
-                self._reject("pose_tracking")
-                return None
-        if zd is None:
-            if self._angles is None or t - self._angles[0] > self.config.max_gap:
-                self._angles = (t, zeta)  # first sample without a measured rate: keep it to difference the next
-                self._last_t = t
-                self._pose_p, self._pose_R = p, R
-                return None
-            zd = (zeta - self._angles[1]) / (t - self._angles[0])
+            if self._est is not None:  # predict across the gap at rest, Newton does the rest
+                self._est = (self._est[0], self._est[1], self._est[2], (0.0,) * 6)
+        ker = self._kernel
+        cfg = self.config
         try:
-            s = self._evaluate(t, zeta, tau, zd, p, R, zeta_ddot)
-        except (DynamicsError, np.linalg.LinAlgError):
+            if q is not None:
+                p, R = tuple(q[:3]), _rotation_zyx_flat(q[3], q[4], q[5])
+                geo, _ = ker.geometry(z, p, R)
+            else:
+                if self._cam is not None and (self._est is None or self._cam[0] >= self._est[0]):
+                    _, p0, R0 = self._cam
+                elif self._est is not None:
+                    te, pe, Re, Ve = self._est
+                    h = t - te
+                    p0 = (pe[0] + Ve[0] * h, pe[1] + Ve[1] * h, pe[2] + Ve[2] * h)
+                    R0 = exp_rotate(Ve[3] * h, Ve[4] * h, Ve[5] * h, Re)
+                else:
+                    self._reject("no_pose")
+                    return None
+                geo, p, R = ker.track_pose(z, p0, R0, cfg.pose_tolerance, cfg.newton_iterations)
+        except KernelError:
+            self._reject("pose_tracking")
+            return None
+        if zd is None:
+            if self._angles is None:
+                self._angles = (t, z)  # first sample without a measured rate: keep it to difference the next
+                self._last_t = t
+                self._cam = None
+                self._est = (t, p, R, (0.0,) * 6)
+                return None
+            t0, z0 = self._angles
+            h = t - t0
+            zd = [(z[i] - z0[i]) / h for i in range(6)]
+        try:
+            s = self._evaluate(t, z, tq, zd, p, R, geo, zeta_ddot)
+        except (KernelError, DynamicsError, np.linalg.LinAlgError):
             self._reject("singular")
             return None
         # accepted: commit the pose estimate and advance
         prev = self._prev
-        self._pose_p, self._pose_R = p, R
-        self._angles = (t, zeta)
+        self._cam = None
+        self._est = (t, p, R, s.V)
+        self._angles = (t, z)
         self._last_t = t
         self._prev = s
         self.accepted += 1
@@ -320,78 +348,79 @@ class ResidualObserver:
             return self._output(t, s)
         dt = t - prev.t
         if self.form == "momentum":
-            w_bar = (s.pi - prev.pi) / dt - 0.5 * (s.u + prev.u)
+            w_bar = np.array([(s.pi[m] - prev.pi[m]) / dt - 0.5 * (s.u[m] + prev.u[m]) for m in range(6)])
         else:
             w_bar = s.Q
+        w_bar -= self._offset
         if self._calib is not None:
-            self._calib.append(w_bar - self._offset)
+            self._calib.append(w_bar)
         a = np.exp(-self._K * dt)
-        self.r = a * self.r + (1.0 - a) * (w_bar - self._offset)
+        self.r = a * self.r + (1.0 - a) * w_bar
         return self._output(t, s)
 
     def _output(self, t: float, s: _ArmSample) -> ResidualSample:
         over, events = self.detector.update(t, self.r)
-        r_zyz = wrench_to_generalized_zyz(self.r[None], s.R)[0]
-        pose = np.concatenate([s.p[0], rotation_to_zyx(s.R)[0]])
-        return ResidualSample(time=t, wrench=self.r.copy(), r_zyz=r_zyz, over=over, in_collision=self.detector.active,
+        R = s.R
+        r = self.r.tolist()
+        st = math.hypot(R[2], R[5])
+        th = math.atan2(st, R[8])
+        ph = math.atan2(R[5], R[2]) if st > 1e-12 else 0.0
+        cf, sf, ct, sth = math.cos(ph), math.sin(ph), math.cos(th), math.sin(th)
+        r_zyz = np.array([r[0], r[1], r[2], r[5], -sf * r[3] + cf * r[4],
+                          cf * sth * r[3] + sf * sth * r[4] + ct * r[5]])  # diag(1, Eᵀ)·r (see lagrange)
+        pose = np.array([s.p[0], s.p[1], s.p[2], math.atan2(R[3], R[0]), math.asin(max(-1.0, min(1.0, -R[6]))),
+                         math.atan2(R[7], R[8])])
+        return ResidualSample(time=t, wrench=np.array(r), r_zyz=r_zyz, over=over, in_collision=self.detector.active,
                               pose=pose, events=events)
 
     # ------------------------------------------------------------------ model evaluation
-    def _track_pose(self, zeta: NDArray, p: NDArray, R: NDArray) -> tuple[NDArray, NDArray]:
-        """Newton steps on f_i(ζ, pose) = 0 (eq 15) from the last pose estimate (forward kinematics by tracking)."""
-        prm = self.params
-        z = zeta[None]
-        for _ in range(self.config.newton_iterations):
-            g = _Geometry(prm, z, p, R)
-            f = g.dd - prm.l_d**2
-            if np.max(np.abs(f)) < self.config.pose_tolerance:
-                return p, R
-            Phi = np.empty((6, 6))
-            Phi[:, :3] = 2.0 * g.d[0]
-            Phi[:, 3:] = 2.0 * _cross(g.r[0], g.d[0])
-            dx = np.linalg.solve(Phi, -f[0])
-            p = p + dx[None, :3]
-            R = _exp_so3(dx[3:]) @ R
-        g = _Geometry(prm, z, p, R)
-        if np.max(np.abs(g.dd - prm.l_d**2)) > 1e3 * self.config.pose_tolerance:
-            raise DynamicsError(f"pose tracking did not converge for zeta {zeta.tolist()}")
-        return p, R
-
-    def _evaluate(self, t, zeta, tau, zd, p, R, zeta_ddot) -> _ArmSample:
-        prm = self.params
-        g = _Geometry(prm, zeta[None], p, R)
-        V = np.linalg.solve(g.j[0], zd)[None]
-        vel = _Velocity(prm, g, V, R)
+    def _evaluate(self, t, z, tq, zd, p, R, geo, zeta_ddot) -> _ArmSample:
         s = _ArmSample()
-        s.t, s.zeta, s.tau, s.zeta_dot, s.p, s.R, s.V = t, zeta, tau, zd, p, R, V
+        s.t, s.zeta, s.tau, s.zeta_dot, s.p, s.R = t, z, tq, zd, p, R
         if self.form == "momentum":
-            mt = _momentum_terms(prm, g, vel, R, tau[None])
-            s.pi = mt.momentum[0]
-            s.u = mt.known_rate[0]
+            s.V, s.pi, s.u = self._kernel.terms(geo, zd, tq, p, R)
             s.Q = None
-        else:
-            prev = self._prev
-            if zeta_ddot is None:
-                if prev is None or prev.zeta_dot is None:
-                    zdd = np.zeros(6)
-                else:
-                    zdd = (zd - prev.zeta_dot) / (t - prev.t)
+            return s
+        prm = self.params
+        pn = np.array(p)[None]
+        Rn = np.array(R).reshape(1, 3, 3)
+        zn, zdn = np.array(z)[None], np.array(zd)[None]
+        g = _Geometry(prm, zn, pn, Rn)
+        V = np.linalg.solve(g.j[0], zdn[0])[None]
+        vel = _Velocity(prm, g, V, Rn)
+        prev = self._prev
+        if zeta_ddot is None:
+            if prev is None:
+                zdd = np.zeros(6)
             else:
-                zdd = np.asarray(zeta_ddot, dtype=float).reshape(6)
-            Vd = np.linalg.solve(g.j[0], zdd - vel.jdot[0] @ V[0])[None]
-            st = MotionState(zeta=zeta[None], zeta_dot=zd[None], p=p, R=R, V=V, zeta_ddot=zdd[None], V_dot=Vd)
-            s.Q = inverse_dynamics(prm, st, tau[None]).wrench[0]
-            s.pi = None
-            s.u = None
+                zdd = (zdn[0] - np.array(prev.zeta_dot)) / (t - prev.t)
+        else:
+            zdd = np.asarray(zeta_ddot, dtype=float).reshape(6)
+        Vd = np.linalg.solve(g.j[0], zdd - vel.jdot[0] @ V[0])[None]
+        st = MotionState(zeta=zn, zeta_dot=zdn, p=pn, R=Rn, V=V, zeta_ddot=zdd[None], V_dot=Vd)
+        s.Q = inverse_dynamics(prm, st, np.array(tq)[None]).wrench[0]
+        s.V = V[0].tolist()
+        s.pi = s.u = None
         return s
 
 
-def _exp_so3(w: NDArray) -> NDArray:
-    th = float(np.linalg.norm(w))
-    K = np.array([[0.0, -w[2], w[1]], [w[2], 0.0, -w[0]], [-w[1], w[0], 0.0]])
-    if th < 1e-12:
-        return np.eye(3) + K
-    return np.eye(3) + math.sin(th) / th * K + (1.0 - math.cos(th)) / th**2 * (K @ K)
+def _floats(x) -> list | None:
+    try:
+        return np.asarray(x, dtype=float).reshape(-1).tolist()
+    except (TypeError, ValueError):
+        return None
+
+
+def _all_finite(v: list) -> bool:
+    return all(map(math.isfinite, v))
+
+
+def _rotation_zyx_flat(a: float, b: float, c: float) -> tuple:
+    """R = Rz(α)·Ry(β)·Rx(γ) (eq 38), row-major flat."""
+    ca, sa, cb, sb, cc, sc = math.cos(a), math.sin(a), math.cos(b), math.sin(b), math.cos(c), math.sin(c)
+    return (ca * cb, ca * sb * sc - sa * cc, ca * sb * cc + sa * sc,
+            sa * cb, sa * sb * sc + ca * cc, sa * sb * cc - ca * sc,
+            -sb, cb * sc, cb * cc)
 
 
 # ---------------------------------------------------------------------- batch API

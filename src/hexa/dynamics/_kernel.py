@@ -1,0 +1,277 @@
+"""Single-sample momentum terms in plain Python floats (the 1 kHz path; numpy call overhead dominates at N = 1).
+
+Same mathematics as `lagrange._momentum_terms` (tested equal to it to rounding): for one sample returns the plate
+twist V = J_ζ⁻¹ ζ̇, the generalized momentum π = M̃ V and u = J_ζᵀ(τ − b ζ̇) + G + β. Per chain the terms collapse to
+π += a_i j_i + J_Cᵢᵀ f_i and u += c_i j_i + a_i j̇_i + J_Cᵢᵀ g_i + [0, (ω×r_i)×f_i], with j_i the row of J_ζ.
+"""
+from __future__ import annotations
+
+import math
+from typing import TYPE_CHECKING, Sequence
+
+import numpy as np
+
+if TYPE_CHECKING:
+    from hexa.dynamics.lagrange import HexaDynamicParameters
+
+Vec = list[float]
+
+
+class KernelError(ArithmeticError):
+    """Singular J_ζ / constraint Jacobian or a serial singularity at this sample."""
+
+
+_GESV = None
+
+
+def solve6(M: list[list[float]], b: Sequence[float]) -> Vec:
+    """x with M x = b for a 6×6 M (LAPACK gesv: the cheapest call for one small system)."""
+    global _GESV
+    if _GESV is None:
+        from scipy.linalg import get_lapack_funcs
+
+        _GESV = get_lapack_funcs("gesv", (np.zeros((6, 6)),))
+    _, _, x, info = _GESV(np.array(M), np.array(b, dtype=float))
+    if info != 0:
+        raise KernelError("singular 6x6 system")
+    return x.tolist()
+
+
+def solve6_python(M: list[list[float]], b: Sequence[float]) -> Vec:
+    """x with M x = b for a 6×6 M (Gaussian elimination, partial pivoting, pure Python); M is consumed."""
+    n = 6
+    x = list(b)
+    for c in range(n):
+        piv = c
+        big = abs(M[c][c])
+        for r in range(c + 1, n):
+            v = abs(M[r][c])
+            if v > big:
+                big, piv = v, r
+        if big < 1e-300:
+            raise KernelError("singular 6x6 system")
+        if piv != c:
+            M[c], M[piv] = M[piv], M[c]
+            x[c], x[piv] = x[piv], x[c]
+        row = M[c]
+        inv = 1.0 / row[c]
+        for r in range(c + 1, n):
+            rr = M[r]
+            f = rr[c] * inv
+            if f != 0.0:
+                for k in range(c + 1, n):
+                    rr[k] -= f * row[k]
+                x[r] -= f * x[c]
+    for c in range(n - 1, -1, -1):
+        row = M[c]
+        s = x[c]
+        for k in range(c + 1, n):
+            s -= row[k] * x[k]
+        x[c] = s / row[c]
+    return x
+
+
+def exp_rotate(w0: float, w1: float, w2: float, R: Sequence[float]) -> tuple[float, ...]:
+    """exp([w]×)·R for a flat row-major 3×3 R."""
+    th2 = w0 * w0 + w1 * w1 + w2 * w2
+    if th2 < 1e-24:
+        a, b = 1.0, 0.5
+    else:
+        th = math.sqrt(th2)
+        a, b = math.sin(th) / th, (1.0 - math.cos(th)) / th2
+    # E = I + a K + b K², K = [w]×
+    e00 = 1.0 - b * (w1 * w1 + w2 * w2)
+    e11 = 1.0 - b * (w0 * w0 + w2 * w2)
+    e22 = 1.0 - b * (w0 * w0 + w1 * w1)
+    e01 = -a * w2 + b * w0 * w1
+    e10 = a * w2 + b * w0 * w1
+    e02 = a * w1 + b * w0 * w2
+    e20 = -a * w1 + b * w0 * w2
+    e12 = -a * w0 + b * w1 * w2
+    e21 = a * w0 + b * w1 * w2
+    r00, r01, r02, r10, r11, r12, r20, r21, r22 = R
+    return (e00 * r00 + e01 * r10 + e02 * r20, e00 * r01 + e01 * r11 + e02 * r21, e00 * r02 + e01 * r12 + e02 * r22,
+            e10 * r00 + e11 * r10 + e12 * r20, e10 * r01 + e11 * r11 + e12 * r21, e10 * r02 + e11 * r12 + e12 * r22,
+            e20 * r00 + e21 * r10 + e22 * r20, e20 * r01 + e21 * r11 + e22 * r21, e20 * r02 + e21 * r12 + e22 * r22)
+
+
+class SampleKernel:
+    """Precomputed constants of one robot; `terms(...)` evaluates one sample."""
+
+    def __init__(self, prm: HexaDynamicParameters) -> None:
+        self.la = prm.l_a
+        self.ld2 = prm.l_d**2
+        self.A = [tuple(map(float, a)) for a in prm.A]
+        self.C = [tuple(map(float, c)) for c in prm.C]
+        self.ca = [math.cos(a) for a in prm.alpha]
+        self.sa = [math.sin(a) for a in prm.alpha]
+        self.mp = prm.m_p
+        self.Ip = [[float(v) for v in row] for row in prm.I_p]
+        self.cp = tuple(map(float, prm.c_p))
+        self.Ja = prm.J_a
+        self.mas = prm.m_a * prm.s_a
+        self.mr = prm.m_r
+        self.Ir = prm.I_r
+        self.k = prm.kappa
+        self.b = prm.arm_damping
+        self.g = tuple(map(float, prm.gravity))
+
+    def geometry(self, zeta: Sequence[float], p: Sequence[float], R: Sequence[float]) -> tuple[list, float]:
+        """Per-chain (r, u, u', d, |d|², D, j) and max |f_i| (f_i = |d_i|² − l_d², eq 15)."""
+        la = self.la
+        r00, r01, r02, r10, r11, r12, r20, r21, r22 = R
+        px, py, pz = p
+        out = []
+        fmax = 0.0
+        for i in range(6):
+            cx, cy, cz = self.C[i]
+            rx = r00 * cx + r01 * cy + r02 * cz
+            ry = r10 * cx + r11 * cy + r12 * cz
+            rz = r20 * cx + r21 * cy + r22 * cz
+            z = zeta[i]
+            c, s = math.cos(z), math.sin(z)
+            ca, sa = self.ca[i], self.sa[i]
+            ux, uy, uz = -ca * c, -sa * c, s
+            vx, vy, vz = ca * s, sa * s, c  # u' = ∂u/∂ζ
+            ax, ay, az = self.A[i]
+            dx = px + rx - ax - la * ux
+            dy = py + ry - ay - la * uy
+            dz = pz + rz - az - la * uz
+            dd = dx * dx + dy * dy + dz * dz
+            f = abs(dd - self.ld2)
+            if f > fmax:
+                fmax = f
+            D = la * (dx * vx + dy * vy + dz * vz)
+            out.append((rx, ry, rz, ux, uy, uz, vx, vy, vz, dx, dy, dz, dd, D))
+        return out, fmax
+
+    def track_pose(self, zeta: Sequence[float], p: Sequence[float], R: Sequence[float], tol: float,
+                   iterations: int) -> tuple[list, tuple, tuple]:
+        """Newton steps on f(ζ, pose) = 0 from (p, R); returns the geometry at the converged pose, p, R."""
+        p = tuple(p)
+        R = tuple(R)
+        for _ in range(iterations + 1):
+            geo, fmax = self.geometry(zeta, p, R)
+            if fmax < tol:
+                return geo, p, R
+            M = []
+            rhs = []
+            for (rx, ry, rz, _ux, _uy, _uz, _vx, _vy, _vz, dx, dy, dz, dd, _D) in geo:
+                M.append([2 * dx, 2 * dy, 2 * dz, 2 * (ry * dz - rz * dy), 2 * (rz * dx - rx * dz),
+                          2 * (rx * dy - ry * dx)])
+                rhs.append(self.ld2 - dd)
+            dx6 = solve6(M, rhs)
+            p = (p[0] + dx6[0], p[1] + dx6[1], p[2] + dx6[2])
+            R = exp_rotate(dx6[3], dx6[4], dx6[5], R)
+        raise KernelError(f"pose tracking did not converge (max |f| = {fmax:.3g} m²)")
+
+    def terms(self, geo: list, zd: Sequence[float], tau: Sequence[float], p: Sequence[float],
+              R: Sequence[float]) -> tuple[Vec, Vec, Vec]:
+        """(V, π, u) for one sample with geometry `geo` (from geometry/track_pose)."""
+        la, k1, k0 = self.la, self.k, 1.0 - self.k
+        Ja, mr, Ir, b = self.Ja, self.mr, self.Ir, self.b
+        gx, gy, gz = self.g
+        J = []
+        for (rx, ry, rz, ux, uy, uz, vx, vy, vz, dx, dy, dz, dd, D) in geo:
+            if abs(D) < 1e-12:
+                raise KernelError("serial singularity (rod perpendicular to the arm's motion)")
+            iD = 1.0 / D
+            J.append([dx * iD, dy * iD, dz * iD, (ry * dz - rz * dy) * iD, (rz * dx - rx * dz) * iD,
+                      (rx * dy - ry * dx) * iD])
+        V = solve6(J, zd)
+        v0, v1, v2, w0, w1, w2 = V
+        p0 = p1 = p2 = p3 = p4 = p5 = 0.0
+        u0 = u1 = u2 = u3 = u4 = u5 = 0.0
+        mas = self.mas
+        grc = la * k0 * mr
+        for i in range(6):
+            rx, ry, rz, ux, uy, uz, vx, vy, vz, dx, dy, dz, dd, D = geo[i]
+            j0, j1, j2, j3, j4, j5 = J[i]
+            z1 = zd[i]
+            # velocities
+            qx = w1 * rz - w2 * ry  # ω × r
+            qy = w2 * rx - w0 * rz
+            qz = w0 * ry - w1 * rx
+            cdx, cdy, cdz = v0 + qx, v1 + qy, v2 + qz  # Ċ
+            lz = la * z1
+            bdx, bdy, bdz = lz * vx, lz * vy, lz * vz  # Ḃ
+            ex, ey, ez = cdx - bdx, cdy - bdy, cdz - bdz  # ḋ
+            Dd = la * (ex * vx + ey * vy + ez * vz - z1 * (dx * ux + dy * uy + dz * uz))
+            iD = 1.0 / D
+            # rod momenta
+            idd = 1.0 / dd
+            hx = mr * (k0 * bdx + k1 * cdx)
+            hy = mr * (k0 * bdy + k1 * cdy)
+            hz = mr * (k0 * bdz + k1 * cdz)
+            Lx = Ir * (dy * ez - dz * ey) * idd  # I_r ω_r, ω_r = d × ḋ / |d|²
+            Ly = Ir * (dz * ex - dx * ez) * idd
+            Lz = Ir * (dx * ey - dy * ex) * idd
+            wcx = (Ly * dz - Lz * dy) * idd  # L × d / |d|²
+            wcy = (Lz * dx - Lx * dz) * idd
+            wcz = (Lx * dy - Ly * dx) * idd
+            fcx, fcy, fcz = k1 * hx + wcx, k1 * hy + wcy, k1 * hz + wcz
+            fbx, fby, fbz = k0 * hx - wcx, k0 * hy - wcy, k0 * hz - wcz
+            # ac = (L × ḋ − 2 (d·ḋ)/|d|² L × d) / |d|²
+            s2 = 2.0 * (dx * ex + dy * ey + dz * ez)
+            acx = (Ly * ez - Lz * ey - s2 * wcx) * idd
+            acy = (Lz * ex - Lx * ez - s2 * wcy) * idd
+            acz = (Lx * ey - Ly * ex - s2 * wcz) * idd
+            a = Ja * z1 + la * (vx * fbx + vy * fby + vz * fbz)
+            upg = vx * gx + vy * gy + vz * gz
+            c = (tau[i] - b * z1 + (mas + grc) * upg
+                 - la * (z1 * (ux * fbx + uy * fby + uz * fbz) + vx * acx + vy * acy + vz * acz))
+            # j̇ = (jd_raw − j Ḋ) / D:  u += c j + a j̇ = (c − a Ḋ/D) j + (a/D) jd_raw
+            ca_ = c - a * Dd * iD
+            aD = a * iD
+            p0 += a * j0 + fcx
+            p1 += a * j1 + fcy
+            p2 += a * j2 + fcz
+            p3 += a * j3 + ry * fcz - rz * fcy
+            p4 += a * j4 + rz * fcx - rx * fcz
+            p5 += a * j5 + rx * fcy - ry * fcx
+            gcx, gcy, gcz = k1 * mr * gx + acx, k1 * mr * gy + acy, k1 * mr * gz + acz
+            u0 += ca_ * j0 + aD * ex + gcx
+            u1 += ca_ * j1 + aD * ey + gcy
+            u2 += ca_ * j2 + aD * ez + gcz
+            u3 += (ca_ * j3 + aD * ((qy * dz - qz * dy) + (ry * ez - rz * ey))
+                   + ry * gcz - rz * gcy + qy * fcz - qz * fcy)
+            u4 += (ca_ * j4 + aD * ((qz * dx - qx * dz) + (rz * ex - rx * ez))
+                   + rz * gcx - rx * gcz + qz * fcx - qx * fcz)
+            u5 += (ca_ * j5 + aD * ((qx * dy - qy * dx) + (rx * ey - ry * ex))
+                   + rx * gcy - ry * gcx + qx * fcy - qy * fcx)
+        pi = [p0, p1, p2, p3, p4, p5]
+        u = [u0, u1, u2, u3, u4, u5]
+        # plate
+        r00, r01, r02, r10, r11, r12, r20, r21, r22 = R
+        cx, cy, cz = self.cp
+        ox = r00 * cx + r01 * cy + r02 * cz  # ρ = R c_p
+        oy = r10 * cx + r11 * cy + r12 * cz
+        oz = r20 * cx + r21 * cy + r22 * cz
+        wox, woy, woz = w1 * oz - w2 * oy, w2 * ox - w0 * oz, w0 * oy - w1 * ox  # ω × ρ
+        mp = self.mp
+        hpx, hpy, hpz = mp * (v0 + wox), mp * (v1 + woy), mp * (v2 + woz)
+        # I_world ω = R I_p Rᵀ ω
+        b0 = r00 * w0 + r10 * w1 + r20 * w2
+        b1 = r01 * w0 + r11 * w1 + r21 * w2
+        b2 = r02 * w0 + r12 * w1 + r22 * w2
+        Ip = self.Ip
+        c0 = Ip[0][0] * b0 + Ip[0][1] * b1 + Ip[0][2] * b2
+        c1 = Ip[1][0] * b0 + Ip[1][1] * b1 + Ip[1][2] * b2
+        c2 = Ip[2][0] * b0 + Ip[2][1] * b1 + Ip[2][2] * b2
+        Lpx = r00 * c0 + r01 * c1 + r02 * c2
+        Lpy = r10 * c0 + r11 * c1 + r12 * c2
+        Lpz = r20 * c0 + r21 * c1 + r22 * c2
+        pi[0] += hpx
+        pi[1] += hpy
+        pi[2] += hpz
+        pi[3] += oy * hpz - oz * hpy + Lpx
+        pi[4] += oz * hpx - ox * hpz + Lpy
+        pi[5] += ox * hpy - oy * hpx + Lpz
+        mgx, mgy, mgz = mp * gx, mp * gy, mp * gz
+        u[0] += mgx
+        u[1] += mgy
+        u[2] += mgz
+        u[3] += oy * mgz - oz * mgy + (woy * hpz - woz * hpy)
+        u[4] += oz * mgx - ox * mgz + (woz * hpx - wox * hpz)
+        u[5] += ox * mgy - oy * mgx + (wox * hpy - woy * hpx)
+        return V, pi, u
