@@ -103,3 +103,12 @@ def test_home_pose_is_far_from_type_two_singularity():
     J_D, J_I = kin.constraint_jacobians(DESC, DESC.home_pose, zeta)
     assert abs(np.linalg.det(J_D)) > 1e-4
     assert np.all(np.abs(np.diag(J_I)) > 0.05)
+
+
+def test_batched_jd_equals_single_jd():
+    rng = np.random.default_rng(3)
+    poses = DESC.home_pose + rng.uniform(-1, 1, (20, 6)) * SPAN * 0.5
+    zetas = kin.inverse_kinematics_batch(DESC, poses)
+    batch = kin.constraint_jacobian_jd_batch(DESC, poses, zetas)
+    for p, z, J in zip(poses, zetas, batch):
+        assert np.allclose(kin.constraint_jacobians(DESC, p, z)[0], J, atol=1e-14)

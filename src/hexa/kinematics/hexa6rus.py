@@ -440,6 +440,16 @@ def constraint_jacobians(desc: "HexaDescription", pose: np.ndarray,
     return J_D, J_I
 
 
+def constraint_jacobian_jd_batch(desc: "HexaDescription", poses: np.ndarray, zetas: np.ndarray) -> np.ndarray:
+    """J_D (N, 6, 6) of `constraint_jacobians` for many poses (N, 6) and their arm angles (N, 6), vectorised."""
+    poses, zetas = np.asarray(poses, dtype=float), np.asarray(zetas, dtype=float)
+    R = rotation_zyx(poses[:, 3], poses[:, 4], poses[:, 5])
+    r = np.einsum("nij,kj->nki", R, desc.C)
+    n = poses[:, None, :3] + r - elbows(desc, zetas)
+    n /= np.linalg.norm(n, axis=-1, keepdims=True)
+    return np.concatenate([n, np.cross(r, n)], -1)
+
+
 def pose_rate_matrix(pose: np.ndarray) -> np.ndarray:
     """T (6,6) with twist = T·pose_dot: blockdiag(I, E(α, β))."""
     T = np.eye(6)
