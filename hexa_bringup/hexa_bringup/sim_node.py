@@ -1,6 +1,6 @@
 """ROS node `hexa-sim`: steps the simulated Hexa and publishes /clock, the two RGB-D cameras and the ground truth.
 
-Parameters: scenario ("" | plate | arm | rod | YAML path), seed, randomize, real_time_factor (1.0; 0 = as fast as
+Parameters: scenario (none | plate | arm | rod | YAML path), seed, randomize, real_time_factor (1.0; 0 = as fast as
 possible), camera_rate_hz (30), cameras (true), clock_rate_hz (1000), truth_rate_hz (250), boards (true: the virtual
 Uno/Mega ptys linked at link_dir, /tmp/hexa_sim/{uno,mega}), duration (0 = run until shut down).
 Topics (relative, under the node namespace, e.g. /hexa): cam_{top,side}/color/image_raw (rgb8),
@@ -68,7 +68,8 @@ def main(argv: list[str] | None = None) -> int:
             self.use_boards = bool(p("boards", True).value)
             self.link_dir = str(p("link_dir", "/tmp/hexa_sim").value)
             self.duration = float(p("duration", 0.0).value)
-            self.sim = Simulator(seed=self.seed, scenario=self.scenario or None, cameras=self.use_cams,
+            scenario = None if self.scenario in ("", "none") else self.scenario
+            self.sim = Simulator(seed=self.seed, scenario=scenario, cameras=self.use_cams,
                                  randomize=self.randomize)
             self.boards = VirtualBoards(self.sim, link_dir=self.link_dir).start() if self.use_boards else None
             self.clock_pub = self.create_publisher(Clock, "/clock", 10)
