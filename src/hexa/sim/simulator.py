@@ -213,6 +213,8 @@ class Simulator:
 
         self._renderer: RGBDRenderer | None = None
         self._noise: dict[str, NoiseBank] = {}
+        self.rgb_noise_sigma = self.config.rgb_noise_sigma      # image noise (hexa.sim.randomize changes them)
+        self.depth_noise_rel = self.config.depth_noise_rel
         if cameras:
             w = max(c.width for c in self.config.cameras.values())
             h = max(c.height for c in self.config.cameras.values())
@@ -486,8 +488,8 @@ class Simulator:
         rgb = rgb[:cfg.height, :cfg.width]
         depth = depth[:cfg.height, :cfg.width]
         bank = self._noise.get(camera) if noise else None
-        return (noisy_rgb(rgb, self.config.rgb_noise_sigma, bank),
-                depth_image_mm(depth, cfg, self.config.depth_noise_rel, bank))
+        return (noisy_rgb(rgb, self.rgb_noise_sigma, bank),
+                depth_image_mm(depth, cfg, self.depth_noise_rel, bank))
 
     def render_raw(self, camera: str) -> tuple[np.ndarray, np.ndarray]:
         """Noise-free colour and metric depth (float32 m, inf = nothing hit) of `camera`."""
