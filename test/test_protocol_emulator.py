@@ -84,3 +84,15 @@ def test_unplug_removes_link_and_replug_points_to_new_pty(tmp_path):
             (h,) = _exchange(s2, fr.FrameParser(), fr.encode_frame(fr.HELLO, 0, fr.pack_hello()), 1)
             assert h.type == fr.HELLO_REPLY
         assert isinstance(first, str)
+
+
+def test_emulator_survives_a_failing_consumer_callback():
+    def boom(_):
+        raise RuntimeError("simulator gone")
+
+    with UnoEmulator(on_targets=boom) as uno, serial.Serial(uno.port, 500000, timeout=0.05) as s:
+        p = fr.FrameParser()
+        s.write(fr.encode_frame(fr.SET_TARGETS, 1, fr.pack_targets([1500] * 6)))
+        (st,) = _exchange(s, p, fr.encode_frame(fr.GET_STATUS, 2), 1)
+        assert fr.unpack_servo_status(st.payload).pulses_us == (1500,) * 6
+        assert uno.callback_errors == 1 and "simulator gone" in uno.last_callback_error

@@ -74,7 +74,7 @@ class DriverNode(Node):
 
         common = dict(baud=int(cfg["baud"]), stale_timeout=float(cfg["stale_timeout"]),
                       drop_after=float(cfg["drop_after"]), reconnect_period=float(cfg["reconnect_period"]),
-                      hello_timeout=float(cfg["hello_timeout"]))
+                      hello_timeout=float(cfg["hello_timeout"]), boot_delay=float(cfg["boot_delay"]))
         servos = self.core.servos
         self.uno = ServoLink(str(cfg["uno_port"]), min_us=[s.min_us for s in servos],
                              max_us=[s.max_us for s in servos], watchdog_ms=int(cfg["watchdog_ms"]),

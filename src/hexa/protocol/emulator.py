@@ -57,6 +57,8 @@ class _BoardEmulator:
         self.rx_bad_frames = 0
         self.tx_frames = 0
         self.tx_dropped_bytes = 0
+        self.callback_errors = 0
+        self.last_callback_error = ""
         self.plugged = False
 
     # ------------------------------------------------------------------ lifecycle
@@ -290,7 +292,11 @@ class UnoEmulator(_BoardEmulator):
             self.last_command_time = self._clock()
             self.commands += 1
             if self.on_targets is not None:
-                self.on_targets(out)
+                try:
+                    self.on_targets(out)
+                except Exception as exc:  # the consumer failed: the board keeps running, like the real one
+                    self.callback_errors += 1
+                    self.last_callback_error = f"{type(exc).__name__}: {exc}"
         elif frame.type == fr.SET_LIMITS:
             lo, hi = fr.unpack_limits(frame.payload)
             if any(a > b for a, b in zip(lo, hi)):
@@ -384,10 +390,16 @@ class MegaEmulator(_BoardEmulator):
 
     def sample_counts(self, t: float) -> tuple[int, ...]:
         """The six ADC counts the board would read at board time `t` (s)."""
-        if self.current_source is None:
-            values = np.zeros(fr.N_CHANNELS)
-        else:
-            values = np.asarray(self.current_source(t), dtype=float).reshape(fr.N_CHANNELS)
+        values = np.zeros(fr.N_CHANNELS)
+        if self.current_source is not None:
+            try:
+                values = np.asarray(self.current_source(t), dtype=float).reshape(fr.N_CHANNELS)
+            except Exception as exc:  # the source failed: sample 0 A (counted), keep streaming
+                self.callback_errors += 1
+                self.last_callback_error = f"{type(exc).__name__}: {exc}"
+                values = np.zeros(fr.N_CHANNELS)
+                if self.units == "counts":
+                    values = self.sensor.counts_from_current(values).astype(float)
         if self.units == "amps":
             volts = self.sensor.zero_voltage + self.sensor.sensitivity * values
             if self.noise_counts:

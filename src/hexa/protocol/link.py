@@ -73,6 +73,8 @@ class BoardLink:
         drop_after: STALE for this long -> close and reconnect (board reset or hung).
         reconnect_period: delay between attempts to reopen a missing port.
         hello_timeout: how long to keep sending HELLO after opening (a real Uno resets on open, ~1.5 s).
+        boot_delay: wait this long after opening a real serial device before the first HELLO (the DTR reset
+            starts the bootloader, which must not see our bytes); skipped for pseudo-terminals (/dev/pts/*).
         poll_period: send GET_STATUS this often when connected (0 = never).
         ping_period: send PING this often to measure the round trip (0 = never).
     """
@@ -81,13 +83,15 @@ class BoardLink:
 
     def __init__(self, port: str, baud: int = 500000, stale_timeout: float = 0.5, drop_after: float = 1.0,
                  reconnect_period: float = 0.1, hello_timeout: float = 3.0, poll_period: float = 0.2,
-                 ping_period: float = 1.0, on_state: Callable[[str], None] | None = None) -> None:
+                 ping_period: float = 1.0, on_state: Callable[[str], None] | None = None,
+                 boot_delay: float = 0.0) -> None:
         self.port = port
         self.baud = baud
         self.stale_timeout = stale_timeout
         self.drop_after = drop_after
         self.reconnect_period = reconnect_period
         self.hello_timeout = hello_timeout
+        self.boot_delay = boot_delay
         self.poll_period = poll_period
         self.ping_period = ping_period
         self.on_state = on_state
@@ -246,6 +250,9 @@ class BoardLink:
             self.stats.open_failures += 1
             self.stats.last_error = f"open failed: {exc}"
             return False
+        if self.boot_delay > 0 and not os.path.realpath(self.port).startswith("/dev/pts/"):
+            self._set_state(CONNECTING)
+            self._stop.wait(self.boot_delay)
         ser.reset_input_buffer()
         self._parser.reset()
         self._parser.stats = fr.ParserStats()  # counters accumulate in self.stats across reconnects
