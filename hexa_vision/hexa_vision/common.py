@@ -74,7 +74,7 @@ def diagnostic_status(name: str, hardware_id: str, counters: Counter | dict, ok_
 
     st = DiagnosticStatus()
     st.name, st.hardware_id = name, hardware_id
-    rejected = sum(v for k, v in counters.items() if k.startswith("reject") or k in _REJECT_KEYS)
+    rejected = sum(v for k, v in counters.items() if "reject" in k or any(r in k for r in _REJECT_KEYS))
     st.level = DiagnosticStatus.WARN if (warn_if_rejects and rejected) else DiagnosticStatus.OK
     st.message = f"{rejected} input(s) rejected" if rejected else ok_message
     st.values = [KeyValue(key=str(k), value=str(v)) for k, v in sorted(counters.items())]

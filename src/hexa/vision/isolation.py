@@ -1,0 +1,575 @@
+"""Collision isolation with two RGB-D cameras (seed 000 §3.2, Figures 4, 5, 12, 17, 22): which link, which chain,
+and where.
+
+Per camera (the paper's flow, Figure 4):
+  1. the robot is "determined": its links are known from the plate pose (markers) and the inverse kinematics, and
+     are drawn into a robot mask; the paper's colour cues are computed too — YCbCr (bright, unsaturated) + Canny +
+     Hough lines for the rods, HSV blue for the arms — and shown in the debug image;
+  2. grayscale background subtraction (plus depth change) gives the changed pixels; depth gating keeps only points
+     inside the robot's workspace (the paper's "objects in the workspace", Fig. 12d / 17b);
+  3. external object = changed, in-workspace pixels minus the robot mask (Fig. 12e);
+  4. object pixels touching a link with consistent depth (their 3D point within `touch_distance` of the link's
+     surface) are the contact candidates (Fig. 12f / 17f / 22f); the link with the most, closest candidates wins;
+  5. contact point: plate — mean of the candidates, the line from the plate centre through it, intersected with
+     the hexagonal border (Fig. 12g); rod/arm — mean of the candidates projected on the link axis, moved to the
+     surface facing the object (Fig. 17g / 22g).
+The top camera is evaluated first (plate and rods, case 1); the side camera (arms, case 2) when the top camera
+finds nothing, and the more confident answer is kept when both do. Pixels → 3D with the camera model.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Any, Sequence
+
+import cv2
+import numpy as np
+
+from hexa.vision.camera import CameraModel
+
+LINK_PLATE, LINK_ARM, LINK_ROD, LINK_UNKNOWN = 0, 1, 2, 255
+LINK_NAMES = {LINK_PLATE: "plate", LINK_ARM: "arm", LINK_ROD: "rod", LINK_UNKNOWN: "none"}
+
+
+class IsolationError(ValueError):
+    """Input frames cannot be used (no background yet, size or encoding mismatch, empty depth); names the problem."""
+
+
+# ----------------------------------------------------------------------------------------------------------------
+# geometry of the robot at one instant
+@dataclass(frozen=True)
+class RobotGeometry:
+    """Links of the Hexa in base at one instant: arms A_i→B_i, rods B_i→C_i (capsules), the hexagonal plate prism.
+
+    hexagon: (6, 2) plate outline in {P} through the C_i, ordered by angle; T_plate: 4x4 plate pose in base.
+    """
+
+    arms: np.ndarray          # (6, 2, 3)
+    rods: np.ndarray          # (6, 2, 3)
+    T_plate: np.ndarray       # (4, 4)
+    hexagon: np.ndarray       # (6, 2)
+    arm_radius: float
+    rod_radius: float
+    plate_half_thickness: float
+
+    @classmethod
+    def from_state(cls, desc: Any, pose: np.ndarray, zeta: np.ndarray | None = None) -> "RobotGeometry":
+        """Geometry from the plate pose [x y z α β γ] (m, rad) and arm angles ζ (IK of the pose when None)."""
+        from hexa.kinematics import hexa6rus as kin
+
+        pose = np.asarray(pose, dtype=float)
+        if zeta is None:
+            zeta = kin.inverse_kinematics(desc, pose)
+        A = np.asarray(desc.A, dtype=float)
+        B = np.asarray(kin.elbows(desc, np.asarray(zeta, dtype=float)), dtype=float)
+        C = np.asarray(kin.plate_joints(desc, pose), dtype=float)
+        T = np.eye(4)
+        T[:3, :3] = kin.rotation_zyx(*pose[3:])
+        T[:3, 3] = pose[:3]
+        Cp = np.asarray(desc.C, dtype=float)[:, :2]
+        hexagon = Cp[np.argsort(np.arctan2(Cp[:, 1], Cp[:, 0]))]
+        ap = _appearance(desc)
+        return cls(np.stack([A, B], axis=1), np.stack([B, C], axis=1), T, hexagon, ap["arm_radius"],
+                   ap["rod_radius"], ap["plate_thickness"] / 2.0)
+
+    def link_segments(self, rod_end_clearance: float = 0.0) -> list[tuple[int, int, np.ndarray, float]]:
+        """(link code, chain, (2, 3) end points, radius) for the 12 capsules; rods may stop `rod_end_clearance`
+        (m) short of the plate joint, so that points at the plate's corners count for the plate."""
+        out = [(LINK_ARM, i + 1, self.arms[i], self.arm_radius) for i in range(6)]
+        for i in range(6):
+            seg = self.rods[i].copy()
+            if rod_end_clearance > 0:
+                e = seg[1] - seg[0]
+                seg[1] = seg[1] - rod_end_clearance * e / np.linalg.norm(e)
+            out.append((LINK_ROD, i + 1, seg, self.rod_radius))
+        return out
+
+    def plate_corners(self) -> np.ndarray:
+        """(12, 3) corners of the plate prism in base."""
+        h = self.plate_half_thickness
+        loc = np.array([[x, y, z] for z in (-h, h) for x, y in self.hexagon])
+        return loc @ self.T_plate[:3, :3].T + self.T_plate[:3, 3]
+
+
+def _appearance(desc: Any) -> dict[str, float]:
+    try:
+        ap = desc.section("appearance")
+    except Exception:  # noqa: BLE001 - description without the simulator's section: nominal sizes
+        ap = {}
+    return {"arm_radius": float(ap.get("arm_radius", 0.006)), "rod_radius": float(ap.get("rod_radius", 0.004)),
+            "plate_thickness": float(ap.get("plate_thickness", 0.01))}
+
+
+def segment_distance(points: np.ndarray, a: np.ndarray, b: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Distances (N,) of points (N, 3) to the segment a–b and the segment parameter s ∈ [0, 1] of the closest point."""
+    ab = b - a
+    s = np.clip(((points - a) @ ab) / max(float(ab @ ab), 1e-18), 0.0, 1.0)
+    closest = a + s[:, None] * ab
+    return np.linalg.norm(points - closest, axis=1), s
+
+
+def plate_distance(points: np.ndarray, geom: RobotGeometry) -> np.ndarray:
+    """Distances (N,) of points in base to the plate prism (0 inside)."""
+    R, t = geom.T_plate[:3, :3], geom.T_plate[:3, 3]
+    q = (points - t) @ R
+    hexa = geom.hexagon
+    n = len(hexa)
+    inside = np.ones(len(q), bool)
+    d_edge = np.full(len(q), np.inf)
+    for k in range(n):
+        a, b = hexa[k], hexa[(k + 1) % n]
+        e = b - a
+        cross = e[0] * (q[:, 1] - a[1]) - e[1] * (q[:, 0] - a[0])
+        inside &= cross >= 0
+        s = np.clip(((q[:, :2] - a) @ e) / float(e @ e), 0, 1)
+        d_edge = np.minimum(d_edge, np.linalg.norm(q[:, :2] - (a + s[:, None] * e), axis=1))
+    d_xy = np.where(inside, 0.0, d_edge)
+    d_z = np.maximum(np.abs(q[:, 2]) - geom.plate_half_thickness, 0.0)
+    return np.hypot(d_xy, d_z)
+
+
+def hexagon_border_point(hexagon: np.ndarray, direction_xy: np.ndarray) -> np.ndarray:
+    """Border point (2,) of the hexagon (in {P}) on the ray from the plate centre along `direction_xy` (Fig. 12g)."""
+    d = np.asarray(direction_xy, float)
+    d = d / max(np.linalg.norm(d), 1e-12)
+    n = len(hexagon)
+    best = None
+    for k in range(n):
+        a, b = hexagon[k], hexagon[(k + 1) % n]
+        M = np.column_stack([d, a - b])
+        if abs(np.linalg.det(M)) < 1e-12:
+            continue
+        s, u = np.linalg.solve(M, a)
+        if s > 0 and -1e-9 <= u <= 1 + 1e-9 and (best is None or s < best):
+            best = s
+    if best is None:
+        raise IsolationError(f"no hexagon border point along {d.tolist()}")
+    return best * d
+
+
+def hexagon_line_entry(hexagon: np.ndarray, origin: np.ndarray, direction: np.ndarray,
+                       max_back: float = 0.05) -> np.ndarray | None:
+    """Where the 2D line origin + s·direction crosses the hexagon border nearest to `origin` (s ≥ −max_back), or
+    None when it misses the hexagon."""
+    best = None
+    n = len(hexagon)
+    for k in range(n):
+        a, b = hexagon[k], hexagon[(k + 1) % n]
+        M = np.column_stack([direction, a - b])
+        if abs(np.linalg.det(M)) < 1e-12:
+            continue
+        s, u = np.linalg.solve(M, a - origin)
+        if -1e-9 <= u <= 1 + 1e-9 and s >= -max_back and (best is None or abs(s) < abs(best)):
+            best = s
+    return None if best is None else origin + best * direction
+
+
+# ----------------------------------------------------------------------------------------------------------------
+@dataclass
+class IsolationConfig:
+    """Thresholds of the isolation procedure (SI units; pixel thresholds in grey levels / px)."""
+
+    gray_threshold: int = 22            # |gray − background| that counts as changed
+    depth_change: float = 0.03          # m of depth change that counts as changed
+    workspace_radius: float = 0.45      # m, cylinder about the base z axis
+    workspace_z: tuple[float, float] = (-0.74, 0.06)   # m, z range in base (floor at -0.80 excluded)
+    robot_margin_px: float = 2.0        # px added around the drawn robot links
+    robot_margin_m: float = 0.002       # m added to link radii when drawing the robot
+    touch_distance: float = 0.022       # m between an object point and a link surface to count as touching
+    rod_end_clearance: float = 0.03     # m of each rod next to its plate joint attributed to the plate
+    closest_points: int = 12            # k nearest object points that decide which link the object comes closest to
+    contact_gap: float = 0.012          # m: the object must come this close to a link to call it a contact
+    contact_sigma: float = 0.003        # m: width of the Gaussian weights on the nearest points
+    smooth_px: int = 7                  # normalised box filter (px) of the object's depth before lifting to 3D
+    axis_elongation: float = 2.5        # object point spread ratio above which its axis guides the plate contact
+    min_confidence: float = 0.5         # a camera earlier in `order` wins unless its confidence is below this
+    min_touch_points: int = 12          # fewer candidates → no contact in this camera
+    min_object_area: int = 30           # px, smaller object blobs are noise
+    depth_rel_sigma: float = 0.01       # depth noise relative to range (for the confidence)
+    blue_hsv: tuple[tuple[int, int, int], tuple[int, int, int]] = ((95, 80, 30), (130, 255, 255))
+    rod_ycbcr: tuple[int, int] = (150, 24)  # Y ≥ …, |Cb − 128| and |Cr − 128| ≤ … (bright unsaturated rods)
+
+
+@dataclass
+class CameraResult:
+    """What one camera concluded: link code, chain, contact point (base), pixel, confidence, counts; debug layers."""
+
+    camera: str
+    link: int = LINK_UNKNOWN
+    chain: int = 0
+    point: np.ndarray = field(default_factory=lambda: np.full(3, np.nan))
+    pixel: np.ndarray = field(default_factory=lambda: np.full(2, np.nan))
+    confidence: float = 0.0
+    n_candidates: int = 0
+    n_object: int = 0
+    reason: str = ""
+    layers: dict[str, Any] = field(default_factory=dict)
+
+    @property
+    def found(self) -> bool:
+        return self.link != LINK_UNKNOWN
+
+
+@dataclass
+class ContactEstimate:
+    """The isolation's answer (hexa_msgs/Contact fields): link code, chain 1..6 (0 plate/unknown), point in base (m),
+    pixel in `camera`'s image, confidence 0..1; and each camera's result."""
+
+    link: int
+    chain: int
+    point: np.ndarray
+    pixel: np.ndarray
+    camera: str
+    confidence: float
+    per_camera: dict[str, CameraResult]
+
+    @property
+    def link_name(self) -> str:
+        return LINK_NAMES[self.link]
+
+
+class Background:
+    """A background frame of one camera (grayscale + depth in m), captured with the workspace clear of objects."""
+
+    def __init__(self, rgb: np.ndarray, depth_m: np.ndarray) -> None:
+        if rgb.ndim != 3 or rgb.shape[:2] != depth_m.shape:
+            raise IsolationError(f"background rgb {rgb.shape} and depth {depth_m.shape} are not an aligned pair")
+        self.gray = cv2.cvtColor(np.ascontiguousarray(rgb), cv2.COLOR_RGB2GRAY)
+        self.depth = np.asarray(depth_m, np.float32)
+        self.shape = depth_m.shape
+
+
+class CollisionIsolator:
+    """Locates a contact from the top and side RGB-D frames (see module docstring).
+
+    Args:
+        cameras: camera models by name ("cam_top", "cam_side").
+        config: thresholds.
+        order: cameras in the order the paper evaluates them.
+    """
+
+    def __init__(self, cameras: dict[str, CameraModel], config: IsolationConfig | None = None,
+                 order: Sequence[str] = ("cam_top", "cam_side")) -> None:
+        self.cameras = dict(cameras)
+        self.config = config or IsolationConfig()
+        self.order = [c for c in order if c in self.cameras] + [c for c in self.cameras if c not in order]
+        self.backgrounds: dict[str, Background] = {}
+        self._rays: dict[str, np.ndarray] = {}
+        for name, cam in self.cameras.items():
+            uu, vv = np.meshgrid(np.arange(cam.width, dtype=np.float32), np.arange(cam.height, dtype=np.float32))
+            # optical-frame ray per pixel with z = 1 (x/z, y/z)
+            fx, fy, cx, cy = cam.K[0, 0], cam.K[1, 1], cam.K[0, 2], cam.K[1, 2]
+            self._rays[name] = np.stack([(uu - cx) / fx, (vv - cy) / fy], axis=-1).astype(np.float32)
+
+    # -- background --------------------------------------------------------------------------------------------
+    def set_background(self, camera: str, rgb: np.ndarray, depth_m: np.ndarray) -> None:
+        """Store the background of `camera` (workspace clear of external objects)."""
+        self._check(camera, rgb, depth_m)
+        self.backgrounds[camera] = Background(rgb, depth_m)
+
+    def _check(self, camera: str, rgb: np.ndarray, depth_m: np.ndarray) -> CameraModel:
+        if camera not in self.cameras:
+            raise IsolationError(f"unknown camera {camera!r}; known: {list(self.cameras)}")
+        cam = self.cameras[camera]
+        if rgb is None or depth_m is None:
+            raise IsolationError(f"{camera}: missing colour or depth frame")
+        if rgb.ndim != 3 or rgb.shape[2] != 3 or rgb.dtype != np.uint8:
+            raise IsolationError(f"{camera}: colour must be RGB uint8 (H, W, 3), got {rgb.dtype} {rgb.shape}")
+        if rgb.shape[:2] != depth_m.shape:
+            raise IsolationError(f"{camera}: colour {rgb.shape[:2]} and depth {depth_m.shape} sizes differ")
+        if depth_m.shape != (cam.height, cam.width):
+            raise IsolationError(f"{camera}: frame {depth_m.shape[1]}x{depth_m.shape[0]} does not match camera_info "
+                                 f"{cam.width}x{cam.height}")
+        return cam
+
+    # -- masks -------------------------------------------------------------------------------------------------
+    def robot_mask(self, camera: str, geom: RobotGeometry) -> np.ndarray:
+        """uint8 mask of the robot's links drawn from the geometry (the "determined" robot), with a margin."""
+        cam = self.cameras[camera]
+        cfg = self.config
+        mask = np.zeros((cam.height, cam.width), np.uint8)
+        f = 0.5 * (cam.K[0, 0] + cam.K[1, 1])
+        for _, _, seg, radius in geom.link_segments():
+            n = 8
+            pts = seg[0] + np.linspace(0, 1, n + 1)[:, None] * (seg[1] - seg[0])
+            uv, z = cam.project(pts)
+            for k in range(n):
+                if z[k] <= 0.01 or z[k + 1] <= 0.01:
+                    continue
+                zz = 0.5 * (z[k] + z[k + 1])
+                th = int(np.ceil(2 * (radius + cfg.robot_margin_m) * f / zz + 2 * cfg.robot_margin_px))
+                p0 = tuple(int(round(c)) for c in uv[k])
+                p1 = tuple(int(round(c)) for c in uv[k + 1])
+                if max(abs(p0[0]), abs(p0[1]), abs(p1[0]), abs(p1[1])) > 10 ** 5:
+                    continue
+                cv2.line(mask, p0, p1, 255, max(th, 1), cv2.LINE_8)
+        uv, z = cam.project(geom.plate_corners())
+        if np.all(z > 0.01) and np.all(np.abs(uv) < 10 ** 5):
+            hull = cv2.convexHull(np.round(uv).astype(np.int32))
+            cv2.fillConvexPoly(mask, hull, 255)
+            m = int(np.ceil(cfg.robot_margin_px + cfg.robot_margin_m * f / float(np.mean(z))))
+            if m > 0:
+                cv2.polylines(mask, [hull], True, 255, 2 * m + 1)
+        return mask
+
+    def paper_colour_cues(self, rgb: np.ndarray) -> dict[str, Any]:
+        """The paper's colour steps: YCbCr rods + Canny + Hough lines (Fig. 12b–c), HSV blue arms + Canny + Hough
+        (Fig. 17c–d). Returned for the debug image; the decision uses the geometric robot mask."""
+        cfg = self.config
+        ycc = cv2.cvtColor(rgb, cv2.COLOR_RGB2YCrCb)
+        y, cr, cb = ycc[:, :, 0], ycc[:, :, 1].astype(np.int16), ycc[:, :, 2].astype(np.int16)
+        rods = ((y >= cfg.rod_ycbcr[0]) & (np.abs(cb - 128) <= cfg.rod_ycbcr[1]) &
+                (np.abs(cr - 128) <= cfg.rod_ycbcr[1])).astype(np.uint8) * 255
+        hsv = cv2.cvtColor(rgb, cv2.COLOR_RGB2HSV)
+        blue = cv2.inRange(hsv, np.array(cfg.blue_hsv[0]), np.array(cfg.blue_hsv[1]))
+        out = {"rods_ycbcr": rods, "arms_hsv": blue}
+        for key, m in (("rod_lines", rods), ("arm_lines", blue)):
+            edges = cv2.Canny(m, 50, 150)
+            lines = cv2.HoughLinesP(edges, 1, np.pi / 180, 30, minLineLength=25, maxLineGap=6)
+            out[key] = np.zeros((0, 4), np.int32) if lines is None else lines[:, 0, :]
+        return out
+
+    # -- one camera --------------------------------------------------------------------------------------------
+    def isolate_camera(self, camera: str, rgb: np.ndarray, depth_m: np.ndarray, geom: RobotGeometry,
+                       debug: bool = False) -> CameraResult:
+        """Contact candidates and the contact in one camera's frame (module docstring, steps 1–5).
+
+        Raises:
+            IsolationError: no background for this camera, or a malformed frame.
+        """
+        cam = self._check(camera, rgb, depth_m)
+        bg = self.backgrounds.get(camera)
+        if bg is None:
+            raise IsolationError(f"{camera}: no background captured yet")
+        cfg = self.config
+        res = CameraResult(camera)
+        depth = np.asarray(depth_m, np.float32)
+        valid = np.isfinite(depth) & (depth > 0)
+        if not valid.any():
+            raise IsolationError(f"{camera}: depth frame has no valid pixel")
+        gray = cv2.cvtColor(rgb, cv2.COLOR_RGB2GRAY)
+        changed = cv2.absdiff(gray, bg.gray) > cfg.gray_threshold
+        bg_valid = np.isfinite(bg.depth) & (bg.depth > 0)
+        with np.errstate(invalid="ignore"):
+            changed |= valid & (~bg_valid | (np.abs(depth - bg.depth) > cfg.depth_change))
+        changed &= valid
+        robot = self.robot_mask(camera, geom)
+        cand = changed & (robot == 0)
+        cand = cv2.morphologyEx(cand.astype(np.uint8), cv2.MORPH_OPEN, np.ones((3, 3), np.uint8)) > 0
+        vv, uu = np.nonzero(cand)
+        if debug:
+            res.layers.update({"rgb": rgb, "changed": changed, "robot": robot})
+        if vv.size == 0:
+            res.reason = "no external object"
+            if debug:
+                res.layers.update({"workspace": changed & False, "object": cand})
+            return res
+        z = depth[vv, uu]
+        ray = self._rays[camera][vv, uu]
+        pc = np.column_stack([ray * z[:, None], z])
+        pts = pc @ cam.T_base_camera[:3, :3].T + cam.T_base_camera[:3, 3]
+        inws = ((np.hypot(pts[:, 0], pts[:, 1]) <= cfg.workspace_radius) & (pts[:, 2] >= cfg.workspace_z[0]) &
+                (pts[:, 2] <= cfg.workspace_z[1]))
+        vv, uu, pts, z = vv[inws], uu[inws], pts[inws], z[inws]
+        obj = np.zeros_like(cand)
+        obj[vv, uu] = True
+        if debug:
+            res.layers["workspace"] = obj.copy()
+        if vv.size:
+            n, labels, stats, _ = cv2.connectedComponentsWithStats(obj.astype(np.uint8), connectivity=8)
+            big = np.zeros(n, bool)
+            big[1:] = stats[1:, cv2.CC_STAT_AREA] >= cfg.min_object_area
+            keep = big[labels[vv, uu]]
+            vv, uu, pts, z = vv[keep], uu[keep], pts[keep], z[keep]
+            obj[:] = False
+            obj[vv, uu] = True
+        res.n_object = int(vv.size)
+        if debug:
+            res.layers["object"] = obj
+        if vv.size == 0:
+            res.reason = "no external object in the workspace"
+            return res
+        if cfg.smooth_px > 1:
+            # normalised box filter of the depth over the object only: the object's own surface, less noise
+            m = obj.astype(np.float32)
+            dz = np.where(obj, depth, 0.0).astype(np.float32)
+            k = (cfg.smooth_px, cfg.smooth_px)
+            num = cv2.boxFilter(dz, -1, k, normalize=False)
+            den = cv2.boxFilter(m, -1, k, normalize=False)
+            z = num[vv, uu] / np.maximum(den[vv, uu], 1.0)
+            ray = self._rays[camera][vv, uu]
+            pts = np.column_stack([ray * z[:, None], z]) @ cam.T_base_camera[:3, :3].T + cam.T_base_camera[:3, 3]
+
+        # distances of object points to every link surface
+        links = geom.link_segments(rod_end_clearance=cfg.rod_end_clearance)
+        D = np.empty((len(links) + 1, len(pts)))
+        S = np.empty((len(links), len(pts)))
+        for k, (_, _, seg, radius) in enumerate(links):
+            d, s = segment_distance(pts, seg[0], seg[1])
+            D[k] = d - radius
+            S[k] = s
+        D[-1] = plate_distance(pts, geom)
+        nearest = np.argmin(D, axis=0)
+        dmin = D[nearest, np.arange(len(pts))]
+        touching = dmin <= cfg.touch_distance
+        res.n_candidates = int(touching.sum())
+        if debug:
+            res.layers["candidates"] = np.stack([uu[touching], vv[touching]], axis=1)
+        if res.n_candidates < cfg.min_touch_points:
+            res.reason = f"{res.n_candidates} object pixels touch the robot (need {cfg.min_touch_points})"
+            return res
+        # the touched link is the one the object comes closest to: mean of its k smallest surface distances
+        kk = min(cfg.closest_points, D.shape[1])
+        closest = np.partition(D, kk - 1, axis=1)[:, :kk].mean(axis=1)
+        counts = (D <= cfg.touch_distance).sum(axis=1)
+        closest[counts < cfg.min_touch_points] = np.inf
+        best = int(np.argmin(closest))
+        if not np.isfinite(closest[best]) or closest[best] > cfg.contact_gap:
+            res.reason = (f"object comes no closer than {1e3 * float(np.min(closest)):.0f} mm to a link "
+                          f"(contact gap {1e3 * cfg.contact_gap:.0f} mm)")
+            return res
+        order = np.sort(closest)
+        if debug:
+            res.layers["closest"] = closest
+        # the object's points nearest the link carry the contact: Gaussian weights on the surface distance
+        sig = max(cfg.contact_sigma, 0.001)
+        sel = D[best] <= closest[best] + 3.0 * sig
+        d_sel = np.maximum(D[best][sel] - closest[best], 0.0)
+        wk = np.exp(-0.5 * (d_sel / sig) ** 2)
+        mean_pt = (wk[:, None] * pts[sel]).sum(axis=0) / wk.sum()
+        if best == len(links):
+            res.link, res.chain = LINK_PLATE, 0
+            R, t = geom.T_plate[:3, :3], geom.T_plate[:3, 3]
+            q = R.T @ (mean_pt - t)
+            border = None
+            # the object's own axis (principal direction of its points), followed from its tip to the border
+            loc = (pts - t) @ R
+            c = loc.mean(axis=0)
+            _, sv, vt = np.linalg.svd(loc - c, full_matrices=False)
+            a = vt[0][:2]
+            if sv[0] > cfg.axis_elongation * max(sv[1], 1e-12) and np.linalg.norm(a) > 0.3:
+                a = a / np.linalg.norm(a)
+                if a @ (-q[:2]) < 0:
+                    a = -a
+                border = hexagon_line_entry(geom.hexagon, q[:2], a)
+            if border is None:   # the paper's line through the plate centre
+                border = hexagon_border_point(geom.hexagon, q[:2])
+            point = t + R @ np.array([border[0], border[1], 0.0])
+        else:
+            code, chain, seg, radius = links[best]
+            res.link, res.chain = code, chain
+            s = float(np.clip((wk * S[best][sel]).sum() / wk.sum(), 0.0, 1.0))
+            axis_pt = seg[0] + s * (seg[1] - seg[0])
+            e = (seg[1] - seg[0]) / np.linalg.norm(seg[1] - seg[0])
+            off = mean_pt - axis_pt
+            off -= (off @ e) * e
+            nrm = np.linalg.norm(off)
+            point = axis_pt + (radius * off / nrm if nrm > 1e-9 else 0.0)
+        res.point = point
+        uv, _ = cam.project(point)
+        res.pixel = uv
+        # confidence: how much nearer this link is than the runner-up, and how many points support it
+        margin = (order[1] - order[0]) if len(order) > 1 and np.isfinite(order[1]) else cfg.contact_gap
+        res.confidence = float(np.clip(min(1.0, margin / cfg.contact_gap + 0.3) *
+                                       min(1.0, int(sel.sum()) / (2.0 * cfg.min_touch_points)), 0.0, 1.0))
+        if debug:
+            res.layers["selected"] = np.stack([uu[sel], vv[sel]], axis=1)
+        return res
+
+    # -- both cameras ------------------------------------------------------------------------------------------
+    def isolate(self, frames: dict[str, tuple[np.ndarray, np.ndarray]], geom: RobotGeometry, debug: bool = False
+                ) -> ContactEstimate:
+        """Contact from the frames of the cameras present (top first, then side; the most confident wins).
+
+        Args:
+            frames: camera name → (rgb uint8, depth m) aligned pair.
+            geom: robot links at the frames' instant.
+            debug: keep the intermediate layers for `debug_image`.
+
+        Raises:
+            IsolationError: no usable frame from any camera (each camera's problem named).
+        """
+        results: dict[str, CameraResult] = {}
+        problems = []
+        for name in self.order:
+            if name not in frames:
+                continue
+            rgb, depth = frames[name]
+            try:
+                results[name] = self.isolate_camera(name, rgb, depth, geom, debug)
+            except IsolationError as exc:
+                problems.append(str(exc))
+        if not results:
+            raise IsolationError("no usable camera frame: " + ("; ".join(problems) or "none given"))
+        found = [r for r in results.values() if r.found]
+        if not found:
+            first = next(iter(results.values()))
+            return ContactEstimate(LINK_UNKNOWN, 0, np.full(3, np.nan), np.full(2, np.nan), first.camera, 0.0,
+                                   results)
+        best = found[0]   # the paper's order: top camera (plate, rods) first, then the side camera
+        if best.confidence < self.config.min_confidence:
+            best = max(found, key=lambda r: (r.confidence, r.n_candidates))
+        return ContactEstimate(best.link, best.chain, best.point, best.pixel, best.camera, best.confidence, results)
+
+
+# ----------------------------------------------------------------------------------------------------------------
+def _tile(img: np.ndarray, title: str, size: tuple[int, int]) -> np.ndarray:
+    if img.dtype == bool:
+        img = img.astype(np.uint8) * 255
+    if img.ndim == 2:
+        img = np.repeat(img[:, :, None], 3, axis=2)
+    t = cv2.resize(img, size, interpolation=cv2.INTER_AREA)
+    cv2.rectangle(t, (0, 0), (size[0] - 1, 18), (0, 0, 0), -1)
+    cv2.putText(t, title, (4, 13), cv2.FONT_HERSHEY_SIMPLEX, 0.42, (255, 255, 255), 1, cv2.LINE_AA)
+    return t
+
+
+def debug_image(result: CameraResult, isolator: CollisionIsolator, geom: RobotGeometry,
+                box: Sequence[float] | None = None, tile: tuple[int, int] = (320, 240)) -> np.ndarray:
+    """A 4x2 mosaic of the procedure's steps for one camera, like the paper's Figures 12, 17 and 22 (RGB uint8).
+
+    Tiles: (a) frame + plate box + projected links, (b) Hough lines on the colour cues, (c) robot mask,
+    (d) changed pixels in the workspace, (e) external object, (f) candidates touching a link, (g) contact,
+    (h) legend with the answer.
+    """
+    L = result.layers
+    rgb = L.get("rgb")
+    if rgb is None:
+        raise IsolationError("debug layers missing: call isolate(..., debug=True)")
+    cam = isolator.cameras[result.camera]
+    a = rgb.copy()
+    if box is not None:
+        cv2.rectangle(a, (int(box[0]), int(box[1])), (int(box[2]), int(box[3])), (0, 255, 0), 2)
+    for code, chain, seg, _ in geom.link_segments():
+        uv, z = cam.project(seg)
+        if np.all(z > 0.01) and np.all(np.abs(uv) < 1e4):
+            col = (0, 120, 255) if code == LINK_ARM else (255, 200, 0)
+            cv2.line(a, tuple(np.round(uv[0]).astype(int)), tuple(np.round(uv[1]).astype(int)), col, 1)
+            cv2.putText(a, str(chain), tuple(np.round(uv.mean(0)).astype(int)), cv2.FONT_HERSHEY_SIMPLEX, 0.4,
+                        col, 1)
+    cues = isolator.paper_colour_cues(rgb)
+    b = rgb.copy() // 2
+    for key, col in (("rod_lines", (255, 255, 0)), ("arm_lines", (0, 160, 255))):
+        for x0, y0, x1, y1 in cues[key]:
+            cv2.line(b, (int(x0), int(y0)), (int(x1), int(y1)), col, 2)
+    f = rgb.copy() // 2
+    for key, col in (("candidates", (255, 255, 0)), ("selected", (255, 0, 0))):
+        for u, v in L.get(key, np.zeros((0, 2), int)):
+            f[v, u] = col
+    g = rgb.copy()
+    if result.found and np.all(np.isfinite(result.pixel)):
+        p = tuple(np.round(result.pixel).astype(int))
+        cv2.circle(g, p, 8, (255, 0, 0), 2)
+        cv2.drawMarker(g, p, (255, 0, 0), cv2.MARKER_CROSS, 14, 1)
+    h = np.zeros((tile[1], tile[0], 3), np.uint8)
+    lines = [f"camera: {result.camera}", f"link: {LINK_NAMES[result.link]}  chain: {result.chain}",
+             "point (mm): " + (" ".join(f"{1e3 * c:.1f}" for c in result.point) if result.found else "-"),
+             f"pixel: {np.round(result.pixel, 1).tolist()}", f"object px: {result.n_object}",
+             f"candidates: {result.n_candidates}", f"confidence: {result.confidence:.2f}", result.reason[:44]]
+    for k, s in enumerate(lines):
+        cv2.putText(h, s, (6, 24 + 22 * k), cv2.FONT_HERSHEY_SIMPLEX, 0.45, (255, 255, 255), 1, cv2.LINE_AA)
+    tiles = [_tile(a, "(a) frame, plate box, links", tile), _tile(b, "(b) YCbCr rods / HSV arms + Hough", tile),
+             _tile(L.get("robot"), "(c) robot (determined)", tile),
+             _tile(L.get("workspace"), "(d) changed, not robot, in workspace", tile),
+             _tile(L.get("object"), "(e) external object", tile), _tile(f, "(f) touching candidates", tile),
+             _tile(g, "(g) contact point", tile), _tile(h, "(h) result", tile)]
+    return np.vstack([np.hstack(tiles[:4]), np.hstack(tiles[4:])])
