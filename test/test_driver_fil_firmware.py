@@ -64,21 +64,27 @@ def test_uno_firmware_counts_bad_crc_and_rejects_wrong_length(tmp_path):
             assert not any(p.width_us > 1900 for p in uno.pulses)
 
 
-def test_mega_firmware_streams_injected_adc_voltages(tmp_path):
+def test_mega_firmware_streams_injected_adc_voltages_at_1khz(tmp_path):
     volts = [2.5, 2.6, 2.4, 3.0, 1.0, 4.5]
     samples = []
     with SimavrBoard("mega", link=tmp_path / "mega") as mega:
         for ch, v in enumerate(volts):
             mega.set_adc(ch, v)
-        with CurrentLink(mega.port, rate_hz=500, on_sample=lambda s, t, g: samples.append(s)) as link:
+        with CurrentLink(mega.port, rate_hz=1000, on_sample=lambda s, t, g: samples.append(s)) as link:
             assert link.wait_connected(5.0), link.stats.last_error
             assert _wait(lambda: len(samples) >= 300, 5.0)
             expected = tuple(simavr_counts(v) for v in volts)
             assert samples[-1].counts == expected
             dts = {b.board_time_us - a.board_time_us for a, b in zip(samples[-200:], samples[-199:])}
-            assert dts == {2000}   # the board's 500 Hz sampling instants, exactly
+            assert dts == {1000}   # the board's 1 kHz sampling instants, exactly
             assert link.sample_gaps == 0 and link.stats.crc_errors == 0
             mega.set_adc(0, 3.5)
             t_set = time.monotonic()
             assert _wait(lambda: samples[-1].counts[0] == simavr_counts(3.5), 2.0)
             assert time.monotonic() - t_set < 1.0
+            status = fr.unpack_current_status(link.request(fr.GET_STATUS, reply_types=(fr.STATUS,)).payload)
+            assert status.rate_hz == 1000 and status.overruns == 0 and status.flags & fr.FLAG_ACTIVE
+            link.stop_stream()
+            n = len(samples)
+            time.sleep(0.2)
+            assert len(samples) <= n + 2   # STOP_STREAM stops the stream
