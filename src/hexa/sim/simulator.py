@@ -124,14 +124,16 @@ class Simulator:
         cameras: create the offscreen renderer (needs EGL); False for physics-only runs.
         pose: assembly/start pose when there is no scenario (default HOME_POSE).
         drive: "trajectory" (servo targets = IK of the scenario's trajectory at sim time t; default with a
-            scenario) or "external" (targets only from `set_servo_targets`, e.g. the virtual Uno; default without).
+            scenario or a trajectory) or "external" (targets only from `set_servo_targets`, e.g. the virtual Uno; default without).
         randomize: draw the scenario's collision from its ranges with `seed` (False: nominal values).
         settle: seconds simulated before t = 0 holding the start targets, so the robot starts at rest under gravity.
+        trajectory: without a scenario, follow this trajectory ("circle", "helix", "ellipse") in free motion for its
+            duration (hexa.trajectories.DURATIONS), then hold its last pose.
     """
 
     def __init__(self, desc: Any = None, seed: int = 0, scenario: Any = None, cameras: bool = True,
                  pose: np.ndarray | None = None, drive: str | None = None, randomize: bool = False,
-                 settle: float = 0.5) -> None:
+                 settle: float = 0.5, trajectory: str | None = None) -> None:
         self.desc = _desc_default(desc)
         self.config: SimConfig = sim_config_of(self.desc)
         self.seed = int(seed)
@@ -143,22 +145,28 @@ class Simulator:
             else:
                 spec = scenario if isinstance(scenario, ScenarioSpec) else load_scenario(scenario)
                 self.collision = draw_collision(spec, np.random.default_rng([self.seed, 1]) if randomize else None)
-        self.drive = drive or ("trajectory" if self.collision is not None else "external")
+        self.trajectory = self.collision.trajectory if self.collision is not None else trajectory
+        self.drive = drive or ("trajectory" if self.trajectory is not None else "external")
         if self.drive not in ("trajectory", "external"):
             raise SimulatorError(f"drive must be 'trajectory' or 'external', got {self.drive!r}")
-        if self.drive == "trajectory" and self.collision is None:
-            raise SimulatorError("drive='trajectory' needs a scenario (it names the trajectory)")
+        if self.drive == "trajectory" and self.trajectory is None:
+            raise SimulatorError("drive='trajectory' needs a scenario or a trajectory name")
 
         self._traj_targets: np.ndarray | None = None
-        if self.collision is not None:
+        if self.trajectory is not None:
             from hexa import trajectories
             from hexa.kinematics import hexa6rus as kin
 
-            fn = trajectories.TRAJECTORIES[self.collision.trajectory]
+            if self.trajectory not in trajectories.TRAJECTORIES:
+                raise SimulatorError(f"unknown trajectory {self.trajectory!r}; "
+                                     f"known: {sorted(trajectories.TRAJECTORIES)}")
+            fn = trajectories.TRAJECTORIES[self.trajectory]
             start_pose = np.asarray(fn(0.0)[0], dtype=float)
             if self.drive == "trajectory":
                 dt = self.config.timestep
-                duration = max(self.collision.end_time + 3.0, 1.0)
+                duration = float(getattr(trajectories, "DURATIONS", {}).get(self.trajectory, 10.0))
+                if self.collision is not None:
+                    duration = max(duration, self.collision.end_time + 3.0)
                 t = np.arange(int(np.ceil(duration / dt)) + 1) * dt
                 poses = np.asarray(fn(t)[0], dtype=float)
                 self._traj_targets = kin.inverse_kinematics_batch(self.desc, poses)
