@@ -16,6 +16,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     s.add_argument("--seed", type=int, default=0)
     s.add_argument("--randomize", action="store_true", help="draw the collision from the scenario's ranges")
     s.add_argument("--at", choices=["onset", "peak"], default="peak", help="instant of the snapshot")
+    s.add_argument("--no-noise", action="store_true", help="render without the colour/depth noise models")
     s.add_argument("--json", action="store_true", help="print JSON (files, ground truth in SI units)")
     s.set_defaults(func=run)
 
@@ -51,7 +52,7 @@ def run(args: argparse.Namespace) -> int:
             truth = sim.ground_truth()
             files = {}
             for cam in ("cam_top", "cam_side"):
-                rgb, depth = sim.render(cam)
+                rgb, depth = sim.render(cam, noise=not args.no_noise)
                 f_rgb = out / f"sim_{case}_{cam}.png"
                 f_depth = out / f"sim_{case}_{cam}_depth.png"
                 cv2.imwrite(str(f_rgb), rgb[:, :, ::-1])
