@@ -24,14 +24,18 @@ class KernelError(ArithmeticError):
 _GESV = None
 
 
-def solve6(M: list[list[float]], b: Sequence[float]) -> Vec:
-    """x with M x = b for a 6×6 M (LAPACK gesv: the cheapest call for one small system)."""
+def _gesv():
     global _GESV
     if _GESV is None:
         from scipy.linalg import get_lapack_funcs
 
         _GESV = get_lapack_funcs("gesv", (np.zeros((6, 6)),))
-    _, _, x, info = _GESV(np.array(M), np.array(b, dtype=float))
+    return _GESV
+
+
+def solve6(M: list[list[float]], b: Sequence[float]) -> Vec:
+    """x with M x = b for a 6×6 M (LAPACK gesv: the cheapest call for one small system)."""
+    _, _, x, info = (_GESV or _gesv())(np.array(M), np.array(b, dtype=float))
     if info != 0:
         raise KernelError("singular 6x6 system")
     return x.tolist()
@@ -99,6 +103,7 @@ class SampleKernel:
     """Precomputed constants of one robot; `terms(...)` evaluates one sample."""
 
     def __init__(self, prm: HexaDynamicParameters) -> None:
+        _gesv()  # import LAPACK now, not in the first 1 kHz sample
         self.la = prm.l_a
         self.ld2 = prm.l_d**2
         self.A = [tuple(map(float, a)) for a in prm.A]

@@ -260,6 +260,11 @@ class ResidualObserver:
     # ------------------------------------------------------------------ inputs
     def update_pose(self, t: float, pose: NDArray) -> bool:
         """A plate pose [x y z α β γ] (m, rad; Z-Y-X) at time t (camera). Returns False when rejected."""
+        try:
+            t = float(t)
+        except (TypeError, ValueError):
+            self._reject("bad_shape")
+            return False
         q = _floats(pose)
         if q is None or len(q) != 6:
             self._reject("bad_shape")
@@ -278,6 +283,11 @@ class ResidualObserver:
                    pose: NDArray | None = None, zeta_ddot: NDArray | None = None) -> ResidualSample | None:
         """One arm sample: angles ζ (rad), torques τ = K_t·I (N·m), optional ζ̇ (rad/s), optional plate pose at the
         same instant (else tracked), ζ̈ (direct form only; else differentiated). Returns None when rejected."""
+        try:
+            t = float(t)  # a numpy scalar here would turn every kernel operation into a numpy call
+        except (TypeError, ValueError):
+            self._reject("bad_shape")
+            return None
         z = _floats(zeta)
         tq = _floats(tau)
         zd = None if zeta_dot is None else _floats(zeta_dot)
