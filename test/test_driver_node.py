@@ -82,9 +82,22 @@ def test_driver_commands_pulses_publishes_currents_and_effort_and_calibrates(tmp
 
 
 def test_driver_recovers_from_unplug_within_two_seconds_and_diagnostics_show_it(tmp_path, procs, ros_env, probe):
-    with UnoEmulator(link=tmp_path / "uno") as uno, MegaEmulator(link=tmp_path / "mega") as mega:
+    got = []
+    with UnoEmulator(on_targets=got.append, link=tmp_path / "uno") as uno, \
+            MegaEmulator(link=tmp_path / "mega") as mega:
         procs.start(driver_args(uno.port, mega.port, "stream_rate_hz:=200", "diagnostics_period:=0.1"), ros_env)
         assert wait_for(lambda: len(probe.currents) >= 20, 30.0), "no motor_currents from the driver"
+        zeta = np.full(6, load_hexa().zeta_center)
+        probe.command(zeta)
+        assert wait_for(lambda: len(got) == 1, 5.0)
+        # servo board alone unplugged: positions become unknown (NaN), never the stale command
+        uno.unplug()
+        t_u = time.monotonic()
+        assert wait_for(lambda: probe.states[-1][0] > t_u + 0.2
+                        and all(math.isnan(p) for p in probe.states[-1][1].position), 3.0)
+        uno.replug()
+        assert wait_for(lambda: len(got) == 2, 3.0) and got[1] == got[0]   # last command restored
+        assert wait_for(lambda: np.allclose(probe.states[-1][1].position, zeta), 3.0)
         uno.unplug()
         mega.unplug()
         t_unplug = time.monotonic()
@@ -108,7 +121,9 @@ def test_driver_recovers_from_unplug_within_two_seconds_and_diagnostics_show_it(
         d = kv(st)
         assert d["state"] == "CONNECTED" and int(d["disconnects"]) == 1 and int(d["connects"]) == 2
         assert float(d["last_reconnect_s"]) < 2.5
-        assert wait_for(lambda: kv(probe.diag_status("servo board"))["state"] == "CONNECTED", 3.0)
+        uno_d = wait_for(lambda: (s := probe.diag_status("servo board")) is not None and
+                         kv(s)["state"] == "CONNECTED" and kv(s), 3.0)
+        assert uno_d and int(uno_d["disconnects"]) == 2 and int(uno_d["targets_restored_after_reconnect"]) == 2
 
 
 def _level(status) -> int:

@@ -105,3 +105,16 @@ def test_stale_stream_marks_stale_then_reconnects(tmp_path):
             assert _wait(lambda: "STALE" in states, 1.0)
             assert _wait(lambda: link.stats.connects >= 2, 3.0)  # dropped, reopened, stream restarted
             assert mega.streaming
+
+
+def test_servo_link_restores_last_targets_after_the_board_comes_back(tmp_path):
+    got = []
+    with UnoEmulator(on_targets=got.append, link=tmp_path / "uno") as uno, ServoLink(uno.port) as link:
+        assert link.wait_connected(3.0)
+        link.set_targets([1100, 1200, 1300, 1400, 1500, 1600])
+        assert _wait(lambda: len(got) == 1)
+        uno.unplug()
+        assert _wait(lambda: link.stats.state == DISCONNECTED, 1.0)
+        uno.replug()   # the board restarts with its outputs off
+        assert _wait(lambda: len(got) == 2, 3.0)
+        assert got[1] == got[0] and uno.outputs_enabled and link.restored == 1

@@ -142,7 +142,10 @@ class DriverNode(Node):
         js.header.stamp = stamp
         js.header.frame_id = self.frame_id
         js.name = list(self.core.joint_names)
-        js.position = [float(z) for z in self.core.commanded]
+        if self.uno.connected:
+            js.position = [float(z) for z in self.core.commanded]
+        else:  # no servo board: the arms are not driven, their angle is unknown
+            js.position = [float("nan")] * len(self.core.joint_names)
         js.effort = [float(t) for t in effort]
         if not self.context.ok():  # shutting down: the link thread outlives the context briefly
             return
@@ -222,7 +225,7 @@ class DriverNode(Node):
         uno_extra = [("commands_accepted", c.accepted), ("commands_rejected_nan", c.rejected_nan),
                      ("commands_rejected_names", c.rejected_names), ("commands_clamped", c.clamped),
                      ("commands_slew_limited", c.slew_limited), ("commands_coalesced", c.coalesced),
-                     ("commands_unsent", self.tx_failures),
+                     ("commands_unsent", self.tx_failures), ("targets_restored_after_reconnect", self.uno.restored),
                      ("board_pulses_us", list(uno_status.pulses_us) if uno_status else "?"),
                      ("board_watchdog_hold", bool(uno_status.flags & fr.FLAG_WATCHDOG_HOLD) if uno_status else "?")]
         mega = self._link_status("current board (Mega)", self.mega, mega_extra)

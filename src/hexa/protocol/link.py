@@ -431,14 +431,23 @@ class ServoLink(BoardLink):
         self.status: fr.ServoStatus | None = None
         self.status_time = 0.0
         self.targets_sent = 0
+        self.last_targets: tuple[int, ...] | None = None
+        self.restored = 0
 
     def on_connected(self) -> None:
         self.request(fr.SET_LIMITS, fr.pack_limits(self.min_us, self.max_us))
         self.request(fr.SET_WATCHDOG, fr.pack_watchdog(self.watchdog_ms))
+        if self.last_targets is not None:  # after a board reset: restore what the host believes is commanded
+            self.send(fr.SET_TARGETS, fr.pack_targets(self.last_targets))
+            self.restored += 1
 
     def set_targets(self, pulses_us: Sequence[int]) -> bool:
-        """Command six pulse widths (us); False if the port is not open (the command is dropped)."""
-        ok = self.send(fr.SET_TARGETS, fr.pack_targets(pulses_us)) is not None
+        """Command six pulse widths (us); False if the port is not open (the command is dropped).
+
+        The last targets are re-sent after every reconnect (the board starts with its outputs off).
+        """
+        self.last_targets = tuple(int(p) for p in pulses_us)
+        ok = self.send(fr.SET_TARGETS, fr.pack_targets(self.last_targets)) is not None
         self.targets_sent += ok
         return ok
 
