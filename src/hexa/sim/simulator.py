@@ -106,6 +106,20 @@ def zyx_from_matrix(R: np.ndarray) -> np.ndarray:
     return np.array([np.arctan2(R[1, 0], R[0, 0]), beta, np.arctan2(R[2, 1], R[2, 2])])
 
 
+_ZERO3 = np.zeros(3)
+
+
+def _poses_from_qpos(pq: np.ndarray) -> np.ndarray:
+    """Plate poses [x y z α β γ] (N,6) from free-joint qpos rows [x y z qw qx qy qz] (N,7)."""
+    w, x, y, z = pq[:, 3], pq[:, 4], pq[:, 5], pq[:, 6]
+    r00 = 1 - 2 * (y * y + z * z)
+    r10 = 2 * (x * y + w * z)
+    r20 = 2 * (x * z - w * y)
+    r21 = 2 * (y * z + w * x)
+    r22 = 1 - 2 * (x * x + y * y)
+    return np.column_stack([pq[:, :3], np.arctan2(r10, r00), -np.arcsin(np.clip(r20, -1, 1)), np.arctan2(r21, r22)])
+
+
 def _desc_default(desc: Any) -> Any:
     if desc is not None:
         return desc
@@ -276,37 +290,46 @@ class Simulator:
             k = min(self._step_count, len(self._traj_targets) - 1)
             self._targets = self._traj_targets[k]
         step = self._omega_max * self._dt
-        d.ctrl[:] = d.ctrl + np.clip(self._targets - d.ctrl, -step, step)
+        d.ctrl[:] = d.ctrl + np.minimum(np.maximum(self._targets - d.ctrl, -step), step)
         if use_schedule and self.collision is not None:
             self._update_scripted(t)
         d.xfrc_applied[:] = 0.0
+        contact = None
         for c in (self._scripted, self._manual):
             if c is not None:
                 R = d.xmat[c.body].reshape(3, 3)
                 p = d.xpos[c.body] + R @ c.local_point
                 d.xfrc_applied[c.body, :3] += c.force
                 d.xfrc_applied[c.body, 3:] += np.cross(p - d.xipos[c.body], c.force)
+                if contact is None and (c.force[0] != 0.0 or c.force[1] != 0.0 or c.force[2] != 0.0):
+                    contact = (c.link, c.chain, p, c.force.copy())
         qpos = d.qpos.copy()
         qvel = d.qvel.copy()
         if advance:
             mujoco.mj_step2(m, d)
         else:
             mujoco.mj_forward(m, d)
-        self._sample = (t, qpos, qvel, d.qacc.copy(), d.actuator_force.copy(), d.ctrl.copy(), self._truth_now(t))
+        tau = d.actuator_force.copy()
+        self._sample = (t, qpos, qvel, d.qacc.copy(), tau, d.ctrl.copy(), contact)
         k = self._step_count % len(self._tau_hist_t)
         self._tau_hist_t[k] = t
-        self._tau_hist[k] = self._sample[4]
+        self._tau_hist[k] = tau
         if self._log_enabled:
-            tr = self._sample[6]
             lg = self._log
             lg.time.append(t)
-            lg.force.append(tr.force)
-            lg.point.append(tr.point)
-            lg.link.append(LINK_CODES[tr.link])
-            lg.chain.append(tr.chain)
-            lg.pose.append(tr.plate_pose)
+            if contact is None:
+                lg.force.append(_ZERO3)
+                lg.point.append(_ZERO3)
+                lg.link.append(255)
+                lg.chain.append(0)
+            else:
+                lg.force.append(contact[3])
+                lg.point.append(contact[2])
+                lg.link.append(LINK_CODES[contact[0]])
+                lg.chain.append(contact[1])
+            lg.pose.append(qpos[self._plate_qpos:self._plate_qpos + 7])
             lg.zeta.append(qpos[self._arm_qpos])
-            lg.tau.append(self._sample[4])
+            lg.tau.append(tau)
         if advance:
             self._step_count += 1
 
@@ -402,15 +425,13 @@ class Simulator:
         R = R.reshape(3, 3)
         return np.concatenate([qpos[a:a + 3], zyx_from_matrix(R)]), R
 
-    def _truth_now(self, t: float) -> GroundTruth:
-        d = self.data
-        pose, _ = self._plate_pose_of(d.qpos)
-        for c in (self._scripted, self._manual):
-            if c is not None and np.any(c.force != 0.0):
-                R = d.xmat[c.body].reshape(3, 3)
-                p = d.xpos[c.body] + R @ c.local_point
-                return GroundTruth(t, c.link, c.chain, p.copy(), c.force.copy(), np.zeros(3), pose)
-        return GroundTruth(t, "none", 0, np.zeros(3), np.zeros(3), np.zeros(3), pose)
+    def _truth_of(self, sample: tuple) -> GroundTruth:
+        t, qpos, contact = sample[0], sample[1], sample[6]
+        pose, _ = self._plate_pose_of(qpos)
+        if contact is None:
+            return GroundTruth(t, "none", 0, np.zeros(3), np.zeros(3), np.zeros(3), pose)
+        link, chain, p, f = contact
+        return GroundTruth(t, link, chain, p.copy(), f.copy(), np.zeros(3), pose)
 
     def state(self) -> SimState:
         """The last consistent sample of the robot (time = `time - timestep`; see module docstring)."""
@@ -427,7 +448,8 @@ class Simulator:
     def ground_truth(self) -> GroundTruth:
         """Contact wrench, point, link and chain, and plate pose at the instant of `state()`."""
         with self._lock:
-            return self._sample[6]
+            sample = self._sample
+        return self._truth_of(sample)
 
     def truth_log(self) -> dict[str, np.ndarray]:
         """Every step's ground truth since t = 0 as arrays: time (N,), force (N,3), point (N,3), link (N,) codes
@@ -435,9 +457,10 @@ class Simulator:
         with self._lock:
             lg = self._log
             n = len(lg.time)
+            pq = np.asarray(lg.pose, float).reshape(n, 7)
             return {"time": np.asarray(lg.time, float), "force": np.asarray(lg.force, float).reshape(n, 3),
                     "point": np.asarray(lg.point, float).reshape(n, 3), "link": np.asarray(lg.link, np.uint8),
-                    "chain": np.asarray(lg.chain, np.uint8), "plate_pose": np.asarray(lg.pose, float).reshape(n, 6),
+                    "chain": np.asarray(lg.chain, np.uint8), "plate_pose": _poses_from_qpos(pq),
                     "zeta": np.asarray(lg.zeta, float).reshape(n, 6), "tau": np.asarray(lg.tau, float).reshape(n, 6)}
 
     def tau_at(self, t: float) -> np.ndarray:
