@@ -37,6 +37,15 @@ def test_free_motion_residual_stays_below_r_low(free_run):
     assert np.abs(run.zeta_dot).max() > 0.1  # it did move
 
 
+def test_free_motion_residual_with_adc_quantized_currents_stays_below_r_low(free_run):
+    """The same run with τ through the current sensor's 10-bit ADC (11.9 mN·m steps): still far below r_low."""
+    from hexa.dynamics.validation import free_motion_figures_adc
+
+    _, run = free_run
+    peak = np.asarray(free_motion_figures_adc(run, PRM)["peak"])
+    assert np.all(peak[:3] < 0.25 * R_LOW) and np.all(peak[3:] < 0.02)
+
+
 def test_momentum_and_direct_forms_agree_on_noiseless_data(free_run):
     _, run = free_run
     f = free_motion_figures(run, PRM)

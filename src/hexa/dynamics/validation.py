@@ -105,6 +105,23 @@ def free_motion_figures(run: SimRun, params: HexaDynamicParameters, skip: float 
             "direct_peak": np.abs(direct.wrench[sel]).max(axis=0).tolist()}
 
 
+def adc_quantized_torques(tau: np.ndarray, K_t: float) -> np.ndarray:
+    """τ as the driver sees it: I = τ/K_t through H3's ACS712 + 10-bit ADC model and back (11.9 mN·m per count)."""
+    from hexa.protocol.sensor_model import CurrentSensorModel
+
+    m = CurrentSensorModel()
+    return K_t * m.current_from_counts(m.counts_from_current(tau / K_t))
+
+
+def free_motion_figures_adc(run: SimRun, params: HexaDynamicParameters, skip: float = 0.3,
+                            gains: float = 25.0) -> dict:
+    """As free_motion_figures with the servo torques quantized by the current sensor's ADC."""
+    tau = adc_quantized_torques(run.tau, params.K_t)
+    mom = momentum_residual_batch(params, run.t, run.zeta, run.zeta_dot, tau, run.pose, gains)
+    r = mom.wrench[run.t >= run.t[0] + skip]
+    return {"peak": np.abs(r).max(axis=0).tolist(), "rms": np.sqrt((r**2).mean(axis=0)).tolist()}
+
+
 def contact_figures(run: SimRun, params: HexaDynamicParameters, link: str, chain: int, settle: float = 0.3,
                     gains: float = 25.0) -> dict:
     """Steady residual vs the applied wrench (plate) and the identified force vs the truth (all links)."""
@@ -147,9 +164,11 @@ def run_all(duration: float = 3.0, contact_duration: float = 2.0) -> dict:
 
     desc = load_hexa()
     prm = HexaDynamicParameters.from_description(desc)
-    out: dict = {"free": {}, "contact": []}
+    out: dict = {"free": {}, "free_adc": {}, "contact": []}
     for name in FREE_TRAJECTORIES:
-        out["free"][name] = free_motion_figures(simulate(_trajectory(name), duration, desc=desc), prm)
+        run = simulate(_trajectory(name), duration, desc=desc)
+        out["free"][name] = free_motion_figures(run, prm)
+        out["free_adc"][name] = free_motion_figures_adc(run, prm)
     for case in CONTACT_CASES:
         c = dict(case, t_on=1.0)
         run = simulate(_trajectory("circle"), contact_duration, contact=c, desc=desc)
@@ -170,7 +189,13 @@ def main(argv: list[str] | None = None) -> int:
     print("| trajectory | " + " | ".join(f"{a} peak / RMS" for a in axes) + " |")
     print("|---|" + "---|" * 6)
     for name, f in res["free"].items():
-        print(f"| {name} | " + " | ".join(f"{p:.3f} / {r:.3f}" for p, r in zip(f["peak"], f["rms"])) + " |")
+        print(f"| {name} | " + " | ".join(f"{p:.4f} / {r:.4f}" for p, r in zip(f["peak"], f["rms"])) + " |")
+    print()
+    print("With τ quantized by the current sensor's 10-bit ADC (ACS712 model of hexa.protocol.sensor_model):")
+    print("| trajectory | " + " | ".join(f"{a} peak / RMS" for a in axes) + " |")
+    print("|---|" + "---|" * 6)
+    for name, f in res["free_adc"].items():
+        print(f"| {name} | " + " | ".join(f"{p:.4f} / {r:.4f}" for p, r in zip(f["peak"], f["rms"])) + " |")
     print()
     print("| link | chain | truth (N) | identified (N) | error (N) | rank | residual error peak |")
     print("|---|---|---|---|---|---|---|")
