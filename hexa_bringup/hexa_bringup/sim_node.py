@@ -1,7 +1,8 @@
 """ROS node `hexa-sim`: steps the simulated Hexa and publishes /clock, the two RGB-D cameras and the ground truth.
 
 Parameters: scenario (none | plate | arm | rod | YAML path), seed, randomize, real_time_factor (1.0; 0 = as fast as
-possible), camera_rate_hz (30), cameras (true), clock_rate_hz (1000), truth_rate_hz (250), boards (true: the virtual
+possible), camera_rate_hz (30), cameras (true), clock_rate_hz (250: every 4 ms of sim time; each
+sim-time node processes every /clock message, so 1 kHz costs the whole graph CPU), truth_rate_hz (100), boards (true: the virtual
 Uno/Mega ptys linked at link_dir, /tmp/hexa_sim/{uno,mega}), duration (0 = run until shut down).
 Topics (relative, under the node namespace, e.g. /hexa): cam_{top,side}/color/image_raw (rgb8),
 cam_{top,side}/color/camera_info, cam_{top,side}/aligned_depth_to_color/image_raw (16UC1 mm),
@@ -63,8 +64,8 @@ def main(argv: list[str] | None = None) -> int:
             self.rtf = float(p("real_time_factor", 1.0).value)
             self.cam_rate = float(p("camera_rate_hz", 30.0).value)
             self.use_cams = bool(p("cameras", True).value)
-            self.clock_rate = float(p("clock_rate_hz", 1000.0).value)
-            self.truth_rate = float(p("truth_rate_hz", 250.0).value)
+            self.clock_rate = float(p("clock_rate_hz", 250.0).value)
+            self.truth_rate = float(p("truth_rate_hz", 100.0).value)
             self.use_boards = bool(p("boards", True).value)
             self.link_dir = str(p("link_dir", "/tmp/hexa_sim").value)
             self.duration = float(p("duration", 0.0).value)
