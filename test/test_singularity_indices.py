@@ -101,6 +101,15 @@ def test_upsrpu_screw_matrix_determinant_equals_det_jd(X):
     assert abs(np.linalg.det(W)) == pytest.approx(abs(np.linalg.det(kin.jacobian_jd(DESC, X))), rel=1e-9)
 
 
+@given(poses)
+@settings(max_examples=80, deadline=None)
+def test_upsrpu_fast_indices_equal_the_screw_computation(X):
+    fast = sg.upsrpu_indices(DESC, X)
+    ref = sg.upsrpu_indices_from_screws(DESC, X)
+    np.testing.assert_allclose(fast.omega, ref.omega, atol=1e-9)
+    assert fast.det_jd == ref.det_jd and fast.pairs == ref.pairs
+
+
 @pytest.mark.parametrize("number", [1, 2, 3, 4, 5])
 def test_table3_poses_are_near_singular_and_home_is_not(number):
     r = sg.upsrpu_indices(DESC, DESC.singular_poses[number - 1])

@@ -27,7 +27,8 @@ if TYPE_CHECKING:
 
 __all__ = [
     "SingularityError", "SingularityReport", "output_twist_screws", "omega_angles", "limb_pairs",
-    "indices_from_screws", "hexa_indices", "upsrpu_indices",
+    "indices_from_screws", "hexa_indices", "upsrpu_indices", "upsrpu_indices_from_screws",
+    "upsrpu_indices_with_jd",
 ]
 
 _PURE_TRANSLATION = 1e-9
@@ -159,15 +160,63 @@ def indices_from_screws(det_jd: float, wrenches: np.ndarray, constraints: np.nda
                              min_pair=names[k])
 
 
+def _report(det_jd: float, om: np.ndarray, names: tuple[str, ...]) -> SingularityReport:
+    k = int(np.argmin(om))
+    return SingularityReport(det_jd=float(det_jd), omega=om, pairs=names, min_omega=float(om[k]), min_pair=names[k])
+
+
+def _angles_between_rows(A: np.ndarray) -> np.ndarray | None:
+    """Omega for every pair of rows of A (angular parts of the OTS, any common basis), or None when a row
+    vanishes (pure-translation OTS: the caller falls back to the screw computation)."""
+    n = np.sqrt(np.einsum("ij,ij->i", A, A))
+    if n.min() <= 1e-12 * n.max():
+        return None
+    ii, jj, _ = _pair_index(A.shape[0])
+    U = A / n[:, None]
+    c = np.abs(np.einsum("ij,ij->i", U[ii], U[jj]))
+    return np.arccos(np.minimum(c, 1.0))
+
+
+def _well_conditioned(J: np.ndarray, det: float) -> bool:
+    """|det J| is far from zero relative to Hadamard's bound (so inv(J) columns are accurate directions)."""
+    return abs(det) > 1e-10 * float(np.prod(np.sqrt(np.einsum("ij,ij->i", J, J))))
+
+
 def upsrpu_indices(desc: UpsrpuDescription, X: np.ndarray) -> SingularityReport:
     """det J_D (J_D = dq/dX) and the six Omega_ij of the 3UPS+RPU at pose X (seed 003 eqs 2, 7, 8).
 
     The four transmission wrenches (eq 8) are completed by the RPU limb's two constraint wrenches so that each
-    OTS is a single, well-defined screw of the platform's 4-DOF motion.
+    OTS is a single, well-defined screw of the platform's 4-DOF motion. Equivalent fast form used here: the
+    twists compatible with the constraints are X_dot mapped to omega = theta_dot Y_F + psi_dot R_y(theta) Z_F, and
+    $T_j o twist = (J_D X_dot)_j, so OTS i is the twist of X_dot = J_D^-1 e_i and its angular part has the
+    coordinates (theta_dot, psi_dot) = rows 3-4 of column i of J_D^-1 in the orthonormal basis (Y_F,
+    R_y(theta) Z_F). Near an exact singularity (or for a pure-translation OTS) the screw computation of
+    `output_twist_screws` (adjugate by SVD) is used instead; tests check both agree.
     """
     from hexa.kinematics import upsrpu as kin
 
-    J, T, C = kin.jd_and_screws(desc, X)
+    X = np.asarray(X, dtype=float)
+    return upsrpu_indices_with_jd(desc, X, kin.jacobian_jd(desc, X))
+
+
+def upsrpu_indices_with_jd(desc: UpsrpuDescription, X: np.ndarray, J: np.ndarray) -> SingularityReport:
+    """`upsrpu_indices` when J_D at X is already known (e.g. from the last Newton-Raphson iteration)."""
+    from hexa.kinematics import upsrpu as kin
+
+    det = np.linalg.det(J)
+    if _well_conditioned(J, det):
+        om = _angles_between_rows(np.linalg.inv(J)[2:4].T)
+        if om is not None:
+            return _report(det, om, _pair_index(4)[2])
+    _, T, C = kin.jd_and_screws(desc, X)
+    return indices_from_screws(det, T, C)
+
+
+def upsrpu_indices_from_screws(desc: UpsrpuDescription, X: np.ndarray) -> SingularityReport:
+    """`upsrpu_indices` computed from the screws only (transmission + constraint wrenches -> OTS -> Omega)."""
+    from hexa.kinematics import upsrpu as kin
+
+    J, T, C = kin.jd_and_screws(desc, np.asarray(X, dtype=float))
     return indices_from_screws(np.linalg.det(J), T, C)
 
 
@@ -178,6 +227,8 @@ def hexa_indices(desc: Any, pose: np.ndarray, zeta: np.ndarray | None = None) ->
     `constraint_jacobians` rows [n_i, r_i x n_i] are exactly these screws with moments about the plate centre
     (H1's `rod_wrench_screws` gives the same screws about the base origin; Omega does not depend on the
     reference point, see the tests), so one call yields both J_D and the wrenches. `zeta` defaults to the IK.
+    Since J_D t = J_I zeta_dot with t = (v_P, omega), OTS i is column i of J_D^-1 and its angular part is rows
+    4-6; near an exact singularity the adjugate (SVD) form of `output_twist_screws` is used instead.
     """
     from hexa.kinematics import hexa6rus as kin
 
@@ -185,4 +236,9 @@ def hexa_indices(desc: Any, pose: np.ndarray, zeta: np.ndarray | None = None) ->
     if zeta is None:
         zeta = kin.inverse_kinematics(desc, pose)
     J_D, _ = kin.constraint_jacobians(desc, pose, zeta)
-    return indices_from_screws(np.linalg.det(J_D), J_D)
+    det = np.linalg.det(J_D)
+    if _well_conditioned(J_D, det):
+        om = _angles_between_rows(np.linalg.inv(J_D)[3:6].T)
+        if om is not None:
+            return _report(det, om, _pair_index(6)[2])
+    return indices_from_screws(det, J_D)

@@ -161,16 +161,16 @@ def forward_kinematics(desc: UpsrpuDescription, q: np.ndarray, X0: np.ndarray, t
 
 def forward_kinematics_terms(desc: UpsrpuDescription, q: np.ndarray, X0: np.ndarray, tol: float = 1e-12,
                              max_iter: int = 30, max_step: float = 0.05
-                             ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """`forward_kinematics` also returning the unit limb vectors (4, 3) and mobile joints (4, 3) at the solution
-    (for the SRM's candidate checks without recomputing them)."""
+                             ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """`forward_kinematics` also returning the unit limb vectors (4, 3), the mobile joints (4, 3) and J_D at the
+    solution (for the SRM's candidate checks without recomputing them)."""
     q = np.asarray(q, dtype=float)
     X = np.array(X0, dtype=float)
     for _ in range(max_iter):
         qx, J, u, pts = _q_and_jd(desc, X)
         r = q - qx
         if float(np.max(np.abs(r))) < tol:
-            return X, u, pts
+            return X, u, pts, J
         try:
             dX = np.linalg.solve(J, r)
         except np.linalg.LinAlgError as exc:
@@ -179,9 +179,9 @@ def forward_kinematics_terms(desc: UpsrpuDescription, q: np.ndarray, X0: np.ndar
         if m > max_step:
             dX *= max_step / m
         X += dX
-    qx, _, u, pts = _q_and_jd(desc, X)
+    qx, J, u, pts = _q_and_jd(desc, X)
     if float(np.max(np.abs(q - qx))) < max(tol, 1e-10):
-        return X, u, pts
+        return X, u, pts, J
     raise ForwardKinematicsError(
         f"FK for q = {q.tolist()} from X0 = {np.asarray(X0).tolist()} did not converge: residual "
         f"{float(np.max(np.abs(q - qx))):.3e} m after {max_iter} iterations")

@@ -7,7 +7,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from hexa.kinematics import upsrpu as kin
-from hexa.singularity import SingularityReport, limb_pairs, omega_angles, output_twist_screws, upsrpu_indices
+from hexa.singularity import SingularityReport, limb_pairs, upsrpu_indices, upsrpu_indices_with_jd
 
 if TYPE_CHECKING:
     from hexa.robots.upsrpu_description import UpsrpuDescription
@@ -30,20 +30,6 @@ class SrmError(ValueError):
 def _clipped(dX: np.ndarray, max_step: float = 0.05) -> np.ndarray:
     m = float(np.max(np.abs(dX)))
     return dX * (max_step / m) if m > max_step else dX
-
-
-def pair_omega(desc: UpsrpuDescription, X: np.ndarray, k: int) -> float:
-    """Omega of the k-th pair of V_Omega at X (rad), without det J_D and the other pairs."""
-    _, T, C = kin.jd_and_screws(desc, X)
-    return _pair_omega_from(T, C, k)
-
-
-def _pair_omega_from(T: np.ndarray, C: np.ndarray, k: int) -> float:
-    O = output_twist_screws(T, C)
-    i, j = _PAIRS[k]
-    if not (np.any(O[i]) and np.any(O[j])):
-        return 0.0
-    return float(omega_angles(O[[i, j]])[0][0])
 
 
 def implicated_limbs(min_index: int) -> tuple[np.ndarray, np.ndarray]:
@@ -140,15 +126,14 @@ class SingularityReleaseModule:
                 continue
             try:
                 X_1 = X_c if J_inv is None else X_c + _clipped(J_inv @ (q_ch - q_xc))
-                X_ch, u, pts = kin.forward_kinematics_terms(d, q_ch, X_1)   # X_c as initial condition
+                X_ch, u, _, J_ch = kin.forward_kinematics_terms(d, q_ch, X_1)   # X_c as initial condition
             except kin.ForwardKinematicsError:
                 continue
             alpha_ch = kin.spherical_angles_from(u, X_ch[2])
             if not np.all(alpha_ch < d.spherical_max):
                 continue
             feasible[c1] = True
-            v_omega_ch[c1] = _pair_omega_from(kin.wrenches_from(u, pts), kin.constraint_wrench_screws(d, X_ch),
-                                              k_min)                 # Omega_ij with i, j = i_ch
+            v_omega_ch[c1] = upsrpu_indices_with_jd(d, X_ch, J_ch).omega[k_min]  # Omega_ij, i, j = i_ch
         info = SrmStepInfo(active=True, i_ch=tuple(int(i) for i in i_ch), v_omega_ch=v_omega_ch,
                            feasible=feasible)
         if feasible.any():
