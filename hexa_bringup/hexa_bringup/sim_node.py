@@ -1,8 +1,8 @@
 """ROS node `hexa-sim`: steps the simulated Hexa and publishes /clock, the two RGB-D cameras and the ground truth.
 
 Parameters: scenario (none | plate | arm | rod | YAML path), seed, randomize, real_time_factor (1.0; 0 = as fast as
-possible), camera_rate_hz (30), cameras (true), clock_rate_hz (250: every 4 ms of sim time; each
-sim-time node processes every /clock message, so 1 kHz costs the whole graph CPU), truth_rate_hz (100), boards (true: the virtual
+possible), camera_rate_hz (30), cameras (true), clock_rate_hz (250: every 4 ms of sim time; every sim-time node
+handles each /clock message, so 1 kHz costs the whole graph CPU), truth_rate_hz (100), boards (true: the virtual
 Uno/Mega ptys linked at link_dir, /tmp/hexa_sim/{uno,mega}), duration (0 = run until shut down).
 Topics (relative, under the node namespace, e.g. /hexa): cam_{top,side}/color/image_raw (rgb8),
 cam_{top,side}/color/camera_info, cam_{top,side}/aligned_depth_to_color/image_raw (16UC1 mm),

@@ -138,7 +138,8 @@ class Simulator:
         cameras: create the offscreen renderer (needs EGL); False for physics-only runs.
         pose: assembly/start pose when there is no scenario (default HOME_POSE).
         drive: "trajectory" (servo targets = IK of the scenario's trajectory at sim time t; default with a
-            scenario or a trajectory) or "external" (targets only from `set_servo_targets`, e.g. the virtual Uno; default without).
+            scenario or a trajectory) or "external" (targets only from `set_servo_targets`, e.g. the virtual Uno;
+            default without).
         randomize: draw the scenario's collision from its ranges with `seed` (False: nominal values).
         settle: seconds simulated before t = 0 holding the start targets, so the robot starts at rest under gravity.
         trajectory: without a scenario, follow this trajectory ("circle", "helix", "ellipse") in free motion for its
