@@ -7,6 +7,7 @@ Service `calibrate_currents` (hexa_msgs/CalibrateCurrents). Parameters: config/d
 """
 from __future__ import annotations
 
+import signal
 import sys
 import threading
 import time
@@ -19,6 +20,7 @@ from hexa_msgs.srv import CalibrateCurrents
 from rclpy.callback_groups import MutuallyExclusiveCallbackGroup, ReentrantCallbackGroup
 from rclpy.executors import ExternalShutdownException, MultiThreadedExecutor
 from rclpy.node import Node
+from rclpy.signals import SignalHandlerOptions
 from rclpy.qos import QoSProfile, ReliabilityPolicy, HistoryPolicy
 from sensor_msgs.msg import JointState
 
@@ -96,8 +98,13 @@ class DriverNode(Node):
 
     # ------------------------------------------------------------------------------------------ links
     def _on_link_state(self, board: str, state: str) -> None:
-        log = self.get_logger()
-        (log.info if state == CONNECTED else log.warning)(f"{board} link {state}")
+        if not self.context.ok():
+            return
+        # separate call sites: rclpy refuses one call site logging at two severities
+        if state == CONNECTED:
+            self.get_logger().info(f"{board} link CONNECTED")
+        else:
+            self.get_logger().warning(f"{board} link {state}")
 
     # ------------------------------------------------------------------------------------------ commands
     def _on_command(self, msg: JointState) -> None:
@@ -241,12 +248,19 @@ class DriverNode(Node):
         self.pub_diag.publish(arr)
 
 
+def _raise_interrupt(signum, frame) -> None:
+    raise KeyboardInterrupt
+
+
 def main(args: list[str] | None = None) -> int:
     """Entry point `hexa-driver` (run with `--ros-args -r __ns:=/hexa -p uno_port:=... -p mega_port:=...`)."""
     from hexa_bringup.rosenv import apply_defaults
 
     apply_defaults()
-    rclpy.init(args=args)
+    # Our own SIGINT/SIGTERM handling: stop the serial links first, then shut ROS down (no logging into a dead
+    # context from the link threads).
+    rclpy.init(args=args, signal_handler_options=SignalHandlerOptions.NO)
+    signal.signal(signal.SIGTERM, _raise_interrupt)
     try:
         node = DriverNode()
     except Exception as exc:
