@@ -16,10 +16,11 @@
 
 #define FRAME_TICKS 40000u      /* 20 ms at 0.5 us per tick */
 #define OFF_SLOT_TICKS 200u     /* time slot of a channel whose output is off (100 us) */
+#define PREP_TICKS 100u         /* 50 us before a frame: pick up the newest channel-1 target (low latency) */
 
 static const uint8_t pin_mask[HX_CHANNELS] = {_BV(2), _BV(3), _BV(4), _BV(5), _BV(6), _BV(7)};
 static volatile uint16_t ticks[HX_CHANNELS];   /* pulse widths in timer ticks; 0 = off */
-static int8_t slot = -1;                       /* pulse running since the last compare: 0..5, or -1 = frame gap */
+static int8_t slot = -1;                       /* pulse running since the last compare: 0..5; 6 gap; 7 prepare */
 static uint8_t cur_mask, next_mask;            /* pin high now / pin to raise at the next compare */
 static uint16_t next_ticks;                    /* length of the slot that starts at the next compare */
 static uint16_t frame_start;
@@ -40,7 +41,9 @@ ISR(TIMER1_COMPA_vect) {
   if (slot == 0) frame_start = OCR1A;
   if (slot < HX_CHANNELS) {
     OCR1A += next_ticks;
-  } else {
+  } else if (slot == HX_CHANNELS) {         /* all pulses done: idle until just before the next frame */
+    OCR1A = frame_start + FRAME_TICKS - PREP_TICKS;
+  } else {                                  /* prepare point: channel 1 below reads the newest target */
     OCR1A = frame_start + FRAME_TICKS;
     slot = -1;
   }
