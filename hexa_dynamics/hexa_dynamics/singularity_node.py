@@ -1,6 +1,7 @@
 """Type II singularity monitor node (seed 003 sec 2.2-2.3) for the Hexa or the 3UPS+RPU.
 
-Thin wrapper over hexa.singularity. Parameters: `robot` ("hexa" | "upsrpu"), `input` ("pose" | "markers"),
+Thin wrapper over hexa.singularity. Parameters: `robot` ("hexa" | "upsrpu"; default from the namespace: "upsrpu"
+when it contains "upsrpu", else "hexa"), `input` ("pose" | "markers"),
 `description` (YAML path, default packaged), `det_jd_limit`, `omega_limit` (rad; default Table 2 for the
 3UPS+RPU, 1.8 deg and no det limit for the Hexa).
 Topics (relative; run in /upsrpu or /hexa): sub `pose` (3UPS+RPU, geometry_msgs/PoseStamped, X_c from the
@@ -30,7 +31,8 @@ class SingularityNode(Node):
 
     def __init__(self) -> None:
         super().__init__("singularity")
-        self.robot = str(self.declare_parameter("robot", "upsrpu").value)
+        self.robot = str(self.declare_parameter("robot", "").value) or (
+            "upsrpu" if "upsrpu" in self.get_namespace() else "hexa")
         mode = str(self.declare_parameter("input", "pose").value)
         path = str(self.declare_parameter("description", "").value) or None
         if self.robot == "upsrpu":
