@@ -82,9 +82,8 @@ def test_identification_recovers_the_observable_part_of_a_model_generated_force(
     np.testing.assert_allclose(est.force, seen, atol=1e-8)
     if link == "arm":
         assert est.rank == 1 and not est.observable and n.shape == (2, 3)
-        motion_dir = np.cross(PRM.A[chain - 1] * 0 + np.array([-np.sin(PRM.alpha[chain - 1]),
-                                                                np.cos(PRM.alpha[chain - 1]), 0.0]),
-                              D - PRM.A[chain - 1])
+        axis = np.array([-np.sin(PRM.alpha[chain - 1]), np.cos(PRM.alpha[chain - 1]), 0.0])
+        motion_dir = np.cross(axis, D - PRM.A[chain - 1])
         np.testing.assert_allclose(n @ motion_dir, 0.0, atol=1e-9)  # what is seen is along the arm's motion
     else:
         assert est.rank == 3 and est.observable and n.shape == (0, 3)
