@@ -64,3 +64,14 @@ def test_hexa_srm_cli_json(capsys):
     assert out["released"] is True and out["variant"] == "v1"
     assert out["implicated_limbs"] == [3, 4]
     assert math.isfinite(out["metrics"]["mae_m"]) and out["metrics"]["mae_m"] > 0
+
+
+def test_v1_releases_with_x_c_from_noisy_markers():
+    from hexa.srm.tracking import tracking_model
+
+    noise = tracking_model(DESC).marker_noise
+    r = run_release_experiment(DESC, 1, 1, wait=1.0, window=6.0, marker_noise=noise, seed=3)
+    assert not np.allclose(r.X_c, r.X_kin)                       # the measurement is noisy
+    assert r.released and r.moved_limbs == (3, 4)
+    tail = slice(len(r.t) - 100, None)
+    assert np.all(r.min_omega[tail] >= DESC.omega_limit) and np.all(np.abs(r.det_jd[tail]) >= DESC.det_jd_limit)

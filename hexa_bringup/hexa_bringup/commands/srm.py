@@ -17,6 +17,8 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--all", action="store_true", help="all trajectories, both variants; report + plots")
     p.add_argument("--out", default="out/srm", help="output folder for --all (default out/srm)")
     p.add_argument("--push", action="store_true", help="push the platform by hand during the wait")
+    p.add_argument("--markers", action="store_true",
+                   help="measure X_c through simulated noisy markers (tracking section of the description)")
     p.add_argument("--no-plots", action="store_true", help="with --all: skip the PNG figures")
     p.add_argument("--description", help="3UPS+RPU description YAML (default: the packaged one)")
     p.add_argument("--json", action="store_true", help="print JSON (SI units)")
@@ -46,7 +48,12 @@ def run(args: argparse.Namespace) -> int:
         raise SystemExit(f"hexa srm: --trajectory must be 1..{len(desc.singular_poses)} or TR15/TRR0, got {traj}")
     variant = int(args.variant[1])
     try:
-        r = run_release_experiment(desc, traj, variant, push=args.push)
+        noise = None
+        if args.markers:
+            from hexa.srm.tracking import tracking_model
+
+            noise = tracking_model(desc).marker_noise
+        r = run_release_experiment(desc, traj, variant, push=args.push, marker_noise=noise)
     except FileNotFoundError as exc:
         raise SystemExit(f"hexa srm: {exc}") from exc
     s = r.summary()

@@ -89,13 +89,16 @@ def reference_path(desc: UpsrpuDescription, trajectory: str | int) -> np.ndarray
 
 def run_release_experiment(desc: UpsrpuDescription, trajectory: str | int, variant: int = 1, push: bool = False,
                            push_force: float = 10.0, pose_noise: float = 0.0, seed: int = 0,
-                           wait: float | None = None, window: float | None = None) -> ReleaseResult:
+                           wait: float | None = None, window: float | None = None,
+                           marker_noise: float | None = None) -> ReleaseResult:
     """Simulate one trajectory with SRM-V`variant` and compute MAE, MAPE, MDSR and AVR after activation.
 
     Args:
         push: apply a push by hand (half-sine generalised force of `push_force` N on x_m and N m on psi,
             2 s long, 5 s into the wait) while the robot sits at the singular pose.
-        pose_noise: standard deviation of the simulated tracking noise on X_c (m / rad).
+        pose_noise: standard deviation of a noise added directly to X_c (m / rad).
+        marker_noise: when given, X_c is measured like the paper's 3D tracking system: simulated markers of
+            both platforms with this noise (m, std per coordinate) fitted by `hexa.srm.tracking`.
     """
     ts = desc.t_s
     wait = desc.wait_before_enable if wait is None else wait
@@ -122,8 +125,17 @@ def run_release_experiment(desc: UpsrpuDescription, trajectory: str | int, varia
     enabled = np.zeros(N, dtype=bool)
     moved: set[int] = set()
     implicated: tuple[int, ...] = ()
+    tracking = None
+    if marker_noise is not None:
+        from hexa.srm.tracking import markers_from_pose, pose_from_markers, tracking_model
+
+        tracking = tracking_model(desc)
+        rng = np.random.default_rng(seed + 1)
     state = plant.state()
     for j in range(N):
+        if tracking is not None:
+            fixed, mobile = markers_from_pose(tracking, state.X, rng, marker_noise)
+            state.X = pose_from_markers(tracking, fixed, mobile)[0]
         rep = upsrpu_indices(desc, state.X)
         enabled[j] = j >= k
         q_d = srm.step(q_r[j], state.X, enabled[j], rep)
