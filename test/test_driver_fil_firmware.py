@@ -57,6 +57,8 @@ def test_uno_firmware_counts_bad_crc_and_rejects_wrong_length(tmp_path):
             link._ser.write(bytes(bad))  # a corrupted command must never move a servo
             with pytest.raises(LinkError, match="BAD_LENGTH"):
                 link.request(fr.SET_WATCHDOG, b"\x01")
+            with pytest.raises(LinkError, match="BAD_VALUE"):   # six 3.5 ms pulses would not fit 20 ms
+                link.request(fr.SET_LIMITS, fr.pack_limits([500] * 6, [3500] * 6))
             status = fr.unpack_servo_status(link.request(fr.GET_STATUS, reply_types=(fr.STATUS,)).payload)
             assert status.rx_crc_errors == 1
             assert status.rx_bad_frames >= 1

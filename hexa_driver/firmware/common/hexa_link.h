@@ -18,6 +18,8 @@
 #define HX_MAX_PAYLOAD 64
 #define HX_CHANNELS 6
 #define HX_BAUD 500000UL
+#define HX_PULSE_MIN_US 400   /* SET_LIMITS bounds: six pulses of at most 3 ms fit the 20 ms servo frame */
+#define HX_PULSE_MAX_US 3000
 
 #define HX_HELLO 0x01
 #define HX_HELLO_REPLY 0x02

@@ -103,8 +103,9 @@ static void handle_frame(void) {
       return;
     case HX_SET_LIMITS:
       if (!hx_check_length(&rx, 24)) return;
-      for (uint8_t i = 0; i < HX_CHANNELS; i++)
-        if (hx_get_u16(rx.payload + 2 * i) > hx_get_u16(rx.payload + 12 + 2 * i)) {
+      for (uint8_t i = 0; i < HX_CHANNELS; i++)   /* six pulses of <= 3 ms always fit the 20 ms frame */
+        if (hx_get_u16(rx.payload + 2 * i) > hx_get_u16(rx.payload + 12 + 2 * i) ||
+            hx_get_u16(rx.payload + 2 * i) < HX_PULSE_MIN_US || hx_get_u16(rx.payload + 12 + 2 * i) > HX_PULSE_MAX_US) {
           hx_send_error(HX_ERR_BAD_VALUE, rx.type, rx.seq, i);
           return;
         }

@@ -17,6 +17,7 @@ from typing import Sequence
 import numpy as np
 import yaml
 
+from hexa.protocol.frames import PULSE_MAX_US, PULSE_MIN_US
 from hexa.protocol.sensor_model import CurrentSensorModel
 
 N_JOINTS = 6
@@ -44,8 +45,9 @@ class ServoCalibration:
     def __post_init__(self) -> None:
         if self.us_per_rad == 0 or not math.isfinite(self.us_per_rad):
             raise DriverConfigError(f"us_per_rad {self.us_per_rad} must be finite and non-zero")
-        if not 0 < self.min_us <= self.max_us <= 0xFFFF:
-            raise DriverConfigError(f"pulse limits min_us={self.min_us} max_us={self.max_us} invalid")
+        if not PULSE_MIN_US <= self.min_us <= self.max_us <= PULSE_MAX_US:
+            raise DriverConfigError(f"pulse limits min_us={self.min_us} max_us={self.max_us} invalid "
+                                    f"(need {PULSE_MIN_US} <= min_us <= max_us <= {PULSE_MAX_US})")
 
     def pulse_from_angle(self, zeta: float) -> int:
         """Pulse width (us, rounded, clamped to the limits) for the arm angle `zeta` (rad)."""

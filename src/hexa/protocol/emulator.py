@@ -299,7 +299,7 @@ class UnoEmulator(_BoardEmulator):
                     self.last_callback_error = f"{type(exc).__name__}: {exc}"
         elif frame.type == fr.SET_LIMITS:
             lo, hi = fr.unpack_limits(frame.payload)
-            if any(a > b for a, b in zip(lo, hi)):
+            if any(a > b or a < fr.PULSE_MIN_US or b > fr.PULSE_MAX_US for a, b in zip(lo, hi)):
                 self._send(fr.ERROR, fr.pack_error(fr.ERR_BAD_VALUE, frame.type, frame.seq))
                 return
             self.min_us, self.max_us = list(lo), list(hi)

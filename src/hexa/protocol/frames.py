@@ -67,6 +67,8 @@ FLAG_OVERRUN = 0x08        # current: a sample deadline was missed since the las
 
 MIN_RATE_HZ = 1
 MAX_RATE_HZ = 1000
+PULSE_MIN_US = 400    # SET_LIMITS bounds (six pulses of <= 3 ms fit the 20 ms servo frame)
+PULSE_MAX_US = 3000
 
 
 class ProtocolError(ValueError):
