@@ -49,6 +49,9 @@ def test_chains_come_in_pairs_rotated_by_120_degrees():
     ("inertia.rod.mass", 0.0, "inertia.rod.mass"),
     ("inertia.plate.inertia", [[1, 0, 0], [0, 1, 0], [0, 0, 3]], "inertia.plate.inertia"),
     ("actuators.K_t", -0.45, "actuators.K_t"),
+    ("geometry.arm_length", 200.0, "geometry.arm_length.*mm given"),
+    ("geometry.alpha", [0, 0, 120, 120, 240, 240], "geometry.alpha.*degrees given"),
+    ("kinematics.home_pose", [0, 0, -550, 0, 0, 0], "kinematics.home_pose"),
 ])
 def test_bad_values_are_rejected_naming_the_key(raw, key, value, fragment):
     data = copy.deepcopy(raw)
@@ -57,7 +60,7 @@ def test_bad_values_are_rejected_naming_the_key(raw, key, value, fragment):
     for p in parents:
         node = node[p]
     node[last] = value
-    with pytest.raises(RobotDescriptionError, match=fragment.replace(".", r"\.")):
+    with pytest.raises(RobotDescriptionError, match=fragment.replace(".", r"\.").replace(r"\.*", ".*")):
         parse_hexa(data)
 
 

@@ -103,3 +103,23 @@ def test_arm_direction_is_the_first_column_of_eq10():
         R6 = np.array([[-1, 0, 0], [0, 0, 1], [0, 1, 0]])
         R7 = np.array([[np.cos(z), -np.sin(z), 0], [np.sin(z), np.cos(z), 0], [0, 0, 1]])
         assert np.allclose(Ro @ R6 @ R7, R10)
+
+
+def test_rod_frames_of_eq13_equal_the_eq11_product_and_point_along_the_rods():
+    desc = load_hexa()
+    pose = np.array([0.05, -0.03, -0.52, 0.1, -0.2, 0.15])
+    zeta = kin.inverse_kinematics(desc, pose)
+    R, beta, gamma = kin.rod_rotations(desc, pose, zeta)
+    RA = kin.arm_rotations(desc, zeta)
+    n = kin.plate_joints(desc, pose) - kin.elbows(desc, zeta)
+    n /= np.linalg.norm(n, axis=1, keepdims=True)
+    for i in range(6):
+        b, g = beta[i], gamma[i]
+        R9 = np.array([[np.cos(b) * np.cos(g), -np.cos(b) * np.sin(g), np.sin(b)],
+                       [np.sin(b) * np.cos(g), -np.sin(b) * np.sin(g), -np.cos(b)],
+                       [np.sin(g), np.cos(g), 0.0]])
+        assert np.allclose(RA[i] @ R9, R[i], atol=1e-12)          # eq 11 = eq 10 · eq 8 · eq 9
+        assert np.allclose(R[i][:, 0], n[i], atol=1e-12)           # x_2i along B_i → C_i
+        assert np.isclose(np.linalg.det(R[i]), 1.0)
+        assert -np.pi / 2 < b + zeta[i] < np.pi / 2 or -np.pi / 2 < b + zeta[i] - 2 * np.pi < np.pi / 2
+    assert np.allclose(RA[:, :, 2], np.stack([-np.sin(desc.alpha), np.cos(desc.alpha), 0 * desc.alpha], 1))

@@ -218,6 +218,41 @@ def elbows(desc: "HexaDescription", zeta: np.ndarray) -> np.ndarray:
     return desc.A + desc.l_a * arm_directions(desc, zeta)
 
 
+def arm_rotations(desc: "HexaDescription", zeta: np.ndarray) -> np.ndarray:
+    """R_{A2i}^O = R_{Oi}^O R_{A1i}^{Oi} R_{A2i}^{A1i} of each arm frame (seed 000, eqs 4, 6, 7 → eq 10); (…, 6, 3, 3).
+
+    Column 0 is the arm direction u_i, column 2 the motor axis (−sin α_i, cos α_i, 0).
+    """
+    zeta = np.asarray(zeta, dtype=float)
+    ca, sa = np.cos(desc.alpha), np.sin(desc.alpha)
+    cz, sz = np.cos(zeta), np.sin(zeta)
+    z = np.zeros_like(cz)
+    return np.stack([np.stack([-ca * cz, ca * sz, -sa + z], -1),
+                     np.stack([-sa * cz, sa * sz, ca + z], -1),
+                     np.stack([sz, cz, z], -1)], -2)
+
+
+def rod_rotations(desc: "HexaDescription", pose: np.ndarray,
+                  zeta: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Rod frames R_{B2i}^O (6, 3, 3) and universal-joint angles β_i, γ_i (6,) (seed 000, eqs 9, 11–13).
+
+    The first column of eq 11 is the unit rod direction n_i = (C_i − B_i)/|C_i − B_i|, so eq 12 gives
+    γ_i = asin(R21 cos α_i − R11 sin α_i) and β_i = atan2(R31, −(R11 cos α_i + R21 sin α_i)) − ζ_i (the
+    quadrant-safe form of eq 12, −π/2 < β_i + ζ_i < π/2); eq 13 then fills R_{B2i}^O, which equals
+    R_{A2i}^O · R_{B1i}^{A2i} (eq 8, identity) · R_{B2i}^{B1i}(β_i, γ_i) (eq 9).
+    """
+    zeta = np.asarray(zeta, dtype=float)
+    _, _, n = _rods(desc, pose, zeta)
+    ca, sa = np.cos(desc.alpha), np.sin(desc.alpha)
+    gamma = np.arcsin(np.clip(n[:, 1] * ca - n[:, 0] * sa, -1.0, 1.0))
+    bz = np.arctan2(n[:, 2], -(n[:, 0] * ca + n[:, 1] * sa))
+    cg, sg, c2, s2 = np.cos(gamma), np.sin(gamma), np.cos(bz), np.sin(bz)
+    R = np.stack([np.stack([-sa * sg - ca * c2 * cg, -sa * cg + ca * c2 * sg, -ca * s2], -1),
+                  np.stack([ca * sg - sa * c2 * cg, ca * cg + sa * c2 * sg, -sa * s2], -1),
+                  np.stack([s2 * cg, -s2 * sg, -c2], -1)], -2)
+    return R, _wrap_pi(bz - zeta), gamma
+
+
 # ------------------------------------------------------------------------------------------ inverse kinematics
 def ik_coefficients(desc: "HexaDescription", pose: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """a_i, b_i, c_i of seed 000 eq 17 (b_i cos ζ_i + c_i sin ζ_i = a_i, eq 15 restored); pose (…, 6) → 3 × (…, 6)."""

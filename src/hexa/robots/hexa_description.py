@@ -122,6 +122,23 @@ def _rz(angle: float) -> np.ndarray:
     return np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
 
 
+def _length(data: dict[str, Any], key: str, nonneg: bool = False) -> float:
+    """A length in metres; values above 5 m are taken for millimetres and rejected."""
+    v = require_float(data, key, nonneg=nonneg, positive=not nonneg)
+    if v > 5.0:
+        raise RobotDescriptionError(f"key '{key}' = {v} is not a plausible length in metres (SI units; mm given?)")
+    return v
+
+
+def _angles(data: dict[str, Any], key: str, shape: tuple[int, ...], bound: float) -> np.ndarray:
+    """Angles in radians; magnitudes above `bound` are taken for degrees and rejected."""
+    arr = require_array(data, key, shape)
+    if np.any(np.abs(arr) > bound):
+        raise RobotDescriptionError(f"key '{key}' must hold radians within ±{bound:.4f} (SI units; degrees given?), "
+                                    f"got {arr.tolist()}")
+    return arr
+
+
 def _signs(data: dict[str, Any], key: str) -> np.ndarray:
     arr = require_array(data, key, (6,))
     if not np.all(np.isin(arr, (-1.0, 1.0))):
@@ -159,17 +176,20 @@ def parse_hexa(data: dict[str, Any], path: str | Path = "<memory>") -> HexaDescr
     kind = require_str(data, "kind", ("hexa6rus",))
     del kind
     name = require_str(data, "name")
-    r_a = require_float(data, "geometry.base_radius", positive=True)
-    h_a = require_float(data, "geometry.base_half_spacing", nonneg=True)
-    r_c = require_float(data, "geometry.plate_radius", positive=True)
+    r_a = _length(data, "geometry.base_radius")
+    h_a = _length(data, "geometry.base_half_spacing", nonneg=True)
+    r_c = _length(data, "geometry.plate_radius")
     ang_c = require_float(data, "geometry.plate_joint_angle", lo=0.0, hi=math.pi / 2)
-    alpha = require_array(data, "geometry.alpha", (6,))
+    alpha = _angles(data, "geometry.alpha", (6,), 2 * math.pi)
     sigma = _signs(data, "geometry.sigma")
-    l_a = require_float(data, "geometry.arm_length", positive=True)
-    l_d = require_float(data, "geometry.rod_length", positive=True)
+    l_a = _length(data, "geometry.arm_length")
+    l_d = _length(data, "geometry.rod_length")
     if h_a >= r_a:
         raise RobotDescriptionError(f"key 'geometry.base_half_spacing' must be < base_radius {r_a}, got {h_a}")
     home = require_array(data, "kinematics.home_pose", (6,))
+    if np.any(np.abs(home[:3]) > 5.0) or np.any(np.abs(home[3:]) > math.pi):
+        raise RobotDescriptionError(f"key 'kinematics.home_pose' must be x y z (m) and alpha beta gamma (rad), "
+                                    f"got {home.tolist()} (SI units; mm or degrees given?)")
     raw_branch = require_float(data, "kinematics.branch")
     if raw_branch not in (1.0, -1.0):
         raise RobotDescriptionError(f"key 'kinematics.branch' must be +1 or -1, got {raw_branch}")
