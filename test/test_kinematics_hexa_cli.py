@@ -50,3 +50,12 @@ def test_upsrpu_ik_and_fk(capsys):
 def test_wrong_pose_length_is_an_error():
     with pytest.raises(SystemExit):
         main(["ik", "--robot", "hexa", "--pose", "0", "0", "-0.5"])
+
+
+def test_fk_ann_is_close_to_newton_raphson(capsys):
+    pose = [0.05, 0.0, -0.55, 0.0, 0.1, 0.0]
+    rc, ik = _json(capsys, ["ik", "--robot", "hexa", "--pose", *map(str, pose), "--json"])
+    rc, fk = _json(capsys, ["fk", "--robot", "hexa", "--ann", "--joints", *map(repr, ik["joints"]), "--json"])
+    assert rc == 0 and fk["method"] == "ann"
+    got = np.array([fk["pose"][k] for k in ("x", "y", "z", "alpha", "beta", "gamma")])
+    assert np.max(np.abs(got[:3] - pose[:3])) < 0.002 and np.max(np.abs(got[3:] - pose[3:])) < np.radians(0.5)

@@ -41,7 +41,7 @@ def solve(robot: str, joints: list[float], ann: bool = False, guess: list[float]
         if ann:
             from hexa.kinematics.hexa_ann import load_ann_fk
 
-            pose = load_ann_fk().predict(zeta)
+            pose = load_ann_fk(desc=desc).predict(zeta)
             method = "ann"
         else:
             if guess is not None and len(guess) != 6:
