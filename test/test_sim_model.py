@@ -5,6 +5,8 @@ import importlib.util
 
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 mujoco = pytest.importorskip("mujoco")
 
@@ -162,3 +164,49 @@ def test_physics_is_deterministic_for_a_seed(desc):
         logs.append(sim.truth_log())
     for key in logs[0]:
         np.testing.assert_array_equal(logs[0][key], logs[1][key])
+
+
+def test_external_force_is_exactly_mj_applyFT_at_the_point(desc):
+    """The scripted/manual wrench equals MuJoCo's own point-force application (same trajectory to 1e-12)."""
+    a = Simulator(desc, cameras=False, seed=0)
+    b = Simulator(desc, cameras=False, seed=0)
+    body = b.model.body("rod_3").id
+    mujoco.mj_kinematics(b.model, b.data)
+    R0, x0 = b.data.xmat[body].reshape(3, 3).copy(), b.data.xpos[body].copy()
+    local = np.array([0.3, 0.004, -0.002])
+    f = np.array([1.5, -2.0, 0.7])
+    a.apply_external_force("rod", 3, x0 + R0 @ local, f)
+    for _ in range(200):
+        a.step(1)
+        # b: same servo commands, force applied through mj_applyFT at the moving point into qfrc_applied
+        m, d = b.model, b.data
+        mujoco.mj_step1(m, d)
+        step = b._omega_max * b.timestep
+        d.ctrl[:] = d.ctrl + np.clip(b._targets - d.ctrl, -step, step)
+        p = d.xpos[body] + d.xmat[body].reshape(3, 3) @ local
+        d.qfrc_applied[:] = 0.0
+        mujoco.mj_applyFT(m, d, f, np.zeros(3), p, body, d.qfrc_applied)
+        mujoco.mj_step2(m, d)
+    np.testing.assert_allclose(a.data.qpos, b.data.qpos, atol=1e-12)
+    np.testing.assert_allclose(a.ground_truth().point, p, atol=1e-12)
+
+
+@settings(max_examples=60, deadline=None)
+@given(seed=st.integers(0, 2**32 - 1), case=st.sampled_from(["plate", "arm", "rod"]),
+       t=st.floats(0.0, 10.0, allow_nan=False))
+def test_drawn_collisions_stay_in_their_ranges_and_the_force_profile_is_bounded(seed, case, t):
+    spec = load_scenario(case)
+    c = draw_collision(spec, np.random.default_rng(seed))
+    for name in ("onset", "rise_time", "release_time", "peak_force", "position", "elevation"):
+        r = getattr(spec, name)
+        assert r.lo - 1e-12 <= getattr(c, name) <= r.hi + 1e-12, name
+    assert c.chain in spec.chains
+    f = c.force_magnitude(t)
+    assert 0.0 <= f <= c.peak_force + 1e-12
+    if t < c.onset or t >= c.end_time:
+        assert f == 0.0
+    assert c.force_magnitude(c.peak_time) == pytest.approx(c.peak_force)
+    d = c.object_distance(t)
+    assert d is None or 0.0 <= d <= c.approach_distance + 1e-12
+    if c.onset <= t <= c.end_time:
+        assert d == 0.0
