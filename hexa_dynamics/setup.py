@@ -17,5 +17,8 @@ setup(
         "hexa-singularity = hexa_dynamics.singularity_node:main",
         "hexa-srm = hexa_dynamics.srm_node:main",
         "hexa-upsrpu-sim = hexa_dynamics.upsrpu_sim_node:main",
+        "hexa-observer = hexa_dynamics.observer_node:main",
+        "hexa-rnea = hexa_dynamics.rnea_node:main",
+        "hexa-trajectory = hexa_dynamics.trajectory_node:main",
     ]},
 )
