@@ -1,7 +1,6 @@
 """Hexa closed-form inverse kinematics (seed 000 eqs 14–18) and the description it stands on."""
 from __future__ import annotations
 
-import math
 
 import numpy as np
 import pytest
