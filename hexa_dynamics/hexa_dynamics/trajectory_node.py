@@ -2,7 +2,9 @@
 collisions (hold | retract along the residual | ignore), resuming on a service call.
 
 Parameters: `trajectory` ("circle" | "helix" | "ellipse" | "file"), `file` (CSV of t x y z alpha beta gamma in SI,
-for trajectory=file), `rate_hz` (100), `start_delay` (s, 1.0), `loop` (false), `collision_policy` ("hold"),
+for trajectory=file), `rate_hz` (100), `start_delay` (s after the first clock reading, 1.0), `start_time`
+(s, clock time of trajectory time 0; −1 = use start_delay; with the simulator's scenarios use 0.0 so that sim time =
+trajectory time), `loop` (false), `collision_policy` ("hold"),
 `retract_distance` (m, 0.02), `retract_time` (s, 0.5), `description` (robot YAML path, default packaged).
 Topics (relative): pub `joint_commands` (sensor_msgs/JointState, arm_1..arm_6, ζ rad and ζ̇ rad/s),
 `trajectory_state` (std_msgs/String); sub `collision` (hexa_msgs/CollisionEvent, reliable), `residual`
@@ -64,6 +66,7 @@ class TrajectoryNode(Node):
         path = str(self.declare_parameter("file", "").value)
         rate = float(self.declare_parameter("rate_hz", 100.0).value)
         self.start_delay = float(self.declare_parameter("start_delay", 1.0).value)
+        self.start_time = float(self.declare_parameter("start_time", -1.0).value)
         loop = bool(self.declare_parameter("loop", False).value)
         policy = str(self.declare_parameter("collision_policy", "hold").value)
         dist = float(self.declare_parameter("retract_distance", 0.02).value)
@@ -105,7 +108,7 @@ class TrajectoryNode(Node):
         if now <= 0.0:  # sim time not started yet
             return None
         if self._t0 is None:
-            self._t0 = now + self.start_delay
+            self._t0 = self.start_time if self.start_time >= 0 else now + self.start_delay
         return now - self._t0
 
     def _tick(self) -> None:
