@@ -174,10 +174,10 @@ class IsolationConfig:
     workspace_z: tuple[float, float] = (-0.74, 0.06)   # m, z range in base (floor at -0.80 excluded)
     robot_margin_px: float = 2.0        # px added around the drawn robot links
     robot_margin_m: float = 0.002       # m added to link radii when drawing the robot
-    touch_distance: float = 0.022       # m between an object point and a link surface to count as touching
+    touch_distance: float = 0.03        # m between an object point and a link surface to count as touching
     rod_end_clearance: float = 0.03     # m of each rod next to its plate joint attributed to the plate
     closest_points: int = 12            # k nearest object points that decide which link the object comes closest to
-    contact_gap: float = 0.012          # m: the object must come this close to a link to call it a contact
+    contact_gap: float = 0.018          # m: the object must come this close to a link to call it a contact
     contact_sigma: float = 0.003        # m: width of the Gaussian weights on the nearest points
     smooth_px: int = 7                  # normalised box filter (px) of the object's depth before lifting to 3D
     axis_elongation: float = 2.5        # object point spread ratio above which its axis guides the plate contact
@@ -187,6 +187,8 @@ class IsolationConfig:
     depth_rel_sigma: float = 0.01       # depth noise relative to range (for the confidence)
     blue_hsv: tuple[tuple[int, int, int], tuple[int, int, int]] = ((95, 80, 30), (130, 255, 255))
     rod_ycbcr: tuple[int, int] = (150, 24)  # Y ≥ …, |Cb − 128| and |Cr − 128| ≤ … (bright unsaturated rods)
+    foreign_min_saturation: int = 110   # HSV S ≥ … and V ≥ … (and not blue): an object pixel in front of a link
+    foreign_min_value: int = 60
 
 
 @dataclass
@@ -282,13 +284,19 @@ class CollisionIsolator:
         return cam
 
     # -- masks -------------------------------------------------------------------------------------------------
-    def robot_mask(self, camera: str, geom: RobotGeometry) -> np.ndarray:
-        """uint8 mask of the robot's links drawn from the geometry (the "determined" robot), with a margin."""
+    def robot_mask(self, camera: str, geom: RobotGeometry, rgb: np.ndarray | None = None) -> np.ndarray:
+        """uint8 mask of the robot's links drawn from the geometry (the "determined" robot), with a margin.
+
+        With `rgb`, pixels whose colour cannot be a link's — saturated and not the arms' HSV blue (the rods are
+        unsaturated, as the paper's YCbCr step assumes) — are released everywhere but on the plate itself (its
+        markers are coloured): an object in front of or next to a link is kept as object.
+        """
         cam = self.cameras[camera]
         cfg = self.config
         mask = np.zeros((cam.height, cam.width), np.uint8)
+        plate = np.zeros_like(mask)
         f = 0.5 * (cam.K[0, 0] + cam.K[1, 1])
-        for _, _, seg, radius in geom.link_segments():
+        for code, _, seg, radius in geom.link_segments():
             n = 8
             pts = seg[0] + np.linspace(0, 1, n + 1)[:, None] * (seg[1] - seg[0])
             uv, z = cam.project(pts)
@@ -296,19 +304,25 @@ class CollisionIsolator:
                 if z[k] <= 0.01 or z[k + 1] <= 0.01:
                     continue
                 zz = 0.5 * (z[k] + z[k + 1])
-                th = int(np.ceil(2 * (radius + cfg.robot_margin_m) * f / zz + 2 * cfg.robot_margin_px))
                 p0 = tuple(int(round(c)) for c in uv[k])
                 p1 = tuple(int(round(c)) for c in uv[k + 1])
                 if max(abs(p0[0]), abs(p0[1]), abs(p1[0]), abs(p1[1])) > 10 ** 5:
                     continue
+                th = int(np.ceil(2 * (radius + cfg.robot_margin_m) * f / zz + 2 * cfg.robot_margin_px))
                 cv2.line(mask, p0, p1, 255, max(th, 1), cv2.LINE_8)
         uv, z = cam.project(geom.plate_corners())
         if np.all(z > 0.01) and np.all(np.abs(uv) < 10 ** 5):
             hull = cv2.convexHull(np.round(uv).astype(np.int32))
             cv2.fillConvexPoly(mask, hull, 255)
+            cv2.fillConvexPoly(plate, hull, 255)
             m = int(np.ceil(cfg.robot_margin_px + cfg.robot_margin_m * f / float(np.mean(z))))
             if m > 0:
                 cv2.polylines(mask, [hull], True, 255, 2 * m + 1)
+        if rgb is not None:
+            hsv = cv2.cvtColor(rgb, cv2.COLOR_RGB2HSV)
+            blue = cv2.inRange(hsv, np.array(cfg.blue_hsv[0]), np.array(cfg.blue_hsv[1])) > 0
+            foreign = (hsv[:, :, 1] >= cfg.foreign_min_saturation) & (hsv[:, :, 2] >= cfg.foreign_min_value) & ~blue
+            mask[foreign & (plate == 0)] = 0
         return mask
 
     def paper_colour_cues(self, rgb: np.ndarray) -> dict[str, Any]:
@@ -352,7 +366,7 @@ class CollisionIsolator:
         with np.errstate(invalid="ignore"):
             changed |= valid & (~bg_valid | (np.abs(depth - bg.depth) > cfg.depth_change))
         changed &= valid
-        robot = self.robot_mask(camera, geom)
+        robot = self.robot_mask(camera, geom, rgb)
         cand = changed & (robot == 0)
         cand = cv2.morphologyEx(cand.astype(np.uint8), cv2.MORPH_OPEN, np.ones((3, 3), np.uint8)) > 0
         vv, uu = np.nonzero(cand)

@@ -1,0 +1,154 @@
+"""Vision nodes as processes: PNG-folder camera → pose node → plate_pose; isolation node → contact; bad sources."""
+from __future__ import annotations
+
+import os
+import subprocess
+import sys
+import time
+
+import cv2
+import numpy as np
+import pytest
+
+pytest.importorskip("rclpy")
+pytest.importorskip("hexa_msgs.msg")
+pytest.importorskip("mujoco")
+
+PY = sys.executable
+
+
+def _wait(node, predicate, timeout: float) -> bool:
+    import rclpy
+
+    t_end = time.time() + timeout
+    while time.time() < t_end:
+        rclpy.spin_once(node, timeout_sec=0.1)
+        if predicate():
+            return True
+    return False
+
+
+@pytest.fixture
+def rclpy_node(ros_env):
+    old = dict(os.environ)
+    os.environ.update(ros_env)
+    import rclpy
+
+    rclpy.init()
+    node = rclpy.create_node("vision_test_probe")
+    try:
+        yield node
+    finally:
+        node.destroy_node()
+        rclpy.shutdown()
+        os.environ.clear()
+        os.environ.update(old)
+
+
+def test_camera_node_reports_missing_sources_clearly(ros_env, procs) -> None:
+    p = procs.start([PY, "-m", "hexa_vision.camera_node", "--ros-args", "-p", "source:=folder", "-p",
+                     "path:=/nonexistent/frames"], ros_env)
+    _, err = p.communicate(timeout=30)
+    assert p.returncode == 2 and "does not exist" in err
+    try:
+        import pyrealsense2  # noqa: F401
+    except ImportError:
+        p = procs.start([PY, "-m", "hexa_vision.camera_node", "--ros-args", "-p", "source:=realsense"], ros_env)
+        _, err = p.communicate(timeout=30)
+        assert p.returncode == 2 and "pyrealsense2" in err
+
+
+def test_folder_camera_and_pose_node_publish_the_plate_pose(tmp_path, ros_env, procs, rclpy_node) -> None:
+    from geometry_msgs.msg import PoseStamped
+    from hexa_msgs.msg import PlateDetections
+
+    from hexa.sim import Simulator
+
+    pose = np.array([0.03, -0.02, -0.54, 0.1, -0.15, 0.2])
+    with Simulator(pose=pose, seed=2) as sim:
+        rgb, depth = sim.render("cam_top")
+        truth = sim.state().pose
+    for k in range(3):
+        cv2.imwrite(str(tmp_path / f"color_{k:04d}.png"), cv2.cvtColor(rgb, cv2.COLOR_RGB2BGR))
+        cv2.imwrite(str(tmp_path / f"depth_{k:04d}.png"), depth)
+    poses: list[PoseStamped] = []
+    dets: list[PlateDetections] = []
+    rclpy_node.create_subscription(PoseStamped, "/hexa/plate_pose", poses.append, 10)
+    rclpy_node.create_subscription(PlateDetections, "/hexa/plate_detections", dets.append, 10)
+    procs.start([PY, "-m", "hexa_vision.camera_node", "--ros-args", "-r", "__ns:=/hexa", "-p", "source:=folder",
+                 "-p", f"path:={tmp_path}", "-p", "rate:=5.0"], ros_env)
+    procs.start([PY, "-m", "hexa_vision.pose_node", "--ros-args", "-r", "__ns:=/hexa"], ros_env)
+    assert _wait(rclpy_node, lambda: len(poses) >= 2, 60.0), "no plate_pose within 60 s"
+    p = poses[-1]
+    assert p.header.frame_id == "base"
+    est = np.array([p.pose.position.x, p.pose.position.y, p.pose.position.z])
+    assert np.linalg.norm(est - truth[:3]) < 0.003
+    assert dets and dets[-1].detections and dets[-1].detections[0].class_id == "plate"
+
+
+def test_isolation_node_publishes_a_contact_on_collision_start(ros_env, procs, rclpy_node) -> None:
+    from geometry_msgs.msg import PoseStamped
+    from hexa_msgs.msg import CollisionEvent, Contact
+    from rclpy.qos import qos_profile_sensor_data
+    from sensor_msgs.msg import CameraInfo, Image
+
+    from hexa.robots.hexa_description import load_hexa
+    from hexa.vision.evaluation import contact_samples
+    from hexa.vision.markers import quaternion_from_matrix
+    from hexa.kinematics.hexa6rus import rotation_zyx
+    from hexa_vision.common import RELIABLE_QOS, camera_info_msg, image_msg
+
+    desc = load_hexa()
+    sample = next(contact_samples(1, seed=5, desc=desc))
+    node = rclpy_node
+    pubs = {}
+    for c in ("cam_top", "cam_side"):
+        pubs[c] = (node.create_publisher(Image, f"/hexa/{c}/color/image_raw", qos_profile_sensor_data),
+                   node.create_publisher(Image, f"/hexa/{c}/aligned_depth_to_color/image_raw",
+                                         qos_profile_sensor_data),
+                   node.create_publisher(CameraInfo, f"/hexa/{c}/color/camera_info", qos_profile_sensor_data))
+    pub_pose = node.create_publisher(PoseStamped, "/hexa/plate_pose", 10)
+    pub_col = node.create_publisher(CollisionEvent, "/hexa/collision", RELIABLE_QOS)
+    contacts: list[Contact] = []
+    node.create_subscription(Contact, "/hexa/contact", contacts.append, RELIABLE_QOS)
+    procs.start([PY, "-m", "hexa_vision.isolation_node", "--ros-args", "-r", "__ns:=/hexa", "-p",
+                 "background_delay:=0.0", "-p", "debug_image:=false"], ros_env)
+    time.sleep(3.0)
+
+    def send(frames: dict, t: float) -> None:
+        stamp = node.get_clock().now().to_msg()
+        stamp.sec, stamp.nanosec = int(t), int((t % 1) * 1e9)
+        for c, (rgb, depth_m) in frames.items():
+            cam = sample.cameras[c]
+            depth_mm = np.nan_to_num(depth_m * 1000.0, nan=0.0).astype(np.uint16)
+            pubs[c][2].publish(camera_info_msg(cam, f"{c}_color_optical_frame", stamp))
+            pubs[c][0].publish(image_msg(rgb, "rgb8", f"{c}_color_optical_frame", stamp))
+            pubs[c][1].publish(image_msg(depth_mm, "16UC1", f"{c}_color_optical_frame", stamp))
+        ps = PoseStamped()
+        ps.header.stamp = stamp
+        ps.header.frame_id = "base"
+        ps.pose.position.x, ps.pose.position.y, ps.pose.position.z = (float(v) for v in sample.pose[:3])
+        q = quaternion_from_matrix(rotation_zyx(*sample.pose[3:]))
+        ps.pose.orientation.x, ps.pose.orientation.y, ps.pose.orientation.z, ps.pose.orientation.w = (
+            float(v) for v in q)
+        pub_pose.publish(ps)
+
+    for k in range(6):                       # backgrounds (workspace clear)
+        send(sample.backgrounds, 10.0 + 0.1 * k)
+        _wait(node, lambda: False, 0.2)
+    ev = CollisionEvent()
+    ev.event, ev.id = CollisionEvent.START, 7
+    ev.onset.sec, ev.onset.nanosec = 11, 0
+    pub_col.publish(ev)
+    _wait(node, lambda: False, 0.3)
+    for k in range(20):
+        send(sample.frames, 11.0 + 0.1 * k)
+        if _wait(node, lambda: bool(contacts), 0.5):
+            break
+    assert contacts, "no contact published"
+    c = contacts[-1]
+    assert c.collision_id == 7 and c.header.frame_id == "base"
+    link = {"plate": Contact.PLATE, "arm": Contact.ARM, "rod": Contact.ROD}[sample.link]
+    assert c.link == link and c.chain == sample.chain
+    assert np.linalg.norm([c.point.x - sample.point[0], c.point.y - sample.point[1],
+                           c.point.z - sample.point[2]]) < 0.02
