@@ -210,3 +210,18 @@ def test_drawn_collisions_stay_in_their_ranges_and_the_force_profile_is_bounded(
     assert d is None or 0.0 <= d <= c.approach_distance + 1e-12
     if c.onset <= t <= c.end_time:
         assert d == 0.0
+
+
+@needs_trajectories
+def test_lead_in_holds_the_start_pose_then_shifts_trajectory_and_collision(desc):
+    sim = Simulator(desc, scenario="arm", cameras=False, lead_in=1.0)
+    assert sim.collision.onset == pytest.approx(load_scenario("arm").onset.nominal + 1.0)
+    z0 = sim.state().zeta
+    sim.run_until(0.9)
+    assert np.abs(sim.state().zeta - z0).max() < 2e-3            # at rest during the lead-in
+    sim.run_until(sim.collision.onset + 0.1)
+    log = sim.truth_log()
+    assert log["time"][np.argmax(np.linalg.norm(log["force"], axis=1) > 0)] == pytest.approx(
+        sim.collision.onset, abs=2e-3)
+    with pytest.raises(SimulatorError, match="lead_in"):
+        Simulator(desc, cameras=False, lead_in=-1.0)

@@ -3,7 +3,9 @@
 Parameters: scenario (none | plate | arm | rod | YAML path), seed, randomize, real_time_factor (1.0; 0 = as fast as
 possible), camera_rate_hz (30), cameras (true), clock_rate_hz (250: every 4 ms of sim time; every sim-time node
 handles each /clock message, so 1 kHz costs the whole graph CPU), truth_rate_hz (100), boards (true: the virtual
-Uno/Mega ptys linked at link_dir, /tmp/hexa_sim/{uno,mega}), duration (0 = run until shut down).
+Uno/Mega ptys linked at link_dir, /tmp/hexa_sim/{uno,mega}), duration (0 = run until shut down), start_delay (wall s
+with sim time frozen at 0 before stepping, while the rest of the graph starts), lead_in (sim s at rest before the
+trajectory and the scenario's clock start; the collision happens at lead_in + the scenario's onset).
 Topics (relative, under the node namespace, e.g. /hexa): cam_{top,side}/color/image_raw (rgb8),
 cam_{top,side}/color/camera_info, cam_{top,side}/aligned_depth_to_color/image_raw (16UC1 mm),
 cam_{top,side}/aligned_depth_to_color/camera_info (sensor-data QoS); sim/wrench_truth (WrenchStamped: force at the
@@ -69,9 +71,11 @@ def main(argv: list[str] | None = None) -> int:
             self.use_boards = bool(p("boards", True).value)
             self.link_dir = str(p("link_dir", "/tmp/hexa_sim").value)
             self.duration = float(p("duration", 0.0).value)
+            self.lead_in = float(p("lead_in", 0.0).value)
+            self.start_delay = float(p("start_delay", 0.0).value)
             scenario = None if self.scenario in ("", "none") else self.scenario
             self.sim = Simulator(seed=self.seed, scenario=scenario, cameras=self.use_cams,
-                                 randomize=self.randomize)
+                                 randomize=self.randomize, lead_in=self.lead_in)
             self.boards = VirtualBoards(self.sim, link_dir=self.link_dir).start() if self.use_boards else None
             self.clock_pub = self.create_publisher(Clock, "/clock", 10)
             self.cam_pubs = {}
@@ -148,11 +152,19 @@ def main(argv: list[str] | None = None) -> int:
             cam_period = 1.0 / self.cam_rate if (self.use_cams and self.cam_rate > 0) else None
             next_cam = 0.0
             k = 0
-            wall0 = time.monotonic()
-            sim_t0 = sim.time
             if cam_period is not None:
                 self.publish_cameras()
                 next_cam = cam_period
+            hold_until = time.monotonic() + self.start_delay
+            while rclpy.ok() and time.monotonic() < hold_until:   # sim time frozen at 0 while the graph starts
+                self.clock_pub.publish(Clock(clock=stamp(sim.time)))
+                self.publish_truth()
+                if cam_period is not None:
+                    self.publish_cameras()
+                rclpy.spin_once(self, timeout_sec=0.0)
+                time.sleep(min(0.5, max(0.0, hold_until - time.monotonic())))
+            wall0 = time.monotonic()
+            sim_t0 = sim.time
             while rclpy.ok():
                 sim.step(1)
                 k += 1

@@ -15,6 +15,7 @@ the integration and q̈ (`qacc`), τ (`actuator_force`) computed in the same cal
 """
 from __future__ import annotations
 
+import dataclasses
 import threading
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -144,11 +145,13 @@ class Simulator:
         settle: seconds simulated before t = 0 holding the start targets, so the robot starts at rest under gravity.
         trajectory: without a scenario, follow this trajectory ("circle", "helix", "ellipse") in free motion for its
             duration (hexa.trajectories.DURATIONS), then hold its last pose.
+        lead_in: seconds of sim time at rest at the start pose before the trajectory (and the scenario's clock)
+            starts, e.g. to let a ROS graph come up and calibrate; collision times are shifted by it.
     """
 
     def __init__(self, desc: Any = None, seed: int = 0, scenario: Any = None, cameras: bool = True,
                  pose: np.ndarray | None = None, drive: str | None = None, randomize: bool = False,
-                 settle: float = 0.5, trajectory: str | None = None) -> None:
+                 settle: float = 0.5, trajectory: str | None = None, lead_in: float = 0.0) -> None:
         self.desc = _desc_default(desc)
         self.config: SimConfig = sim_config_of(self.desc)
         self.seed = int(seed)
@@ -160,6 +163,11 @@ class Simulator:
             else:
                 spec = scenario if isinstance(scenario, ScenarioSpec) else load_scenario(scenario)
                 self.collision = draw_collision(spec, np.random.default_rng([self.seed, 1]) if randomize else None)
+        if lead_in < 0:
+            raise SimulatorError(f"lead_in must be >= 0 s, got {lead_in}")
+        self.lead_in = float(lead_in)
+        if self.collision is not None and self.lead_in > 0:
+            self.collision = dataclasses.replace(self.collision, onset=self.collision.onset + self.lead_in)
         self.trajectory = self.collision.trajectory if self.collision is not None else trajectory
         self.drive = drive or ("trajectory" if self.trajectory is not None else "external")
         if self.drive not in ("trajectory", "external"):
@@ -179,11 +187,11 @@ class Simulator:
             start_pose = np.asarray(fn(0.0)[0], dtype=float)
             if self.drive == "trajectory":
                 dt = self.config.timestep
-                duration = float(getattr(trajectories, "DURATIONS", {}).get(self.trajectory, 10.0))
+                duration = float(getattr(trajectories, "DURATIONS", {}).get(self.trajectory, 10.0)) + self.lead_in
                 if self.collision is not None:
                     duration = max(duration, self.collision.end_time + 3.0)
                 t = np.arange(int(np.ceil(duration / dt)) + 1) * dt
-                poses = np.asarray(fn(t)[0], dtype=float)
+                poses = np.asarray(fn(np.maximum(t - self.lead_in, 0.0))[0], dtype=float)
                 self._traj_targets = kin.inverse_kinematics_batch(self.desc, poses)
         else:
             start_pose = HOME_POSE if pose is None else np.asarray(pose, dtype=float)
