@@ -72,3 +72,45 @@ def test_enable_service_releases_the_simulated_robot_through_the_ros_graph(procs
     assert all(not m[0] for m in r["after_last"]), r["after_last"][-3:]   # released and staying released
     moved = [abs(a - b) > 1e-6 for a, b in zip(r["cmd_last"], r["ref_last"])]
     assert moved == [False, False, True, True]                 # V1 moved only limbs 3 and 4
+
+
+PROBE_TRAJ = r"""
+import json, time
+import rclpy
+from rclpy.node import Node
+from hexa_msgs.msg import SingularityIndices
+from sensor_msgs.msg import JointState
+from hexa_bringup.rosenv import apply_defaults
+apply_defaults()
+rclpy.init()
+n = Node("srm_probe_traj", namespace="/upsrpu")
+ind, ref = [], []
+n.create_subscription(SingularityIndices, "singularity", lambda m: ind.append([time.monotonic(), m.near]), 10)
+n.create_subscription(JointState, "joint_references", lambda m: ref.append(list(m.position)), 10)
+t0 = time.monotonic()
+while time.monotonic() - t0 < 45:
+    rclpy.spin_once(n, timeout_sec=0.05)
+    near = [m[1] for m in ind]
+    if True in near and near.index(True) < len(near) - 1 and len(near) > near.index(True) + 200 \
+            and not any(near[-100:]):
+        break
+near = [m[1] for m in ind]
+print(json.dumps({"n": len(ind), "first_near": near.index(True) if True in near else None,
+                  "last_100_near": sum(near[-100:]), "ref_first": ref[0] if ref else None,
+                  "ref_last": ref[-1] if ref else None}))
+"""
+
+
+def test_srm_node_plays_trajectory_2_and_auto_enables_the_release(procs, ros_env):
+    ns = ["--ros-args", "-r", "__ns:=/upsrpu"]
+    procs.start([PY, "-m", "hexa_dynamics.upsrpu_sim_node", *ns, "-p", "publish_markers:=false"], ros_env)
+    procs.start([PY, "-m", "hexa_dynamics.singularity_node", *ns], ros_env)
+    procs.start([PY, "-m", "hexa_dynamics.srm_node", *ns, "-p", "trajectory:=2", "-p", "auto_enable_after:=1.0"],
+                ros_env)
+    probe = procs.start([PY, "-c", PROBE_TRAJ], ros_env)
+    out, err = probe.communicate(timeout=120)
+    assert probe.returncode == 0, err
+    r = json.loads(out.strip().splitlines()[-1])
+    assert r["first_near"] is not None, "the robot never reached the near-singular end of trajectory 2"
+    assert r["last_100_near"] == 0, "not released after the automatic enable"
+    assert r["ref_first"] != r["ref_last"]                 # the reference trajectory was played

@@ -21,6 +21,7 @@ import rclpy
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from geometry_msgs.msg import PoseArray, PoseStamped
 from hexa_msgs.srv import EnableSrm
+from rcl_interfaces.msg import ParameterDescriptor
 from rclpy.executors import ExternalShutdownException
 from rclpy.node import Node
 from sensor_msgs.msg import JointState
@@ -39,7 +40,9 @@ class SrmNode(Node):
         self.desc = load_upsrpu(str(self.declare_parameter("description", "").value) or None)
         variant = int(self.declare_parameter("variant", 1).value)
         self.srm = SingularityReleaseModule(self.desc, variant)
-        self.trajectory = str(self.declare_parameter("trajectory", "").value)
+        # "1".."5" arrive as integers from `-p trajectory:=2`: accept any type and use its text
+        self.trajectory = str(self.declare_parameter("trajectory", "",
+                                                     ParameterDescriptor(dynamic_typing=True)).value or "")
         mode = str(self.declare_parameter("input", "pose").value)
         self.enabled = bool(self.declare_parameter("enabled", False).value)
         self.auto_enable_after = float(self.declare_parameter("auto_enable_after", -1.0).value)
