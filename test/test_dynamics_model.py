@@ -193,6 +193,13 @@ def test_single_sample_kernel_equals_the_vectorized_model(pose_frac, rates_tau):
     np.testing.assert_allclose(V, s.V[0], atol=1e-12)
     np.testing.assert_allclose(pi, mt.momentum[0], atol=1e-13)
     np.testing.assert_allclose(u, mt.known_rate[0], atol=1e-12)
+    # the pose-driven path: twist given, ζ̇ = J_ζ V inside
+    V2, pi2, u2 = ker.terms(geo, None, tau.tolist(), s.p[0].tolist(), s.R[0].ravel().tolist(), twist=s.V[0].tolist())
+    np.testing.assert_allclose(pi2, mt.momentum[0], atol=1e-13)
+    np.testing.assert_allclose(u2, mt.known_rate[0], atol=1e-12)
+    # arm angles of the pose by Newton from a nearby guess
+    np.testing.assert_allclose(ker.arm_angles((zeta + 0.05).tolist(), s.p[0].tolist(), s.R[0].ravel().tolist()),
+                               zeta, atol=1e-10)
     # pose tracking from a disturbed start converges back to the pose of ζ
     _, p, R = ker.track_pose(zeta.tolist(), (s.p[0] + 0.002).tolist(), (s.R[0] @ kin.rotation_zyx(0.01, -0.02, 0.01))
                              .ravel().tolist(), 1e-14, 6)

@@ -170,80 +170,115 @@ class SampleKernel:
             R = exp_rotate(dx6[3], dx6[4], dx6[5], R)
         raise KernelError(f"pose tracking did not converge (max |f| = {fmax:.3g} m²)")
 
-    def terms(self, geo: list, zd: Sequence[float], tau: Sequence[float], p: Sequence[float],
-              R: Sequence[float]) -> tuple[Vec, Vec, Vec]:
-        """(V, π, u) for one sample with geometry `geo` (from geometry/track_pose)."""
+    def arm_angles(self, zeta0: Sequence[float], p: Sequence[float], R: Sequence[float], tol: float = 1e-13,
+                   iterations: int = 8) -> list[float]:
+        """ζ of the plate pose (p, R) by per-chain Newton on f_i(ζ_i) = 0 (eq 15) from the guess zeta0 (the branch
+        of the guess is kept)."""
+        la, ld2 = self.la, self.ld2
+        r00, r01, r02, r10, r11, r12, r20, r21, r22 = R
+        px, py, pz = p
+        out = []
+        for i in range(6):
+            cx, cy, cz = self.C[i]
+            ax, ay, az = self.A[i]
+            Cx = px + r00 * cx + r01 * cy + r02 * cz - ax
+            Cy = py + r10 * cx + r11 * cy + r12 * cz - ay
+            Cz = pz + r20 * cx + r21 * cy + r22 * cz - az
+            ca, sa = self.ca[i], self.sa[i]
+            z = zeta0[i]
+            for _ in range(iterations):
+                c, s_ = math.cos(z), math.sin(z)
+                dx, dy, dz = Cx + la * ca * c, Cy + la * sa * c, Cz - la * s_
+                f = dx * dx + dy * dy + dz * dz - ld2
+                if abs(f) < tol:
+                    break
+                dfdz = -2.0 * la * (dx * ca * s_ + dy * sa * s_ + dz * c)
+                if abs(dfdz) < 1e-12:
+                    raise KernelError(f"chain {i + 1}: serial singularity while solving its arm angle")
+                z -= f / dfdz
+            else:
+                raise KernelError(f"chain {i + 1}: arm angle did not converge (|f| = {abs(f):.3g} m²)")
+            out.append(z)
+        return out
+
+    def terms(self, geo: list, zd: Sequence[float] | None, tau: Sequence[float], p: Sequence[float],
+              R: Sequence[float], twist: Sequence[float] | None = None) -> tuple[Vec, Vec, Vec]:
+        """(V, π, u) for one sample with geometry `geo` (from geometry/track_pose); the twist is J_ζ⁻¹ζ̇, or
+        `twist` as given (then ζ̇ = J_ζ V).
+
+        Per chain, with j_i = [d, r × d]/D, everything folds into forces at C_i plus couples:
+        π_i = [Y, r × Y] with Y = (a/D) d + f_C, u_i = [X, r × X + (ω × r) × Y] with X = (c'/D) d + (a/D) ḋ + g_C
+        (a = J_a ζ̇ + l_a u'·f_B, c' = c − a Ḋ/D; see lagrange._momentum_terms for the unfolded terms)."""
         la, k1, k0 = self.la, self.k, 1.0 - self.k
         Ja, mr, Ir, b = self.Ja, self.mr, self.Ir, self.b
         gx, gy, gz = self.g
-        J = []
-        for (rx, ry, rz, ux, uy, uz, vx, vy, vz, dx, dy, dz, dd, D) in geo:
-            if abs(D) < 1e-12:
-                raise KernelError("serial singularity (rod perpendicular to the arm's motion)")
-            iD = 1.0 / D
-            J.append([dx * iD, dy * iD, dz * iD, (ry * dz - rz * dy) * iD, (rz * dx - rx * dz) * iD,
-                      (rx * dy - ry * dx) * iD])
-        V = solve6(J, zd)
+        mk0, mk1 = mr * k0, mr * k1
+        gcx0, gcy0, gcz0 = mk1 * gx, mk1 * gy, mk1 * gz
+        mg = self.mas + la * mk0
+        if twist is None:
+            J = []
+            for (rx, ry, rz, ux, uy, uz, vx, vy, vz, dx, dy, dz, dd, D) in geo:
+                if abs(D) < 1e-12:
+                    raise KernelError("serial singularity (rod perpendicular to the arm's motion)")
+                iD = 1.0 / D
+                J.append([dx * iD, dy * iD, dz * iD, (ry * dz - rz * dy) * iD, (rz * dx - rx * dz) * iD,
+                          (rx * dy - ry * dx) * iD])
+            V = solve6(J, zd)
+        else:
+            V = list(twist)
         v0, v1, v2, w0, w1, w2 = V
         p0 = p1 = p2 = p3 = p4 = p5 = 0.0
         u0 = u1 = u2 = u3 = u4 = u5 = 0.0
-        mas = self.mas
-        grc = la * k0 * mr
         for i in range(6):
             rx, ry, rz, ux, uy, uz, vx, vy, vz, dx, dy, dz, dd, D = geo[i]
-            j0, j1, j2, j3, j4, j5 = J[i]
-            z1 = zd[i]
-            # velocities
+            if abs(D) < 1e-12:
+                raise KernelError("serial singularity (rod perpendicular to the arm's motion)")
+            iD = 1.0 / D
             qx = w1 * rz - w2 * ry  # ω × r
             qy = w2 * rx - w0 * rz
             qz = w0 * ry - w1 * rx
             cdx, cdy, cdz = v0 + qx, v1 + qy, v2 + qz  # Ċ
+            z1 = zd[i] if twist is None else (dx * cdx + dy * cdy + dz * cdz) * iD  # ζ̇ = j·V
             lz = la * z1
             bdx, bdy, bdz = lz * vx, lz * vy, lz * vz  # Ḃ
             ex, ey, ez = cdx - bdx, cdy - bdy, cdz - bdz  # ḋ
             Dd = la * (ex * vx + ey * vy + ez * vz - z1 * (dx * ux + dy * uy + dz * uz))
-            iD = 1.0 / D
-            # rod momenta
             idd = 1.0 / dd
-            hx = mr * (k0 * bdx + k1 * cdx)
-            hy = mr * (k0 * bdy + k1 * cdy)
-            hz = mr * (k0 * bdz + k1 * cdz)
-            Lx = Ir * (dy * ez - dz * ey) * idd  # I_r ω_r, ω_r = d × ḋ / |d|²
-            Ly = Ir * (dz * ex - dx * ez) * idd
-            Lz = Ir * (dx * ey - dy * ex) * idd
-            wcx = (Ly * dz - Lz * dy) * idd  # L × d / |d|²
-            wcy = (Lz * dx - Lx * dz) * idd
-            wcz = (Lx * dy - Ly * dx) * idd
+            sg = (dx * ex + dy * ey + dz * ez) * idd  # (d·ḋ)/|d|² (0 on the constraint manifold)
+            cI = Ir * idd
+            # rod: linear momentum at the COM, angular momentum I_r ω_r as a couple wc = (I_r ω_r) × d / |d|²
+            hx, hy, hz = mk0 * bdx + mk1 * cdx, mk0 * bdy + mk1 * cdy, mk0 * bdz + mk1 * cdz
+            wcx, wcy, wcz = cI * (ex - sg * dx), cI * (ey - sg * dy), cI * (ez - sg * dz)
             fcx, fcy, fcz = k1 * hx + wcx, k1 * hy + wcy, k1 * hz + wcz
             fbx, fby, fbz = k0 * hx - wcx, k0 * hy - wcy, k0 * hz - wcz
-            # ac = (L × ḋ − 2 (d·ḋ)/|d|² L × d) / |d|²
-            s2 = 2.0 * (dx * ex + dy * ey + dz * ez)
-            acx = (Ly * ez - Lz * ey - s2 * wcx) * idd
-            acy = (Lz * ex - Lx * ez - s2 * wcy) * idd
-            acz = (Lx * ey - Ly * ex - s2 * wcz) * idd
+            # ac = ((I_r ω_r) × ḋ − 2 (d·ḋ)/|d|² (I_r ω_r) × d) / |d|²
+            a1 = cI * sg
+            a2 = cI * (ex * ex + ey * ey + ez * ez) * idd
+            a3 = 2.0 * sg
+            acx = a1 * ex - a2 * dx - a3 * wcx
+            acy = a1 * ey - a2 * dy - a3 * wcy
+            acz = a1 * ez - a2 * dz - a3 * wcz
             a = Ja * z1 + la * (vx * fbx + vy * fby + vz * fbz)
-            upg = vx * gx + vy * gy + vz * gz
-            c = (tau[i] - b * z1 + (mas + grc) * upg
+            c = (tau[i] - b * z1 + mg * (vx * gx + vy * gy + vz * gz)
                  - la * (z1 * (ux * fbx + uy * fby + uz * fbz) + vx * acx + vy * acy + vz * acz))
-            # j̇ = (jd_raw − j Ḋ) / D:  u += c j + a j̇ = (c − a Ḋ/D) j + (a/D) jd_raw
-            ca_ = c - a * Dd * iD
             aD = a * iD
-            p0 += a * j0 + fcx
-            p1 += a * j1 + fcy
-            p2 += a * j2 + fcz
-            p3 += a * j3 + ry * fcz - rz * fcy
-            p4 += a * j4 + rz * fcx - rx * fcz
-            p5 += a * j5 + rx * fcy - ry * fcx
-            gcx, gcy, gcz = k1 * mr * gx + acx, k1 * mr * gy + acy, k1 * mr * gz + acz
-            u0 += ca_ * j0 + aD * ex + gcx
-            u1 += ca_ * j1 + aD * ey + gcy
-            u2 += ca_ * j2 + aD * ez + gcz
-            u3 += (ca_ * j3 + aD * ((qy * dz - qz * dy) + (ry * ez - rz * ey))
-                   + ry * gcz - rz * gcy + qy * fcz - qz * fcy)
-            u4 += (ca_ * j4 + aD * ((qz * dx - qx * dz) + (rz * ex - rx * ez))
-                   + rz * gcx - rx * gcz + qz * fcx - qx * fcz)
-            u5 += (ca_ * j5 + aD * ((qx * dy - qy * dx) + (rx * ey - ry * ex))
-                   + rx * gcy - ry * gcx + qx * fcy - qy * fcx)
+            cD = (c - aD * Dd) * iD
+            Yx, Yy, Yz = aD * dx + fcx, aD * dy + fcy, aD * dz + fcz
+            Xx = cD * dx + aD * ex + gcx0 + acx
+            Xy = cD * dy + aD * ey + gcy0 + acy
+            Xz = cD * dz + aD * ez + gcz0 + acz
+            p0 += Yx
+            p1 += Yy
+            p2 += Yz
+            p3 += ry * Yz - rz * Yy
+            p4 += rz * Yx - rx * Yz
+            p5 += rx * Yy - ry * Yx
+            u0 += Xx
+            u1 += Xy
+            u2 += Xz
+            u3 += ry * Xz - rz * Xy + qy * Yz - qz * Yy
+            u4 += rz * Xx - rx * Xz + qz * Yx - qx * Yz
+            u5 += rx * Xy - ry * Xx + qx * Yy - qy * Yx
         pi = [p0, p1, p2, p3, p4, p5]
         u = [u0, u1, u2, u3, u4, u5]
         # plate

@@ -41,7 +41,9 @@ if TYPE_CHECKING:
     from numpy.typing import NDArray
 
 AXIS_NAMES = ("fx", "fy", "fz", "mx", "my", "mz")
-REJECT_REASONS = ("non_finite", "time_not_increasing", "gap", "bad_shape", "pose_tracking", "singular", "no_pose")
+REJECT_REASONS = ("non_finite", "time_not_increasing", "gap", "bad_shape", "pose_tracking", "singular", "no_pose",
+                  "pose_stale")
+KINEMATICS = ("arm", "pose")
 
 
 class ObserverError(ValueError):
@@ -56,6 +58,13 @@ class ObserverConfig:
     releases below release_ratio·r_low (hysteresis); min_duration (s): over threshold this long before START, all axes
     released this long before END; max_gap (s): longer arm-sample spacing is a gap; pose_tolerance (m²): largest
     |f_i| accepted after pose tracking.
+
+    kinematics: "arm" — ζ (and ζ̇) come with the arm samples, the plate pose is tracked from them (servos with
+    angle feedback, the simulator); "pose" — the arm samples bring only τ (and at most the commanded ζ, used as a
+    seed), ζ and the twist come from the camera poses: a polynomial of order `pose_fit_order` fitted to the last
+    `pose_window` poses is evaluated (extrapolated) at each arm sample, ζ by Newton on eq 15 per chain; arm samples
+    more than `max_pose_age` s after the newest pose are rejected as pose_stale. This is the paper's set-up
+    (currents + plate pose from image processing) and the one for hobby servos, whose angle is not measured.
     """
 
     gains: tuple[float, ...] = (25.0, 25.0, 25.0, 25.0, 25.0, 25.0)
@@ -65,6 +74,10 @@ class ObserverConfig:
     max_gap: float = 0.1
     pose_tolerance: float = 1e-10
     newton_iterations: int = 4
+    kinematics: str = "arm"
+    pose_window: int = 8
+    pose_fit_order: int = 1
+    max_pose_age: float = 0.1
 
     def __post_init__(self) -> None:
         g = np.asarray(self.gains, dtype=float)
@@ -79,6 +92,13 @@ class ObserverConfig:
             raise ObserverError(f"min_duration must be >= 0 s, got {self.min_duration!r}")
         if not self.max_gap > 0.0:
             raise ObserverError(f"max_gap must be > 0 s, got {self.max_gap!r}")
+        if self.kinematics not in KINEMATICS:
+            raise ObserverError(f"kinematics must be one of {KINEMATICS}, got {self.kinematics!r}")
+        if not (0 <= self.pose_fit_order <= 3 and self.pose_window >= self.pose_fit_order + 1):
+            raise ObserverError(f"pose_fit_order {self.pose_fit_order!r} needs 0..3 and pose_window "
+                                f"{self.pose_window!r} >= order + 1")
+        if not self.max_pose_age > 0.0:
+            raise ObserverError(f"max_pose_age must be > 0 s, got {self.max_pose_age!r}")
 
 
 @dataclass(frozen=True)
@@ -182,6 +202,63 @@ def _finite(*arrays: NDArray | None) -> bool:
     return all(a is None or bool(np.all(np.isfinite(a))) for a in arrays)
 
 
+class PoseFit:
+    """Least-squares polynomial in time through the last camera poses (Z-Y-X angles unwrapped): pose, twist at t."""
+
+    def __init__(self, window: int, order: int) -> None:
+        self.window, self.order = window, order
+        self._t: list[float] = []
+        self._q: list[list[float]] = []
+        self.t_last = -math.inf
+        self._coef: list[list[float]] | None = None
+
+    def add(self, t: float, q: list[float]) -> None:
+        if self._q:
+            last = self._q[-1]
+            q = q[:3] + [a + math.remainder(a_new - a, 2 * math.pi) for a, a_new in zip(last[3:], q[3:])]
+        self._t.append(t)
+        self._q.append(q)
+        if len(self._t) > self.window:
+            del self._t[0], self._q[0]
+        self.t_last = t
+        n = len(self._t)
+        m = min(self.order, n - 1)
+        h = np.asarray(self._t) - t
+        A = np.vander(h, m + 1, increasing=True)
+        coef, *_ = np.linalg.lstsq(A, np.asarray(self._q), rcond=None)
+        self._coef = coef.tolist()
+
+    @property
+    def ready(self) -> bool:
+        return self._coef is not None
+
+    def clear(self) -> None:
+        self._t.clear()
+        self._q.clear()
+        self._coef = None
+        self.t_last = -math.inf
+
+    def evaluate(self, t: float) -> tuple[tuple, tuple, list[float]]:
+        """(p, R flat, V = [ṗ, ω]) at time t."""
+        h = t - self.t_last
+        c = self._coef
+        q = list(c[0])
+        qd = [0.0] * 6
+        hp = 1.0
+        for k in range(1, len(c)):
+            ck = c[k]
+            for m in range(6):
+                qd[m] += k * ck[m] * hp
+            hp *= h
+            for m in range(6):
+                q[m] += ck[m] * hp
+        a, b, g = q[3], q[4], q[5]
+        da, db, dg = qd[3], qd[4], qd[5]
+        ca, sa, cb, sb = math.cos(a), math.sin(a), math.cos(b), math.sin(b)
+        w = (-sa * db + ca * cb * dg, ca * db + sa * cb * dg, da - sb * dg)  # ω = E(α, β)·(α̇, β̇, γ̇), eq 38
+        return (q[0], q[1], q[2]), _rotation_zyx_flat(a, b, g), [qd[0], qd[1], qd[2], w[0], w[1], w[2]]
+
+
 class _ArmSample:
     __slots__ = ("t", "zeta", "tau", "zeta_dot", "pi", "u", "p", "R", "V", "Q")
 
@@ -213,6 +290,10 @@ class ResidualObserver:
             raise ObserverError(f"form must be 'momentum' or 'direct', got {form!r}")
         self.params = params
         self.config = config or ObserverConfig()
+        if form == "direct" and self.config.kinematics == "pose":
+            raise ObserverError("the direct form needs ζ̈ from the arm samples: use kinematics='arm' with it")
+        self._fit = PoseFit(self.config.pose_window, self.config.pose_fit_order)
+        self._zeta_est: list[float] | None = None
         self.form = form
         self._K = np.asarray(self.config.gains, dtype=float)
         self._kernel = SampleKernel(params)
@@ -277,6 +358,8 @@ class ResidualObserver:
             return False
         self._cam = (float(t), tuple(q[:3]), _rotation_zyx_flat(q[3], q[4], q[5]))
         self._cam_t = float(t)
+        if self.config.kinematics == "pose":
+            self._fit.add(float(t), q)
         return True
 
     def update_arm(self, t: float, zeta: NDArray, tau: NDArray, zeta_dot: NDArray | None = None,
@@ -288,16 +371,17 @@ class ResidualObserver:
         except (TypeError, ValueError):
             self._reject("bad_shape")
             return None
-        z = _floats(zeta)
+        pose_mode = self.config.kinematics == "pose"
+        z = None if (zeta is None and pose_mode) else _floats(zeta)
         tq = _floats(tau)
         zd = None if zeta_dot is None else _floats(zeta_dot)
         q = None if pose is None else _floats(pose)
-        if (z is None or tq is None or len(z) != 6 or len(tq) != 6
+        if ((z is None and not pose_mode) or tq is None or (z is not None and len(z) != 6) or len(tq) != 6
                 or (zeta_dot is not None and (zd is None or len(zd) != 6))
                 or (pose is not None and (q is None or len(q) != 6))):
             self._reject("bad_shape")
             return None
-        if not (math.isfinite(t) and _all_finite(z) and _all_finite(tq) and (zd is None or _all_finite(zd))
+        if not (math.isfinite(t) and (z is None or _all_finite(z)) and _all_finite(tq) and (zd is None or _all_finite(zd))
                 and (q is None or _all_finite(q))):
             self._reject("non_finite")
             return None
@@ -312,8 +396,30 @@ class ResidualObserver:
                 self._est = (self._est[0], self._est[1], self._est[2], (0.0,) * 6)
         ker = self._kernel
         cfg = self.config
+        V = None
+        if pose_mode:
+            if not self._fit.ready:
+                self._reject("no_pose")
+                return None
+            if t - self._fit.t_last > cfg.max_pose_age:
+                self._reject("pose_stale")
+                return None
+            p, R, V = self._fit.evaluate(t)
+            seed = self._zeta_est if self._zeta_est is not None else z
+            if seed is None:  # the first sample must bring a guess of ζ (the commanded angles will do)
+                self._reject("no_pose")
+                return None
+            try:
+                z = ker.arm_angles(seed, p, R)
+                geo, _ = ker.geometry(z, p, R)
+            except KernelError:
+                self._reject("pose_tracking")
+                return None
+            zd = [0.0] * 6  # not used: the twist comes from the pose fit
         try:
-            if q is not None:
+            if pose_mode:
+                pass
+            elif q is not None:
                 p, R = tuple(q[:3]), _rotation_zyx_flat(q[3], q[4], q[5])
                 geo, _ = ker.geometry(z, p, R)
             else:
@@ -342,7 +448,7 @@ class ResidualObserver:
             h = t - t0
             zd = [(z[i] - z0[i]) / h for i in range(6)]
         try:
-            s = self._evaluate(t, z, tq, zd, p, R, geo, zeta_ddot)
+            s = self._evaluate(t, z, tq, zd, p, R, geo, zeta_ddot, V)
         except (KernelError, DynamicsError, np.linalg.LinAlgError):
             self._reject("singular")
             return None
@@ -350,6 +456,7 @@ class ResidualObserver:
         prev = self._prev
         self._cam = None
         self._est = (t, p, R, s.V)
+        self._zeta_est = z
         self._angles = (t, z)
         self._last_t = t
         self._prev = s
@@ -384,11 +491,11 @@ class ResidualObserver:
                               pose=pose, events=events)
 
     # ------------------------------------------------------------------ model evaluation
-    def _evaluate(self, t, z, tq, zd, p, R, geo, zeta_ddot) -> _ArmSample:
+    def _evaluate(self, t, z, tq, zd, p, R, geo, zeta_ddot, V=None) -> _ArmSample:
         s = _ArmSample()
         s.t, s.zeta, s.tau, s.zeta_dot, s.p, s.R = t, z, tq, zd, p, R
         if self.form == "momentum":
-            s.V, s.pi, s.u = self._kernel.terms(geo, zd, tq, p, R)
+            s.V, s.pi, s.u = self._kernel.terms(geo, zd, tq, p, R, twist=V)
             s.Q = None
             return s
         prm = self.params
