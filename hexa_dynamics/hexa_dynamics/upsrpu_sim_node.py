@@ -8,7 +8,7 @@ advances t_s per tick), `push_at` (s after start, < 0 = never), `push_force` (N)
 Topics: sub `joint_commands` (sensor_msgs/JointState, limb_1..limb_4, metres); pub `pose`
 (geometry_msgs/PoseStamped in frame `upsrpu_base`, X_c with the push deflection), `pose_fk` (FK of the encoder
 lengths), `joint_states` (position q_c m, velocity m/s, effort tau N), `markers/fixed`, `markers/mobile`
-(geometry_msgs/PoseArray in frame `tracking_world`).
+(geometry_msgs/PoseArray in frame `tracking_world`), `/diagnostics`.
 """
 from __future__ import annotations
 
@@ -16,6 +16,7 @@ import sys
 
 import numpy as np
 import rclpy
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from geometry_msgs.msg import Pose, PoseArray, PoseStamped
 from rclpy.executors import ExternalShutdownException
 from rclpy.node import Node
@@ -62,9 +63,13 @@ class UpsrpuSimNode(Node):
         self.pub_js = self.create_publisher(JointState, "joint_states", 10)
         self.pub_fixed = self.create_publisher(PoseArray, "markers/fixed", 10)
         self.pub_mobile = self.create_publisher(PoseArray, "markers/mobile", 10)
+        self.pub_diag = self.create_publisher(DiagnosticArray, "/diagnostics", 10)
         self.create_subscription(JointState, "joint_commands", self._on_command, 10)
         self.rejected = 0
+        self.fk_failures = 0
+        self.ticks = 0
         self.create_timer(1.0 / rate, self._tick)
+        self.create_timer(1.0, self._diagnostics)
 
     def _on_command(self, msg: JointState) -> None:
         try:
@@ -88,8 +93,10 @@ class UpsrpuSimNode(Node):
         try:
             s = self.plant.advance(self.q_d, self.desc.t_s)
         except ForwardKinematicsError as exc:
+            self.fk_failures += 1
             self.get_logger().error(f"plant FK failed: {exc}", throttle_duration_sec=2.0)
             return
+        self.ticks += 1
         stamp = self.get_clock().now().to_msg()
         ps = PoseStamped()
         ps.header.stamp = stamp
@@ -119,6 +126,20 @@ class UpsrpuSimNode(Node):
                     m.orientation.w = 1.0
                     arr.poses.append(m)
                 pub.publish(arr)
+
+
+    def _diagnostics(self) -> None:
+        arr = DiagnosticArray()
+        arr.header.stamp = self.get_clock().now().to_msg()
+        bad = self.fk_failures > 0
+        st = DiagnosticStatus(level=DiagnosticStatus.WARN if bad else DiagnosticStatus.OK,
+                              name=self.get_fully_qualified_name(), message="FK failures" if bad else "ok")
+        st.values = [KeyValue(key="sim_time", value=f"{self.plant.t:.2f}"),
+                     KeyValue(key="ticks", value=str(self.ticks)),
+                     KeyValue(key="rejected_commands", value=str(self.rejected)),
+                     KeyValue(key="fk_failures", value=str(self.fk_failures))]
+        arr.status = [st]
+        self.pub_diag.publish(arr)
 
 
 def main(argv: list[str] | None = None) -> int:
