@@ -146,3 +146,21 @@ def test_hexa_indices_give_fifteen_pairs_and_match_rod_wrench_screws():
         np.testing.assert_allclose(r.omega, ref, atol=1e-8)
         J_D, _ = hexa6rus.constraint_jacobians(h, pose, hexa6rus.inverse_kinematics(h, pose))
         assert r.det_jd == pytest.approx(np.linalg.det(J_D))
+
+
+def test_indices_stay_consistent_approaching_an_exact_singularity():
+    from scipy.optimize import brentq
+
+    def det_at(psi: float) -> float:
+        return float(np.linalg.det(kin.jacobian_jd(DESC, np.array([0.125, 0.77, 0.05, psi]))))
+
+    psi_s = brentq(det_at, 0.3, 0.4, xtol=1e-15)           # a true type II singularity (det J_D = 0)
+    prev = math.inf
+    for eps in (1e-2, 1e-3, 1e-4, 1e-5, 1e-6, 1e-8):
+        X = np.array([0.125, 0.77, 0.05, psi_s + eps])
+        fast = sg.upsrpu_indices(DESC, X)
+        ref = sg.upsrpu_indices_from_screws(DESC, X)
+        np.testing.assert_allclose(fast.omega, ref.omega, atol=1e-8)
+        assert fast.min_pair == "3-4" and fast.min_omega <= prev   # Omega_34 -> 0 with det J_D -> 0
+        prev = fast.min_omega
+    assert prev < 1e-7

@@ -179,7 +179,7 @@ def _angles_between_rows(A: np.ndarray) -> np.ndarray | None:
 
 def _well_conditioned(J: np.ndarray, det: float) -> bool:
     """|det J| is far from zero relative to Hadamard's bound (so inv(J) columns are accurate directions)."""
-    return abs(det) > 1e-10 * float(np.prod(np.sqrt(np.einsum("ij,ij->i", J, J))))
+    return abs(det) > 1e-7 * float(np.prod(np.sqrt(np.einsum("ij,ij->i", J, J))))
 
 
 def upsrpu_indices(desc: UpsrpuDescription, X: np.ndarray) -> SingularityReport:
