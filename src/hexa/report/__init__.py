@@ -1,0 +1,1 @@
+"""Reports: metrics and plots of demo runs (ROS-free, from arrays)."""

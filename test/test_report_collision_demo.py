@@ -1,0 +1,65 @@
+"""Demo metrics on a hand-checkable synthetic case."""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from hexa.report.collision_demo import CaseData, compute_metrics, markdown_table, plot_case, write_report
+
+
+def _case() -> CaseData:
+    t = np.arange(0, 3.0, 0.01)
+    f = np.zeros((len(t), 3))
+    on = (t >= 1.0) & (t < 2.0)
+    f[on, 0] = 4.0 * (t[on] - 1.0) / 1.0 * 2  # ramps 0 → 8 N; exceeds 2 N at t = 1.25 (first sample > 2: 1.26)
+    point = np.tile([0.1, 0.0, -0.55], (len(t), 1))
+    link = np.full(len(t), 0)
+    chain = np.zeros(len(t), dtype=int)
+    wt = np.arange(1.3, 1.9, 0.1)
+    wf = np.interp(wt, t, f[:, 0])[:, None] * np.array([[1.0, 0.0, 0.0]]) + np.array([[0.5, -1.0, 0.0]])
+    return CaseData(
+        case="plate", truth_t=t, truth_force=f, truth_point=point, truth_link=link, truth_chain=chain,
+        events=[(0.5, "START", 1, "fx"), (0.6, "END", 1, "fx"), (1.27, "START", 2, "fx"), (2.1, "END", 2, "fx")],
+        contact_t=np.array([1.3, 1.4, 1.5]), contact_link=np.array([0, 0, 1]), contact_chain=np.array([0, 0, 3]),
+        contact_point=np.array([[0.1, 0.003, -0.55], [0.1, 0.004, -0.55], [0.2, 0.0, -0.55]]),
+        wrench_t=wt, wrench_force=wf)
+
+
+def test_metrics_of_a_hand_checkable_case():
+    m = compute_metrics(_case())
+    assert m.onset_true == pytest.approx(1.01)
+    assert m.exceed_time == pytest.approx(1.26)
+    assert m.detect_time == pytest.approx(1.27) and m.delay_ms == pytest.approx(10.0)
+    assert m.false_starts == 1
+    assert (m.found_link, m.found_chain) == ("plate", 0)      # majority of the three contacts
+    assert m.point_error_median_mm == pytest.approx(4.0)
+    assert m.force_rmse[0] == pytest.approx(0.5) and m.force_rmse[1] == pytest.approx(1.0)
+    assert m.force_rmse[2] == pytest.approx(0.0)
+    assert m.paper_rmse == (0.819, 0.476, 1.282)
+
+
+def test_no_detection_and_no_outputs_give_nan_not_garbage():
+    d = _case()
+    d.events, d.contact_t, d.wrench_t = [], np.zeros(0), np.zeros(0)
+    m = compute_metrics(d)
+    assert math.isnan(m.delay_ms) and m.found_link == "none" and all(math.isnan(v) for v in m.force_rmse)
+    assert "—" in markdown_table([m])
+
+
+def test_case_without_true_contact_is_refused():
+    d = _case()
+    d.truth_force[:] = 0.0
+    with pytest.raises(ValueError, match="no contact"):
+        compute_metrics(d)
+
+
+def test_report_and_plot_are_written(tmp_path):
+    d = _case()
+    m = compute_metrics(d)
+    png = plot_case(d, m, tmp_path / "plate.png")
+    rep = write_report([m], {"plate": png}, tmp_path)
+    assert png.stat().st_size > 10_000
+    text = rep.read_text()
+    assert "| plate | plate 0 | plate 0 |" in text and "plate.png" in text
