@@ -236,3 +236,24 @@ def test_arm_samples_before_any_pose_are_rejected_as_no_pose():
     assert obs.update_arm(0.0, DATA["zeta"][0], DATA["tau"][0], DATA["zeta_dot"][0]) is None
     assert obs.rejected["no_pose"] == 1
     assert math.isinf(-obs._last_t)
+
+
+def test_vectorized_lag_equals_the_sample_by_sample_recursion():
+    """The batch lag (blockwise closed form) is the recursion r_k = a_k r_{k−1} + (1 − a_k) w_k, even with large gains,
+    irregular spacing and long runs."""
+    from hexa.dynamics.observer import _first_order_lag
+
+    rng = np.random.default_rng(7)
+    n = 20000
+    dt = rng.uniform(0.0002, 0.003, n - 1)
+    dt[5000] = 0.5  # a long interval
+    w = rng.normal(size=(n, 6)) + np.where(np.arange(n) > 10000, 3.0, 0.0)[:, None]
+    K = np.array([25.0, 5.0, 400.0, 1.0, 60.0, 25.0])
+    r = _first_order_lag(w, dt, K)
+    a = np.exp(-dt[:, None] * K)
+    ref = np.zeros_like(w)
+    rk = np.zeros(6)
+    for k in range(n - 1):
+        rk = a[k] * rk + (1 - a[k]) * w[k + 1]
+        ref[k + 1] = rk
+    np.testing.assert_allclose(r, ref, atol=1e-10)

@@ -585,14 +585,28 @@ def direct_residual_batch(params: HexaDynamicParameters, t: NDArray, zeta: NDArr
     return BatchResidual(time=t, wrench=r, r_zyz=wrench_to_generalized_zyz(r, state.R), instantaneous=Q)
 
 
-def _first_order_lag(w: NDArray, dt: NDArray, gains: Iterable[float] | float) -> NDArray:
-    K = np.broadcast_to(np.asarray(gains, dtype=float), (6,))
-    a = np.exp(-dt[:, None] * K[None, :])
-    b = 1.0 - a
+def _first_order_lag(w: NDArray, dt: NDArray, gains: Iterable[float] | float, span: float = 200.0) -> NDArray:
+    """r_0 = 0, r_k = a_k r_{k−1} + (1 − a_k) w_k with a_k = exp(−K Δt_k), vectorized.
+
+    Unrolled, r_k = e^{−K t_k} (e^{K t_s} r_s + Σ_{s<i≤k} e^{K t_i}(1 − a_i) w_i) from a block start s; blocks are cut
+    so that K·(t_k − t_s) ≤ `span` (no overflow, no loss of the recent terms)."""
+    K = np.broadcast_to(np.asarray(gains, dtype=float), (6,)).astype(float)
+    n = w.shape[0]
+    t = np.concatenate([[0.0], np.cumsum(dt)])
+    b = 1.0 - np.exp(-dt[:, None] * K[None, :])
+    bw = np.zeros_like(w)
+    bw[1:] = b * w[1:]
     r = np.zeros_like(w)
-    rk = np.zeros(6)
-    bw = b * w[1:]
-    for k in range(a.shape[0]):
-        rk = a[k] * rk + bw[k]
-        r[k + 1] = rk
+    block = span / float(K.max())
+    start = 0
+    r_s = np.zeros(6)
+    while start < n - 1:
+        stop = int(np.searchsorted(t, t[start] + block, side="right"))
+        stop = min(max(stop, start + 2), n)
+        tau = t[start:stop] - t[start]
+        e = np.exp(K[None, :] * tau[:, None])
+        acc = np.cumsum(e[1:] * bw[start + 1:stop], axis=0)
+        r[start + 1:stop] = (r_s + acc) / e[1:]
+        r_s = r[stop - 1]
+        start = stop - 1
     return r
