@@ -103,7 +103,7 @@ def build_mjcf(desc: Any, pose: np.ndarray | None = None, config: SimConfig | No
     w = out.append
     w('<mujoco model="hexa">')
     w(f'<compiler angle="radian" autolimits="true"/>')
-    w(f'<option timestep="{cfg.timestep:.9g}" integrator="implicitfast" gravity="0 0 -9.81" cone="elliptic">'
+    w(f'<option timestep="{cfg.timestep:.9g}" integrator="Euler" gravity="0 0 -9.81" cone="elliptic">'
       '<flag contact="disable"/></option>')
     w('<visual><global offwidth="640" offheight="480"/><quality shadowsize="0" offsamples="0"/>'
       '<headlight ambient="0.35 0.35 0.35" diffuse="0.55 0.55 0.55" specular="0.05 0.05 0.05"/>'
