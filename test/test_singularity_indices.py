@@ -64,7 +64,10 @@ def test_dependent_wrenches_give_zero_omega_for_the_implicated_limbs():
     om, pairs = sg.omega_angles(sg.output_twist_screws(W))
     d = dict(zip(pairs, om))
     assert d["1-2"] < 1e-6 and d["1-6"] < 1e-6 and d["2-6"] < 1e-6
-    assert d["3-4"] == 0.0                # uninvolved OTS are undefined at the exact singularity -> reported 0
+    assert d["3-4"] == pytest.approx(math.pi / 2)   # uninvolved OTS are undefined there -> not implicated
+    assert d["1-3"] == pytest.approx(math.pi / 2)
+    rep = sg.indices_from_screws(0.0, W)
+    assert rep.min_pair in ("1-2", "1-6", "2-6")
 
 
 def test_pairs_follow_the_papers_v_omega_order():
@@ -164,3 +167,7 @@ def test_indices_stay_consistent_approaching_an_exact_singularity():
         assert fast.min_pair == "3-4" and fast.min_omega <= prev   # Omega_34 -> 0 with det J_D -> 0
         prev = fast.min_omega
     assert prev < 1e-7
+    # at the singularity itself every limb is in the dependency: all OTS coincide and every Omega vanishes
+    # (near it Omega_34 is ~100 times smaller than the others, which is what names the pair)
+    exact = sg.upsrpu_indices(DESC, np.array([0.125, 0.77, 0.05, psi_s]))
+    assert np.all(exact.omega < 1e-6)

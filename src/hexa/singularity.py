@@ -11,7 +11,9 @@ swapped wrenches (m; f), $O_i spans the null space of W without row i, which is 
 Omega_ij (seed 003 eq 7) is the angle between the lines of the angular parts of $O_i and $O_j, in [0, pi/2].
 An OTS whose angular part vanishes (pure translation, screw axis at infinity) is compared by its linear part
 with another pure translation, and counts as 90 deg from a rotation (a rotation and a translation cannot be
-linearly dependent).
+linearly dependent). At an exact singularity of rank 5 only the OTS of the limbs in the dependency are defined
+(they all equal the uncontrolled twist, so their Omega is 0); pairs with an undefined OTS are reported as 90 deg
+so that the minimum still names the implicated limbs. With rank <= 4 nothing is defined and every Omega is 0.
 """
 from __future__ import annotations
 
@@ -147,7 +149,9 @@ def omega_angles(twists: np.ndarray) -> tuple[np.ndarray, tuple[str, ...]]:
     c = np.abs(np.einsum("ij,ij->i", dirs[ii], dirs[jj])) / (n[ii] * n[jj])
     om = np.arccos(np.minimum(c, 1.0))
     om = np.where(rot[ii] != rot[jj], np.pi / 2, om)
-    om = np.where(defined[ii] & defined[jj], om, 0.0)   # undefined OTS: treat the pair as singular
+    if not defined.any():                     # rank <= 4: every pair singular
+        return np.zeros(len(ii)), names
+    om = np.where(defined[ii] & defined[jj], om, np.pi / 2)   # undefined OTS: not the implicated pair
     return om, names
 
 
