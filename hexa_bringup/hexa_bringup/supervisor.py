@@ -57,7 +57,8 @@ class Supervisor:
     def __init__(self, specs: list[NodeSpec], env: dict[str, str], log_dir: str | None = None,
                  out: TextIO = sys.stdout, status_every: float = 5.0, backoff_initial: float = 0.5,
                  backoff_max: float = 30.0, stable_after: float = 5.0, max_quick_failures: int = 3,
-                 clock: Callable[[], float] = time.monotonic) -> None:
+                 clock: Callable[[], float] = time.monotonic,
+                 progress: Callable[[], str] | None = None) -> None:
         if not specs:
             raise SupervisorError("nothing to supervise: the graph has no nodes")
         names = [s.name for s in specs]
@@ -73,6 +74,7 @@ class Supervisor:
         self.stable_after = stable_after
         self.max_quick_failures = max_quick_failures
         self.clock = clock
+        self.progress = progress
         self._stop_signal: int | None = None
         self._finished = False
         self.failure: str | None = None
@@ -200,6 +202,8 @@ class Supervisor:
                     self._check(n, now)
                 if now >= next_status:
                     print(self.status_table(), file=self.out, flush=True)
+                    if self.progress is not None:
+                        self._say(self.progress())
                     next_status = now + self.status_every
                 if duration and now - start >= duration:
                     break

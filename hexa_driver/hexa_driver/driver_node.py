@@ -270,7 +270,10 @@ def main(args: list[str] | None = None) -> int:
     executor = MultiThreadedExecutor(num_threads=3)
     executor.add_node(node)
     try:
-        executor.spin()
+        # spin_once with a timeout, not spin(): with our own signal handling the C wait is not woken by SIGINT,
+        # and with use_sim_time no timer fires once /clock stops (e.g. the simulator exited first).
+        while rclpy.ok():
+            executor.spin_once(timeout_sec=0.1)
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
     finally:

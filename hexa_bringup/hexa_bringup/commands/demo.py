@@ -1,50 +1,65 @@
-"""`hexa demo`: the main job on the simulated robot (the paper's three collision cases)."""
+"""`hexa demo`: the paper's three collision cases on the simulated robot with the whole node graph → report."""
 from __future__ import annotations
 
 import argparse
-import importlib.util
 import json
-
-GRAPH = [
-    ("hexa-sim", "hexa_bringup.sim_node", "MuJoCo Hexa: /clock, cam_top/*, cam_side/*, sim/*, virtual Uno + Mega ptys"),
-    ("hexa-driver", "hexa_driver.driver_node", "serial driver: joint_states, motor_currents, /diagnostics"),
-    ("hexa-pose", "hexa_vision.pose_node", "plate detector + markers: plate_detections, plate_pose"),
-    ("hexa-observer", "hexa_dynamics.observer_node", "residual observer: residual, collision"),
-    ("hexa-isolation", "hexa_vision.isolation_node", "contact point from both cameras: contact"),
-    ("hexa-rnea", "hexa_dynamics.rnea_node", "Newton-Euler identification: contact_wrench"),
-    ("hexa-singularity", "hexa_dynamics.singularity_node", "det J_D and 15 Omega: singularity"),
-    ("hexa-trajectory", "hexa_dynamics.trajectory_node", "paper trajectories through IK: joint_commands"),
-]
+import os
+import sys
+from pathlib import Path
 
 
 def register(sub: argparse._SubParsersAction) -> None:
-    p = sub.add_parser("demo", help="the paper's three collision cases on the simulated robot (report + table)")
+    p = sub.add_parser("demo", help="the paper's three collision cases on the simulated robot (bag, report, table)")
     p.add_argument("--case", choices=["plate", "arm", "rod", "all"], default="all")
-    p.add_argument("--out", default="out/demo", help="output directory for the report")
-    p.add_argument("--json", action="store_true")
+    p.add_argument("--out", default="out/demo", help="output directory (bags, logs, report.md, PNGs)")
+    p.add_argument("--seed", type=int, default=0, help="scenario seed (timings/positions drawn from it)")
+    p.add_argument("--rtf", type=float, default=0.5, help="simulator real-time factor (the graph must keep up)")
+    p.add_argument("--record-images", action="store_true", help="also record the camera topics (large bags)")
+    p.add_argument("--ns", default="/hexa")
+    p.add_argument("--json", action="store_true", help="print the metrics as JSON")
     p.set_defaults(func=run)
 
 
 def run(args: argparse.Namespace) -> int:
-    status = []
-    for entry, module, role in GRAPH:
-        present = importlib.util.find_spec(module.split(".")[0]) is not None and _module_exists(module)
-        status.append({"entry_point": entry, "module": module, "role": role, "present": present})
+    from hexa.report.collision_demo import compute_metrics, markdown_table, plot_case, write_report
+    from hexa_bringup.demo_run import CASES, case_data_from_bag, run_case
+    from hexa_bringup.rosenv import ros_env
+    from hexa_bringup.supervisor import SupervisorError
+
+    out = Path(args.out)
+    out.mkdir(parents=True, exist_ok=True)
+    domain = int(os.environ.get("ROS_DOMAIN_ID", str(100 + os.getpid() % 100)))
+    env = ros_env(domain)  # localhost discovery: the demo never talks to other machines
+    os.environ.update(env)  # the progress display in this process joins the same graph
+    cases = list(CASES) if args.case == "all" else [args.case]
+    metrics, plots, problems = [], {}, []
+    for i, case in enumerate(cases, 1):
+        print(f"\n=== hexa demo: case {i}/{len(cases)}: {case} (scenario {CASES[case][0]}, trajectory "
+              f"{CASES[case][1]}, {CASES[case][2]:.1f} s of sim time at {args.rtf:g}x real time) ===", flush=True)
+        try:
+            run = run_case(case, out, env, ns=args.ns, seed=args.seed, real_time_factor=args.rtf,
+                           record_images=args.record_images)
+        except SupervisorError as exc:
+            print(f"hexa demo: cannot start the graph: {exc}", file=sys.stderr)
+            return 2
+        if run.returncode != 0:
+            problems.append(f"{case}: the graph did not run cleanly (see {run.log_dir})")
+        try:
+            data = case_data_from_bag(case, run.bag, args.ns)
+            m = compute_metrics(data)
+        except Exception as exc:  # noqa: BLE001 - report the case as failed, go on with the others
+            problems.append(f"{case}: no metrics ({exc})")
+            continue
+        metrics.append(m)
+        plots[case] = plot_case(data, m, out / f"{case}.png")
+        print(f"case {case} done in {run.wall_s:.0f} s wall", flush=True)
+    notes = "\n".join(f"- {p}" for p in problems)
+    report = write_report(metrics, plots, out, notes=("Problems:\n" + notes) if problems else "")
     if args.json:
-        print(json.dumps({"graph": status, "ran": False}))
-        return 0
-    print("hexa demo: the graph `hexa bringup sim` starts (namespace /hexa), one process per node:")
-    for s in status:
-        print(f"  [{'x' if s['present'] else ' '}] {s['entry_point']:18s} {s['role']}")
-    missing = [s["entry_point"] for s in status if not s["present"]]
-    if missing:
-        print(f"\nNot all nodes exist yet ({', '.join(missing)}): the end-to-end demo (issue 8) is unfinished, "
-              "so nothing is started. See README 'Status'.")
-    return 0
-
-
-def _module_exists(module: str) -> bool:
-    try:
-        return importlib.util.find_spec(module) is not None
-    except ModuleNotFoundError:
-        return False
+        print(json.dumps({"report": str(report), "cases": [m.as_dict() for m in metrics], "problems": problems}))
+    else:
+        print("\n" + markdown_table(metrics))
+        if problems:
+            print("\nProblems:\n" + notes)
+        print(f"\nreport: {report}")
+    return 0 if metrics and not problems else 1

@@ -1,0 +1,167 @@
+"""`hexa demo` machinery: run one collision case of the paper on the simulated robot with the whole node graph,
+record a bag, and turn the bag into the arrays of hexa.report.collision_demo."""
+from __future__ import annotations
+
+import os
+import sys
+import threading
+import time
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from hexa_bringup.graphs import DEFAULT_PARAMS, build_graph
+from hexa_bringup.supervisor import NodeSpec, Supervisor
+
+#: case -> (scenario, trajectory, sim seconds to run: nominal onset + rise + release + margin)
+CASES: dict[str, tuple[str, str, float]] = {
+    "plate": ("plate", "circle", 5.5),
+    "arm": ("arm", "helix", 7.3),
+    "rod": ("rod", "ellipse", 6.5),
+}
+
+RECORDED = ["sim/wrench_truth", "sim/contact_truth", "sim/plate_pose_truth", "sim/joint_states_truth", "residual",
+            "collision", "contact", "contact_wrench", "joint_states", "joint_commands", "motor_currents",
+            "plate_pose", "plate_detections", "trajectory_state", "singularity", "/diagnostics"]
+IMAGES = ["cam_top/color/image_raw", "cam_top/aligned_depth_to_color/image_raw", "cam_top/color/camera_info",
+          "cam_side/color/image_raw", "cam_side/aligned_depth_to_color/image_raw", "cam_side/color/camera_info"]
+
+
+@dataclass
+class CaseRun:
+    case: str
+    bag: Path
+    log_dir: Path
+    returncode: int
+    wall_s: float
+
+
+class _ClockWatcher:
+    """Reads /clock in a background thread for the progress display."""
+
+    def __init__(self, env: dict[str, str]) -> None:
+        self.t = 0.0
+        self._stop = threading.Event()
+        self._thread = threading.Thread(target=self._run, args=(env,), daemon=True)
+
+    def _run(self, env: dict[str, str]) -> None:
+        try:
+            import rclpy
+            from rclpy.executors import SingleThreadedExecutor
+            from rosgraph_msgs.msg import Clock
+
+            ctx = rclpy.context.Context()
+            rclpy.init(context=ctx, domain_id=int(env.get("ROS_DOMAIN_ID", "0")))
+            node = rclpy.create_node(f"hexa_demo_progress_{os.getpid()}", context=ctx,
+                                     start_parameter_services=False)
+
+            def on_clock(m: Clock) -> None:
+                self.t = m.clock.sec + m.clock.nanosec * 1e-9
+
+            node.create_subscription(Clock, "/clock", on_clock, 10)
+            ex = SingleThreadedExecutor(context=ctx)
+            ex.add_node(node)
+            while not self._stop.is_set():
+                ex.spin_once(timeout_sec=0.1)
+            ex.shutdown()
+            node.destroy_node()
+            rclpy.shutdown(context=ctx)
+        except Exception as exc:  # noqa: BLE001 - progress is cosmetic; say why it is missing
+            print(f"hexa demo: no progress display ({exc})", file=sys.stderr)
+
+    def __enter__(self) -> "_ClockWatcher":
+        self._thread.start()
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self._stop.set()
+        self._thread.join(timeout=5)
+
+
+def run_case(case: str, out_dir: Path, env: dict[str, str], ns: str = "/hexa", seed: int = 0,
+             real_time_factor: float = 0.5, record_images: bool = False, duration: float | None = None,
+             params: Path = DEFAULT_PARAMS, status_every: float = 5.0) -> CaseRun:
+    """Bring up the sim graph for `case`, record a bag until the scenario is over, stop everything."""
+    scenario, trajectory, default_duration = CASES[case]
+    sim_s = default_duration if duration is None else duration
+    case_dir = out_dir / case
+    case_dir.mkdir(parents=True, exist_ok=True)
+    bag = case_dir / "bag"
+    if bag.exists():
+        import shutil
+
+        shutil.rmtree(bag)
+    node_args = {
+        "sim": ["-p", f"scenario:={scenario}", "-p", f"seed:={seed}", "-p", f"real_time_factor:={real_time_factor}",
+                "-p", f"duration:={sim_s}", "-p", "use_sim_time:=false", "-p", f"link_dir:=/tmp/hexa_sim_{os.getpid()}"],
+        "driver": ["-p", f"uno_port:=/tmp/hexa_sim_{os.getpid()}/uno", "-p", f"mega_port:=/tmp/hexa_sim_{os.getpid()}/mega"],
+        "trajectory": ["-p", f"trajectory:={trajectory}", "-p", "start_time:=0.0"],
+        "singularity": ["-p", "robot:=hexa"],
+    }
+    specs = build_graph("sim", ns, params, node_args)
+    for s in specs:
+        if s.name == "sim":
+            s.ends_graph = True
+    topics = [t if t.startswith("/") else f"{ns}/{t}" for t in RECORDED + (IMAGES if record_images else [])]
+    specs.append(NodeSpec("record", [sys.executable, "-m", "hexa_bringup.cli", "record", *topics, "-o", str(bag),
+                                     "--use-sim-time"], required=True, respawn=False))
+    t0 = time.monotonic()
+    with _ClockWatcher(env) as clock:
+        sup = Supervisor(specs, env, log_dir=str(case_dir / "logs"), status_every=status_every,
+                         progress=lambda: f"case {case}: sim t = {clock.t:5.2f} / {sim_s:.2f} s "
+                                          f"({100 * min(1.0, clock.t / sim_s):3.0f} %)")
+        rc = sup.run()
+    return CaseRun(case, bag, case_dir / "logs", rc, time.monotonic() - t0)
+
+
+def _stamp(h) -> float:
+    return h.stamp.sec + h.stamp.nanosec * 1e-9
+
+
+def case_data_from_bag(case: str, bag: Path, ns: str = "/hexa"):
+    """The CaseData of hexa.report.collision_demo from a recorded bag.
+
+    Raises:
+        hexa_bringup.bag.BagError: the bag is unreadable; ValueError: it lacks the simulator's ground truth.
+    """
+    from hexa.report.collision_demo import CaseData
+    from hexa_bringup.bag import read_bag, typestore
+
+    store = typestore()
+    rows: dict[str, list] = {k: [] for k in ("truth", "wrench_truth", "res", "ev", "contact", "wrench")}
+    for topic, msgtype, _t, data in read_bag(bag):
+        name = topic[len(ns) + 1:] if topic.startswith(ns + "/") else topic
+        if name not in ("sim/contact_truth", "sim/wrench_truth", "residual", "collision", "contact",
+                        "contact_wrench"):
+            continue
+        m = store.deserialize_cdr(data, msgtype)
+        if name == "sim/contact_truth":
+            rows["truth"].append((_stamp(m.header), m.link, m.chain, m.point.x, m.point.y, m.point.z))
+        elif name == "sim/wrench_truth":
+            f = m.wrench.force
+            rows["wrench_truth"].append((_stamp(m.header), f.x, f.y, f.z))
+        elif name == "residual":
+            w = m.wrench
+            rows["res"].append((_stamp(m.header), w.force.x, w.force.y, w.force.z, w.torque.x, w.torque.y,
+                                w.torque.z, *[float(v) for v in m.threshold]))
+        elif name == "collision":
+            rows["ev"].append((_stamp(m.header), "START" if m.event == 0 else "END", int(m.id), str(m.axis_name)))
+        elif name == "contact":
+            rows["contact"].append((_stamp(m.header), m.link, m.chain, m.point.x, m.point.y, m.point.z))
+        elif name == "contact_wrench":
+            rows["wrench"].append((_stamp(m.header), m.force.x, m.force.y, m.force.z))
+    if not rows["truth"] or not rows["wrench_truth"]:
+        raise ValueError(f"bag {bag} has no simulator ground truth (sim/contact_truth, sim/wrench_truth)")
+    truth = np.array(sorted(rows["truth"]), dtype=float)
+    wt = np.array(sorted(rows["wrench_truth"]), dtype=float)
+    force = np.stack([np.interp(truth[:, 0], wt[:, 0], wt[:, k]) for k in (1, 2, 3)], axis=1)
+    res = np.array(sorted(rows["res"]), dtype=float) if rows["res"] else np.zeros((0, 13))
+    con = np.array(sorted(rows["contact"]), dtype=float) if rows["contact"] else np.zeros((0, 6))
+    wr = np.array(sorted(rows["wrench"]), dtype=float) if rows["wrench"] else np.zeros((0, 4))
+    return CaseData(
+        case=case, truth_t=truth[:, 0], truth_force=force, truth_point=truth[:, 3:6],
+        truth_link=truth[:, 1].astype(int), truth_chain=truth[:, 2].astype(int),
+        residual_t=res[:, 0], residual=res[:, 1:7], threshold=res[0, 7:13] if len(res) else np.full(6, 2.0),
+        events=sorted(rows["ev"]), contact_t=con[:, 0], contact_link=con[:, 1].astype(int),
+        contact_chain=con[:, 2].astype(int), contact_point=con[:, 3:6], wrench_t=wr[:, 0], wrench_force=wr[:, 1:4])
