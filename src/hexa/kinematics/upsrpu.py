@@ -42,14 +42,6 @@ def rotation_yz(theta: float, psi: float) -> np.ndarray:
                      [-st * cp, st * sp, ct]])
 
 
-def _rotation_and_partials(theta: float, psi: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    ct, st, cp, sp = math.cos(theta), math.sin(theta), math.cos(psi), math.sin(psi)
-    R = np.array([[ct * cp, -ct * sp, st], [sp, cp, 0.0], [-st * cp, st * sp, ct]])
-    dR_dtheta = np.array([[-st * cp, st * sp, ct], [0.0, 0.0, 0.0], [-ct * cp, ct * sp, -st]])
-    dR_dpsi = np.array([[-ct * sp, -ct * cp, 0.0], [cp, -sp, 0.0], [st * sp, st * cp, 0.0]])
-    return R, dR_dtheta, dR_dpsi
-
-
 def platform_joints_base(desc: UpsrpuDescription, X: np.ndarray) -> np.ndarray:
     """A1, B1, C1 in the fixed frame (3, 3) for pose X."""
     R = rotation_yz(X[2], X[3])
