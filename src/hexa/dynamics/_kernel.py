@@ -315,3 +315,87 @@ class SampleKernel:
         u[4] += oz * mgx - ox * mgz + (woz * hpx - wox * hpz)
         u[5] += ox * mgy - oy * mgx + (wox * hpy - woy * hpx)
         return V, pi, u
+
+    def newton_euler(self, geo: list, V: Sequence[float], Vd: Sequence[float], tau: Sequence[float],
+                     R: Sequence[float]) -> dict:
+        """Per-chain loads of one sample for the identification (seed 000 eqs 27–30), no external load assumed:
+        f_C (force of rod i on the plate), F_r = m_r(a_r − g), M_r = I_r ω̇_r, s_B = u'·f_B from the arm's axis
+        moment, ζ̈, ζ̇; and the plate's F_p = m_p(a_p − g), its moment need N_p = ρ × F_p + I ω̇ + ω × I ω, ρ."""
+        la, k1, k0 = self.la, self.k, 1.0 - self.k
+        Ja, mr, Ir, b, mas = self.Ja, self.mr, self.Ir, self.b, self.mas
+        gx, gy, gz = self.g
+        v0, v1, v2, w0, w1, w2 = V
+        a0, a1, a2, e0, e1, e2 = Vd
+        fC, rodF, rodM, sB, zdd_l, zd_l = [], [], [], [], [], []
+        for i in range(6):
+            rx, ry, rz, ux, uy, uz, vx, vy, vz, dx, dy, dz, dd, D = geo[i]
+            if abs(D) < 1e-12:
+                raise KernelError(f"chain {i + 1} is at a serial singularity (rod ⟂ arm motion)")
+            iD, idd = 1.0 / D, 1.0 / dd
+            qx, qy, qz = w1 * rz - w2 * ry, w2 * rx - w0 * rz, w0 * ry - w1 * rx  # ω × r
+            cdx, cdy, cdz = v0 + qx, v1 + qy, v2 + qz  # Ċ
+            z1 = (dx * cdx + dy * cdy + dz * cdz) * iD  # ζ̇
+            lz = la * z1
+            ex, ey, ez = cdx - lz * vx, cdy - lz * vy, cdz - lz * vz  # ḋ
+            # C̈ = v̇ + ω̇ × r + ω × (ω × r)
+            ccx = a0 + e1 * rz - e2 * ry + w1 * qz - w2 * qy
+            ccy = a1 + e2 * rx - e0 * rz + w2 * qx - w0 * qz
+            ccz = a2 + e0 * ry - e1 * rx + w0 * qy - w1 * qx
+            z2 = (dx * ccx + dy * ccy + dz * ccz + lz * z1 * (dx * ux + dy * uy + dz * uz)
+                  + ex * ex + ey * ey + ez * ez) * iD  # ζ̈ (differentiated eq 15 twice)
+            l2, l1 = la * z2, la * z1 * z1
+            bbx, bby, bbz = l2 * vx - l1 * ux, l2 * vy - l1 * uy, l2 * vz - l1 * uz  # B̈
+            fx = mr * (k0 * bbx + k1 * ccx - gx)  # F_r = m_r (a_r − g)
+            fy = mr * (k0 * bby + k1 * ccy - gy)
+            fz = mr * (k0 * bbz + k1 * ccz - gz)
+            ddx, ddy, ddz = ccx - bbx, ccy - bby, ccz - bbz  # d̈
+            s2 = 2.0 * (dx * ex + dy * ey + dz * ez) * idd
+            mx = Ir * ((dy * ddz - dz * ddy) - s2 * (dy * ez - dz * ey)) * idd  # M_r = I_r ω̇_r
+            my = Ir * ((dz * ddx - dx * ddz) - s2 * (dz * ex - dx * ez)) * idd
+            mz = Ir * ((dx * ddy - dy * ddx) - s2 * (dx * ey - dy * ex)) * idd
+            # moments about B: d × f_C = −κ d × F_r − M_r
+            nbx = -k1 * (dy * fz - dz * fy) - mx
+            nby = -k1 * (dz * fx - dx * fz) - my
+            nbz = -k1 * (dx * fy - dy * fx) - mz
+            px_, py_, pz_ = (nby * dz - nbz * dy) * idd, (nbz * dx - nbx * dz) * idd, (nbx * dy - nby * dx) * idd
+            s_b = (tau[i] - Ja * z2 + mas * (vx * gx + vy * gy + vz * gz) - b * z1) / la
+            nd = math.sqrt(dd)
+            hx, hy, hz = dx / nd, dy / nd, dz / nd
+            den = vx * hx + vy * hy + vz * hz
+            if abs(den) < 1e-9:
+                raise KernelError(f"chain {i + 1} is at a serial singularity (u'·d = 0)")
+            t_ax = (s_b - (vx * (px_ + fx) + vy * (py_ + fy) + vz * (pz_ + fz))) / den
+            fC.append([t_ax * hx + px_, t_ax * hy + py_, t_ax * hz + pz_])
+            rodF.append([fx, fy, fz])
+            rodM.append([mx, my, mz])
+            sB.append(s_b)
+            zdd_l.append(z2)
+            zd_l.append(z1)
+        r00, r01, r02, r10, r11, r12, r20, r21, r22 = R
+        cx, cy, cz = self.cp
+        ox, oy, oz = r00 * cx + r01 * cy + r02 * cz, r10 * cx + r11 * cy + r12 * cz, r20 * cx + r21 * cy + r22 * cz
+        qx, qy, qz = w1 * oz - w2 * oy, w2 * ox - w0 * oz, w0 * oy - w1 * ox
+        apx = a0 + e1 * oz - e2 * oy + w1 * qz - w2 * qy
+        apy = a1 + e2 * ox - e0 * oz + w2 * qx - w0 * qz
+        apz = a2 + e0 * oy - e1 * ox + w0 * qy - w1 * qx
+        mp = self.mp
+        Fp = [mp * (apx - gx), mp * (apy - gy), mp * (apz - gz)]
+        # I_world x = R I_p Rᵀ x
+        Ip = self.Ip
+
+        def iw(x0: float, x1: float, x2: float) -> tuple[float, float, float]:
+            b0 = r00 * x0 + r10 * x1 + r20 * x2
+            b1 = r01 * x0 + r11 * x1 + r21 * x2
+            b2 = r02 * x0 + r12 * x1 + r22 * x2
+            c0 = Ip[0][0] * b0 + Ip[0][1] * b1 + Ip[0][2] * b2
+            c1 = Ip[1][0] * b0 + Ip[1][1] * b1 + Ip[1][2] * b2
+            c2 = Ip[2][0] * b0 + Ip[2][1] * b1 + Ip[2][2] * b2
+            return (r00 * c0 + r01 * c1 + r02 * c2, r10 * c0 + r11 * c1 + r12 * c2, r20 * c0 + r21 * c1 + r22 * c2)
+
+        ia = iw(e0, e1, e2)
+        lw = iw(w0, w1, w2)
+        Np = [oy * Fp[2] - oz * Fp[1] + ia[0] + w1 * lw[2] - w2 * lw[1],
+              oz * Fp[0] - ox * Fp[2] + ia[1] + w2 * lw[0] - w0 * lw[2],
+              ox * Fp[1] - oy * Fp[0] + ia[2] + w0 * lw[1] - w1 * lw[0]]
+        return {"fC": fC, "rod_F": rodF, "rod_M": rodM, "s_B": sB, "zeta_ddot": zdd_l, "zeta_dot": zd_l,
+                "plate_F": Fp, "plate_N": Np, "rho": [ox, oy, oz]}

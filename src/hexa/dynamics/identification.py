@@ -24,13 +24,14 @@ force (minimum-norm solution), never noise.
 """
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
 import numpy as np
 
-from hexa.dynamics.lagrange import (DynamicsError, HexaDynamicParameters, MotionState, _accelerations, _cross,
-                                    _dot, _Geometry, _Velocity)
+from hexa.dynamics._kernel import KernelError, SampleKernel
+from hexa.dynamics.lagrange import DynamicsError, HexaDynamicParameters, MotionState
 
 if TYPE_CHECKING:
     from numpy.typing import NDArray
@@ -65,14 +66,30 @@ class ContactForceEstimate:
     chain_forces: NDArray
 
 
+_KERNELS: dict[int, tuple[HexaDynamicParameters, SampleKernel]] = {}
+
+
+def _kernel_of(params: HexaDynamicParameters) -> SampleKernel:
+    """The single-sample kernel of these parameters (cached; the cache holds the parameters, so ids stay unique)."""
+    hit = _KERNELS.get(id(params))
+    if hit is None:
+        if len(_KERNELS) > 32:
+            _KERNELS.clear()
+        hit = (params, SampleKernel(params))
+        _KERNELS[id(params)] = hit
+    return hit[1]
+
+
+def _cross3(a, b) -> list[float]:
+    return [a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]]
+
+
 def _lstsq(A: NDArray, b: NDArray, rcond: float) -> tuple[NDArray, int, NDArray, float, NDArray, float]:
     U, s, Vt = np.linalg.svd(A, full_matrices=True)
     smax = s[0] if s.size else 0.0
     keep = s > rcond * smax if smax > 0 else np.zeros_like(s, dtype=bool)
     rank = int(keep.sum())
-    x = np.zeros(A.shape[1])
-    for k in range(rank):
-        x += (U[:, k] @ b) / s[k] * Vt[k]
+    x = ((U[:, :rank].T @ b) / s[:rank]) @ Vt[:rank]
     svals = np.zeros(A.shape[1])
     svals[: s.size] = s
     cond = float(svals[0] / svals[-1]) if svals[-1] > 0 else float("inf")
@@ -101,55 +118,61 @@ def identify_contact_force(params: HexaDynamicParameters, state: MotionState, ta
     if D.shape != (3,) or not np.all(np.isfinite(D)):
         raise IdentificationError(f"point must be 3 finite coordinates (m), got {point!r}")
     tau = np.asarray(tau, dtype=float).reshape(6)
+    if not np.all(np.isfinite(tau)):
+        raise IdentificationError(f"tau must be 6 finite torques (N·m), got {tau.tolist()}")
     prm = params
-    g = _Geometry(prm, state.zeta, state.p, state.R)
-    vel = _Velocity(prm, g, state.V, state.R)
-    acc = _accelerations(prm, g, vel, state.V, state.V_dot, state.R)
-    d, up = g.d[0], g.up[0]
-    rod_F, rod_M = acc.rod_F[0], acc.rod_M[0]
-    dd = g.dd[0]
-    # rod: perpendicular part of f_C from the moments about B (eq 30)
-    m_B = -prm.kappa * _cross(d, rod_F) - rod_M
-    fC_perp = _cross(m_B, d) / dd[:, None]
-    # arm: u'·f_B from the motor-axis moment (eq 28 projected on the axis)
-    s_B = (tau - prm.J_a * acc.zdd[0] + prm.m_a * prm.s_a * (up @ prm.gravity)
-           - prm.arm_damping * vel.zd[0]) / prm.l_a
-    dhat = d / np.sqrt(dd)[:, None]
-    den = _dot(up, dhat)
-    if np.any(np.abs(den) < 1e-9):
-        raise DynamicsError(f"chain {int(np.argmin(np.abs(den))) + 1} is at a serial singularity (u'·d = 0)")
-    t_ax = (s_B - _dot(up, fC_perp + rod_F)) / den
-    fC = t_ax[:, None] * dhat + fC_perp  # (6, 3) forces of the rods on the plate, chains without load
-    plate_F = acc.plate_F[0]
-    rho = vel.rho[0]
-    r = g.r[0]
-    P = state.p[0]
+    ker = _kernel_of(prm)
+    p_l, R_l = state.p[0].tolist(), state.R[0].ravel().tolist()
+    geo, _ = ker.geometry(state.zeta[0].tolist(), p_l, R_l)
+    try:
+        # per chain without load: f_Ci from the rod's moments about B_i (eq 30) and the arm's axis moment (eq 28)
+        ne = ker.newton_euler(geo, state.V[0].tolist(), state.V_dot[0].tolist(), tau.tolist(), R_l)
+    except KernelError as exc:
+        raise DynamicsError(str(exc)) from exc
+    fC = ne["fC"]  # 6 × [x, y, z]: forces of the rods on the plate (chains without load)
+    rod_F, rod_M, plate_F = ne["rod_F"], ne["rod_M"], ne["plate_F"]
+    P = p_l
+    Dl = D.tolist()
     if link == "plate":
-        F = plate_F - fC.sum(axis=0)  # eq 31
-        need = _cross(rho, plate_F) + acc.plate_M[0] - _cross(r, fC).sum(axis=0)
-        res = float(np.linalg.norm(np.cross(D - P, F) - need))
-        return ContactForceEstimate(force=F, link=link, chain=0, point=D, rank=3, singular_values=np.ones(3),
-                                    condition=1.0, observable=True, unobservable_directions=np.zeros((0, 3)),
-                                    residual_norm=res, chain_forces=fC)
+        F = [plate_F[m] - sum(f[m] for f in fC) for m in range(3)]  # eq 31
+        need = list(ne["plate_N"])
+        for g_i, f in zip(geo, fC):
+            c = _cross3(g_i[0:3], f)
+            need = [need[m] - c[m] for m in range(3)]
+        lever = [Dl[m] - P[m] for m in range(3)]
+        mism = _cross3(lever, F)
+        res = math.sqrt(sum((mism[m] - need[m]) ** 2 for m in range(3)))
+        return ContactForceEstimate(force=np.array(F), link=link, chain=0, point=D, rank=3,
+                                    singular_values=np.ones(3), condition=1.0, observable=True,
+                                    unobservable_directions=np.zeros((0, 3)), residual_norm=res,
+                                    chain_forces=np.array(fC))
     k = int(chain) - 1
-    fC = fC.copy()
-    fC[k] = plate_F - np.delete(fC, k, axis=0).sum(axis=0)  # eq 32
-    fB_k = fC[k] + rod_F[k]
+    fC = [list(f) for f in fC]
+    fC[k] = [plate_F[m] - sum(fC[i][m] for i in range(6) if i != k) for m in range(3)]  # eq 32
+    fk, Fr = fC[k], rod_F[k]
+    rk, upk, dk = geo[k][0:3], geo[k][6:9], geo[k][9:12]
+    s_B = ne["s_B"][k]
     if link == "arm":
-        lever = D - prm.A[k]
-        row = np.cross(g.e[k], lever)  # e·(lever × F) = (e × lever)·F
-        rhs = (prm.J_a * acc.zdd[0, k] - tau[k] + prm.l_a * up[k] @ fB_k - prm.m_a * prm.s_a * (up[k] @ prm.gravity)
-               + prm.arm_damping * vel.zd[0, k])  # eq 33 on the motor axis
-        A = row[None, :] / max(np.linalg.norm(lever), 1e-12)
-        b = np.array([rhs]) / max(np.linalg.norm(lever), 1e-12)
+        lever = [Dl[m] - float(prm.A[k][m]) for m in range(3)]
+        e_k = (-math.sin(prm.alpha[k]), math.cos(prm.alpha[k]), 0.0)
+        row = _cross3(e_k, lever)  # e·(lever × F) = (e × lever)·F
+        fB = [fk[m] + Fr[m] for m in range(3)]
+        rhs = prm.l_a * (sum(upk[m] * fB[m] for m in range(3)) - s_B)  # eq 33 on the motor axis
+        L = max(math.sqrt(sum(x * x for x in lever)), 1e-12)
+        A = np.array([row]) / L
+        b = np.array([rhs]) / L
     else:
-        lever = D - g.B[0, k]
-        L = max(float(np.linalg.norm(lever)), 1e-12)
-        mom = _cross(d[k], fC[k]) + prm.kappa * _cross(d[k], rod_F[k]) + rod_M[k]  # eq 36
-        Kx = np.array([[0.0, -lever[2], lever[1]], [lever[2], 0.0, -lever[0]], [-lever[1], lever[0], 0.0]])
-        A = np.vstack([Kx / L, -up[k][None, :]])  # eqs 35–36 and the arm's axis equation (eq 34)
-        b = np.concatenate([mom / L, [s_B[k] - up[k] @ (fC[k] + rod_F[k])]])
+        B_k = [P[m] + rk[m] - dk[m] for m in range(3)]
+        lever = [Dl[m] - B_k[m] for m in range(3)]
+        L = max(math.sqrt(sum(x * x for x in lever)), 1e-12)
+        c1, c2 = _cross3(dk, fk), _cross3(dk, Fr)
+        mom = [c1[m] + prm.kappa * c2[m] + rod_M[k][m] for m in range(3)]  # eq 36
+        lx, ly, lz = lever
+        A = np.array([[0.0, -lz, ly], [lz, 0.0, -lx], [-ly, lx, 0.0],
+                      [-upk[0] * L, -upk[1] * L, -upk[2] * L]]) / L  # eqs 35–36 and the arm's axis eq (34)
+        b = np.array([mom[0] / L, mom[1] / L, mom[2] / L,
+                      s_B - sum(upk[m] * (fk[m] + Fr[m]) for m in range(3))])
     x, rank, sv, cond, null, res = _lstsq(A, b, rcond)
     return ContactForceEstimate(force=x, link=link, chain=k + 1, point=D, rank=rank, singular_values=sv,
                                 condition=cond, observable=rank == 3, unobservable_directions=null,
-                                residual_norm=res, chain_forces=fC)
+                                residual_norm=res, chain_forces=np.array(fC))
