@@ -1,0 +1,307 @@
+"""Arm-angle estimator for hobby servos: ζ, ζ̇ at the current-sample rate from the commanded angles and the measured
+torques (servo model), corrected by the camera plate poses through inverse kinematics (seed 000 eqs 15-18).
+
+Hobby servos (MG996R class) report no angle. What the host knows at each current sample k (≈1 kHz) is the commanded
+angle u_k (joint_states.position) and the horn torque τ_k = K_t·(I_k − I_0) (joint_states.effort); the cameras add a
+plate pose every ~33 ms. The servo is modelled as the simulator models it (hexa.sim.mjcf / Simulator._step_once):
+
+    c_k = c_{k−1} + clip(u(t_k − d) − c_{k−1}, ±ω_max·Δt)       speed limit on the set-point (d: command latency)
+    τ   = k_p (c − ζ) − k_v ζ̇                                  the servo's position loop (MuJoCo position actuator)
+
+so y_k = c_k − τ_k/k_p = ζ_k + (k_v/k_p)·ζ̇_k is a direct measurement of the arm state, accurate to σ_τ/k_p (0.3 mrad
+for 10-bit current sensing). Per arm a constant-velocity Kalman filter on x = [ζ, ζ̇] (white acceleration of spectral
+density q = accel_sigma²) fuses y_k with H = [1, k_v/k_p], R = (torque_sigma/k_p)². All six arms receive the same
+measurements at the same times, so they share one covariance and one gain (six 2-state filters for the price of one).
+
+Camera correction: each plate pose p(t_c) gives ζ_IK = IK(p) (eq 18). The innovation against the estimate at t_c
+(interpolated from a short history, so the camera latency is respected) drives a per-arm bias b (complementary
+filter, gain `camera_gain` per frame, innovations larger than `camera_gate` rad rejected); the output is ζ̂ = ζ_KF + b.
+b absorbs what the servo model cannot know: horn mounting offsets, pot non-linearity, a wrong I_0.
+
+Bad input never touches the state and is counted by reason in `rejected`.
+"""
+from __future__ import annotations
+
+import math
+from collections import deque
+from dataclasses import dataclass
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+
+if TYPE_CHECKING:
+    from numpy.typing import NDArray
+
+REJECT_REASONS = ("bad_shape", "non_finite", "time_not_increasing", "gap", "camera_unreachable",
+                  "camera_gate", "camera_too_old", "camera_before_start")
+
+
+class EstimationError(ValueError):
+    """Bad estimator configuration (the message names the value)."""
+
+
+@dataclass(frozen=True)
+class ServoModel:
+    """Servo position loop τ = k_p (c − ζ) − k_v ζ̇ (N·m/rad, N·m·s/rad), set-point speed limit ω_max (rad/s),
+    command latency (s) between the commanded angle and the servo's set-point."""
+
+    kp: float
+    kv: float
+    speed_max: float
+    command_delay: float = 0.0
+
+    def __post_init__(self) -> None:
+        for name in ("kp", "speed_max"):
+            v = getattr(self, name)
+            if not (math.isfinite(v) and v > 0):
+                raise EstimationError(f"servo {name} must be > 0, got {v!r}")
+        if not (math.isfinite(self.kv) and self.kv >= 0):
+            raise EstimationError(f"servo kv must be >= 0, got {self.kv!r}")
+        if not (math.isfinite(self.command_delay) and self.command_delay >= 0):
+            raise EstimationError(f"servo command_delay must be >= 0 s, got {self.command_delay!r}")
+
+    @classmethod
+    def from_description(cls, desc: Any, command_delay: float = 0.0) -> "ServoModel":
+        """k_p, k_v from the description's `sim.servo` section (the simulator's servo), ω_max from `actuators`."""
+        servo = {}
+        try:
+            servo = dict(desc.section("sim").get("servo", {}))
+        except (KeyError, AttributeError):
+            servo = {}
+        return cls(kp=float(servo.get("kp", 40.0)), kv=float(servo.get("kv", 0.6)),
+                   speed_max=float(desc.speed_max), command_delay=float(command_delay))
+
+
+@dataclass(frozen=True)
+class EstimatorConfig:
+    """Filter settings.
+
+    accel_sigma: white-acceleration density √q_a of the constant-velocity model (rad/s^1.5); torque_sigma: torque
+    noise (N·m, 1σ) → servo-measurement variance (torque_sigma/k_p)²; saturation: a servo whose |τ| exceeds
+    saturation·τ_max is stalled and its sample is not used as a measurement; camera_sigma: noise of ζ from a camera
+    pose through IK (rad, 1σ; 0 disables the camera); bias_sigma: initial uncertainty of the servo-model offset
+    b (rad); bias_walk: its random walk (rad/√s); camera_gate: largest |ζ_IK − ζ̂| accepted (rad); max_gap: longer
+    sample spacing restarts the filter (s); history: how far back camera stamps are matched (s)."""
+
+    accel_sigma: float = 60.0
+    torque_sigma: float = 0.012
+    saturation: float = 0.97
+    camera_sigma: float = 0.004
+    bias_sigma: float = 0.02
+    bias_walk: float = 0.0005
+    camera_gate: float = 0.15
+    max_gap: float = 0.1
+    history: float = 0.5
+
+    def __post_init__(self) -> None:
+        checks = {"accel_sigma": self.accel_sigma > 0, "torque_sigma": self.torque_sigma > 0,
+                  "saturation": 0 < self.saturation <= 1.0, "camera_sigma": self.camera_sigma >= 0,
+                  "bias_sigma": self.bias_sigma > 0, "bias_walk": self.bias_walk >= 0,
+                  "camera_gate": self.camera_gate > 0, "max_gap": self.max_gap > 0, "history": self.history > 0}
+        for name, ok in checks.items():
+            if not (ok and math.isfinite(getattr(self, name))):
+                raise EstimationError(f"estimator {name} out of range, got {getattr(self, name)!r}")
+
+
+@dataclass(frozen=True)
+class ArmEstimate:
+    """ζ̂ (rad), ζ̂̇ (rad/s) at `time`; bias: servo-model offset b (rad); setpoint: servo set-point c (rad);
+    sigma: 1σ uncertainty of ζ̂ (rad)."""
+
+    time: float
+    zeta: NDArray
+    zeta_dot: NDArray
+    bias: NDArray
+    setpoint: NDArray
+    sigma: NDArray
+
+
+def _six(x: Any) -> NDArray | None:
+    try:
+        a = np.asarray(x, dtype=float).reshape(-1)
+    except (TypeError, ValueError):
+        return None
+    return a if a.shape == (6,) else None
+
+
+class ZetaEstimator:
+    """ζ, ζ̇ of the six arms from commanded angles + torques, corrected by camera poses (see module docstring).
+
+    Usage:
+        est = ZetaEstimator(desc)
+        e = est.update(t, zeta_commanded, tau)   # every current sample; None when rejected
+        est.update_camera(t_cam, pose)           # every plate pose [x y z α β γ] (m, rad; Z-Y-X)
+        e.zeta, e.zeta_dot
+    """
+
+    def __init__(self, desc: Any, servo: ServoModel | None = None, config: EstimatorConfig | None = None) -> None:
+        self.desc = desc
+        self.servo = servo or ServoModel.from_description(desc)
+        self.config = config or EstimatorConfig()
+        self.rejected: dict[str, int] = {k: 0 for k in REJECT_REASONS}
+        self.accepted = 0
+        self.camera_accepted = 0
+        self.saturated = 0
+        self.torque_max = float(getattr(desc, "torque_max", math.inf))
+        self._commands: deque[tuple[float, NDArray]] = deque()
+        self._hist: deque[tuple[float, NDArray]] = deque()
+        self.reset()
+
+    def reset(self) -> None:
+        """Forget the filter state; the next sample re-initialises it."""
+        self._t: float | None = None
+        self._c: NDArray | None = None
+        self._x = np.zeros((6, 3))
+        self._P = np.zeros((6, 3, 3))
+        self._commands.clear()
+        self._hist.clear()
+        self.last: ArmEstimate | None = None
+
+    def _reject(self, reason: str) -> None:
+        self.rejected[reason] += 1
+
+    # ------------------------------------------------------------------ servo model
+    def _delayed_command(self, t: float, u: NDArray) -> NDArray:
+        d = self.servo.command_delay
+        self._commands.append((t, u))
+        if d <= 0.0:
+            self._commands.clear()
+            return u
+        while len(self._commands) > 1 and self._commands[1][0] <= t - d:
+            self._commands.popleft()
+        return self._commands[0][1]
+
+    def update(self, t: float, zeta_commanded: Any, tau: Any) -> ArmEstimate | None:
+        """One current sample: commanded angles u (rad) and horn torques τ (N·m) at time t (s)."""
+        u = _six(zeta_commanded)
+        tq = _six(tau)
+        try:
+            t = float(t)
+        except (TypeError, ValueError):
+            self._reject("bad_shape")
+            return None
+        if u is None or tq is None:
+            self._reject("bad_shape")
+            return None
+        if not (math.isfinite(t) and np.all(np.isfinite(u)) and np.all(np.isfinite(tq))):
+            self._reject("non_finite")
+            return None
+        sv = self.servo
+        cfg = self.config
+        if self._t is not None and t <= self._t:
+            self._reject("time_not_increasing")
+            return None
+        if self._t is not None and t - self._t > cfg.max_gap:
+            self._reject("gap")
+            self.reset()
+        uc = self._delayed_command(t, u)
+        r_s = (cfg.torque_sigma / sv.kp) ** 2
+        free = np.abs(tq) < cfg.saturation * self.torque_max  # saturated servos: τ no longer tells the angle
+        self.saturated += int(6 - free.sum())
+        if self._t is None:
+            c = uc.copy()
+            x = np.zeros((6, 3))
+            x[:, 0] = c - tq / sv.kp
+            x[:, 2] = 0.0
+            self._x = x
+            self._P = np.tile(np.diag([r_s + cfg.bias_sigma ** 2, 1.0, cfg.bias_sigma ** 2]), (6, 1, 1))
+            self._P[:, 0, 2] = self._P[:, 2, 0] = -cfg.bias_sigma ** 2
+        else:
+            h = t - self._t
+            step = sv.speed_max * h
+            c = self._c + np.clip(uc - self._c, -step, step)
+            x, P = self._x, self._P
+            # predict: constant velocity (white acceleration), bias random walk
+            x[:, 0] += h * x[:, 1]
+            F = np.array([[1.0, h, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]])
+            qa = cfg.accel_sigma ** 2
+            Q = np.array([[qa * h ** 3 / 3, qa * h ** 2 / 2, 0.0], [qa * h ** 2 / 2, qa * h, 0.0],
+                          [0.0, 0.0, cfg.bias_walk ** 2 * h]])
+            P = F @ P @ F.T + Q
+            # servo-model update y = c − τ/k_p = ζ + (k_v/k_p) ζ̇ + b, on the arms whose servo is not saturated
+            if free.any():
+                H = np.array([1.0, sv.kv / sv.kp, 1.0])
+                y = c - tq / sv.kp
+                PH = P @ H                                   # (6, 3)
+                S = PH @ H + r_s                             # (6,)
+                K = PH / S[:, None]
+                innov = (y - x @ H) * free
+                x += K * innov[:, None]
+                P = np.where(free[:, None, None], P - K[:, :, None] * PH[:, None, :], P)
+            self._P = 0.5 * (P + np.swapaxes(P, 1, 2))
+        self._c = c
+        self._t = t
+        self.accepted += 1
+        self._hist.append((t, self._x[:, 0].copy()))
+        while self._hist and self._hist[0][0] < t - cfg.history:
+            self._hist.popleft()
+        self.last = self._estimate()
+        return self.last
+
+    def _estimate(self) -> ArmEstimate:
+        return ArmEstimate(time=self._t, zeta=self._x[:, 0].copy(), zeta_dot=self._x[:, 1].copy(),
+                           bias=self._x[:, 2].copy(), setpoint=self._c.copy(),
+                           sigma=np.sqrt(np.maximum(self._P[:, 0, 0], 0.0)))
+
+    # ------------------------------------------------------------------ camera correction
+    def _filter_at(self, t: float) -> NDArray | None:
+        h = self._hist
+        if not h or t < h[0][0]:
+            return None
+        if t >= h[-1][0]:
+            return h[-1][1] + (t - h[-1][0]) * self._x[:, 1]
+        lo, hi = 0, len(h) - 1
+        while hi - lo > 1:
+            mid = (lo + hi) // 2
+            if h[mid][0] <= t:
+                lo = mid
+            else:
+                hi = mid
+        (t0, z0), (t1, z1) = h[lo], h[hi]
+        w = (t - t0) / (t1 - t0) if t1 > t0 else 0.0
+        return z0 + w * (z1 - z0)
+
+    def update_camera(self, t: float, pose: Any) -> bool:
+        """A plate pose [x y z α β γ] (m, rad) stamped t (the image time): ζ_IK = IK(pose) (eq 18) is a measurement
+        of ζ at t, applied now as ζ_IK + (ζ̂(now) − ζ̂(t)). Returns False when rejected."""
+        from hexa.kinematics.hexa6rus import UnreachablePoseError, inverse_kinematics
+
+        q = _six(pose)
+        try:
+            t = float(t)
+        except (TypeError, ValueError):
+            self._reject("bad_shape")
+            return False
+        if q is None:
+            self._reject("bad_shape")
+            return False
+        if not (math.isfinite(t) and np.all(np.isfinite(q))):
+            self._reject("non_finite")
+            return False
+        if self._t is None:
+            self._reject("camera_before_start")
+            return False
+        if self.config.camera_sigma <= 0.0:
+            return False
+        z_then = self._filter_at(t)
+        if z_then is None:
+            self._reject("camera_too_old")
+            return False
+        try:
+            z_ik = np.asarray(inverse_kinematics(self.desc, q), dtype=float)
+        except (UnreachablePoseError, ValueError):
+            self._reject("camera_unreachable")
+            return False
+        e = np.remainder(z_ik - z_then + math.pi, 2 * math.pi) - math.pi
+        if np.max(np.abs(e)) > self.config.camera_gate:
+            self._reject("camera_gate")
+            return False
+        x, P = self._x, self._P
+        S = P[:, 0, 0] + self.config.camera_sigma ** 2
+        K = P[:, :, 0] / S[:, None]                     # (6, 3)
+        x += K * e[:, None]
+        P = P - K[:, :, None] * P[:, 0, None, :]
+        self._P = 0.5 * (P + np.swapaxes(P, 1, 2))
+        self.camera_accepted += 1
+        self.last = self._estimate()
+        return True
