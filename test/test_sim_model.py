@@ -252,3 +252,19 @@ def test_plate_twist_and_arm_rates_match_finite_differences_of_the_pose(desc):
     np.testing.assert_allclose((s1.zeta - s0.zeta) / dt, s1.zeta_dot, atol=1e-9)
     np.testing.assert_allclose((s1.zeta_dot - s0.zeta_dot) / dt, s0.zeta_ddot, atol=1e-8)
     np.testing.assert_allclose((s1.twist - s0.twist) / dt, s0.accel, atol=1e-6)
+
+
+def test_set_pose_reassembles_the_closed_robot_at_rest_without_rebuilding(desc):
+    sim = Simulator(desc, cameras=False)
+    model_id = id(sim.model)
+    for pose in ([0.05, -0.03, -0.50, 0.2, -0.3, 0.1], [-0.1, 0.08, -0.60, -0.1, 0.25, -0.2]):
+        sim.set_pose(np.array(pose))
+        tips = np.array([sim.data.site(f"rod_tip_{i}").xpos for i in range(1, 7)])
+        joints = np.array([sim.data.site(f"plate_joint_{i}").xpos for i in range(1, 7)])
+        np.testing.assert_allclose(tips, joints, atol=1e-8)
+        s = sim.state()
+        np.testing.assert_allclose(s.pose, pose, atol=1e-12)
+        assert np.all(s.zeta_dot == 0.0)
+        sim.step(300)                                        # the servos hold it there
+        assert np.linalg.norm(sim.state().pose[:3] - pose[:3]) < 0.005
+    assert id(sim.model) == model_id

@@ -539,6 +539,66 @@ class Simulator:
             self._place_object()
             return self._renderer.render(self.data, self._cam_ids[camera])
 
+    def set_pose(self, pose: np.ndarray, settle: float = 0.0) -> None:
+        """Re-assemble the robot at plate `pose` [x y z α β γ] at rest, without rebuilding the model or the renderer
+        (fast for rendering many poses). Servo targets become the pose's ζ; external forces are cleared; with a
+        trajectory drive, the drive switches to "external". `settle` seconds are then simulated (time advances).
+
+        Raises:
+            UnreachablePoseError (hexa.kinematics.hexa6rus): the pose is outside the workspace.
+        """
+        from hexa.kinematics import hexa6rus as kin
+
+        pose = np.asarray(pose, dtype=float).reshape(6)
+        zeta = kin.inverse_kinematics(self.desc, pose)
+        m, d = self.model, self.data
+        with self._lock:
+            d.qpos[self._arm_qpos] = zeta
+            d.qpos[self._u_qpos] = 0.0
+            a = self._plate_qpos
+            d.qpos[a:a + 3] = pose[:3]
+            q = np.zeros(4)
+            mujoco.mju_mat2Quat(q, kin.rotation_zyx(*pose[3:]).ravel())
+            d.qpos[a + 3:a + 7] = q
+            mujoco.mj_kinematics(m, d)
+            C = kin.plate_joints(self.desc, pose)
+            for i in range(6):
+                self._aim_rod(i, C[i])
+            d.qvel[:] = 0.0
+            d.qacc_warmstart[:] = 0.0
+            d.ctrl[:] = zeta
+            self._targets = zeta.copy()
+            if self.drive == "trajectory":
+                self.drive = "external"
+            self._manual = None
+            self._scripted = None
+            self._scripted_dir = None
+            mujoco.mj_forward(m, d)
+            self._step_once(use_schedule=False, advance=False)
+        if settle > 0:
+            for _ in range(int(round(settle / self._dt))):
+                with self._lock:
+                    self._step_once(use_schedule=False)
+
+    def _aim_rod(self, i: int, target: np.ndarray) -> None:
+        """Set the universal-joint angles of chain i+1 so that its rod points at `target` (kinematics current)."""
+        m, d = self.model, self.data
+        body = self._rod_body[i]
+        j1, j2 = m.joint(f"u1_{i + 1}").id, m.joint(f"u2_{i + 1}").id
+        a1 = m.jnt_axis[j1] / np.linalg.norm(m.jnt_axis[j1])          # in the rod frame at u = 0 (y-component 0)
+        R_ref = d.xmat[body].reshape(3, 3)                             # u = 0 here (set by the caller)
+        w = R_ref.T @ (target - d.xpos[body])
+        w /= np.linalg.norm(w)
+        phi = np.arctan2(a1[2], a1[0])
+        c = np.clip(a1 @ w, -1.0, 1.0)
+        # R(a1,u1)·R(y,u2)·e_x = w  →  a1·(cos u2, 0, −sin u2) = a1·w  →  cos(u2 + φ) = a1·w
+        cands = [np.arccos(c) - phi, -np.arccos(c) - phi]
+        u2 = min(((u + np.pi) % (2 * np.pi) - np.pi for u in cands), key=abs)
+        v = np.array([np.cos(u2), 0.0, -np.sin(u2)])
+        vp, wp = v - (a1 @ v) * a1, w - (a1 @ w) * a1
+        u1 = np.arctan2(a1 @ np.cross(vp, wp), vp @ wp)
+        d.qpos[self._u_qpos[i]] = [u1, u2]
+
     def close(self) -> None:
         if self._renderer is not None:
             self._renderer.close()
