@@ -24,7 +24,12 @@ NODES: list[tuple[str, str, bool, tuple[str, ...]]] = [
     ("rnea", "hexa_dynamics.rnea_node", True, ("sim", "robot", "replay")),
     ("singularity", "hexa_dynamics.singularity_node", False, ("sim", "robot", "replay")),
     ("trajectory", "hexa_dynamics.trajectory_node", False, ("sim", "robot")),
+    # the 3UPS+RPU (seed 003), namespace /upsrpu: simulated robot + tracking, indices, singularity release
+    ("upsrpu_sim", "hexa_dynamics.upsrpu_sim_node", True, ("upsrpu",)),
+    ("singularity", "hexa_dynamics.singularity_node", True, ("upsrpu",)),
+    ("srm", "hexa_dynamics.srm_node", True, ("upsrpu",)),
 ]
+MODES = ("sim", "robot", "replay", "upsrpu")
 
 
 def module_available(module: str) -> bool:
@@ -47,13 +52,13 @@ def ros_args(name: str, namespace: str, params: Path | None, sim_time: bool, ext
 
 def build_graph(mode: str, namespace: str = "/hexa", params: Path | None = DEFAULT_PARAMS,
                 node_args: dict[str, list[str]] | None = None) -> list[NodeSpec]:
-    """NodeSpecs for `mode` in {"sim", "robot", "replay"}.
+    """NodeSpecs for `mode` in MODES ("sim", "robot", "replay" for the Hexa; "upsrpu" for the 3UPS+RPU).
 
     Raises:
         SupervisorError: a required node's module is not installed (names it and the package to build).
     """
-    if mode not in ("sim", "robot", "replay"):
-        raise SupervisorError(f"unknown bringup mode {mode!r}; use sim, robot or replay")
+    if mode not in MODES:
+        raise SupervisorError(f"unknown bringup mode {mode!r}; use one of {', '.join(MODES)}")
     specs = []
     missing = []
     for name, module, required, modes in NODES:
@@ -64,7 +69,8 @@ def build_graph(mode: str, namespace: str = "/hexa", params: Path | None = DEFAU
                 missing.append(f"{name} ({module})")
             continue
         extra = (node_args or {}).get(name, [])
-        cmd = [sys.executable, "-m", module] + ros_args(name, namespace, params, mode != "robot", extra)
+        sim_time = mode in ("sim", "replay")
+        cmd = [sys.executable, "-m", module] + ros_args(name, namespace, params, sim_time, extra)
         specs.append(NodeSpec(name, cmd, required=required))
     if missing:
         raise SupervisorError(f"cannot bring up '{mode}': required node module(s) not installed: "

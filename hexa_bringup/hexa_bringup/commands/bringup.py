@@ -7,10 +7,12 @@ from pathlib import Path
 
 
 def register(sub: argparse._SubParsersAction) -> None:
-    p = sub.add_parser("bringup", help="start and supervise the node graph (sim | robot | replay BAG)")
-    p.add_argument("mode", choices=["sim", "robot", "replay"])
+    p = sub.add_parser("bringup", help="start and supervise the node graph (sim | robot | replay BAG | upsrpu)")
+    p.add_argument("mode", choices=["sim", "robot", "replay", "upsrpu"],
+                   help="sim: simulated Hexa + whole graph; robot: real hardware; replay: graph on a bag; "
+                        "upsrpu: simulated 3UPS+RPU with singularity monitor and SRM (namespace /upsrpu)")
     p.add_argument("bag", nargs="?", help="bag to replay (mode replay)")
-    p.add_argument("--ns", default="/hexa", help="namespace of the graph (default /hexa)")
+    p.add_argument("--ns", default=None, help="namespace of the graph (default /hexa; /upsrpu for upsrpu)")
     p.add_argument("--params", default=None, help="ROS parameters YAML for all nodes (default: shipped config)")
     p.add_argument("--graph", help="YAML list of {name, cmd, required, respawn} to run instead of the built-in graph")
     p.add_argument("--uno", help="robot mode: serial port of the Arduino Uno (servos)")
@@ -40,7 +42,11 @@ def run(args: argparse.Namespace) -> int:
                 for name, serial in zip(("camera_top", "camera_side"), args.cameras):
                     node_args[name] = ["-p", "source:=realsense", "-p", f"serial:={serial}"]
             params = Path(args.params) if args.params else DEFAULT_PARAMS
-            specs = build_graph(args.mode, args.ns, params, node_args)
+            if args.mode == "upsrpu":
+                node_args["singularity"] = ["-p", "robot:=upsrpu", "-p", "input:=markers"]
+                node_args["srm"] = ["-p", "input:=markers"]
+            ns = args.ns or ("/upsrpu" if args.mode == "upsrpu" else "/hexa")
+            specs = build_graph(args.mode, ns, params, node_args)
             if args.mode == "replay":
                 if not args.bag:
                     raise SupervisorError("replay mode needs a BAG argument")
