@@ -51,7 +51,7 @@ def _cross(a: NDArray, b: NDArray) -> NDArray:
 
 def _dot(a: NDArray, b: NDArray) -> NDArray:
     """Dot product on the last axis."""
-    return (a * b).sum(axis=-1)
+    return np.einsum("...i,...i->...", a, b)
 
 
 def _attr(obj: Any, *names: str, default: Any = None) -> Any:

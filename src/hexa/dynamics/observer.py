@@ -33,8 +33,8 @@ from typing import TYPE_CHECKING, Iterable
 import numpy as np
 
 from hexa.dynamics._kernel import KernelError, SampleKernel, exp_rotate
-from hexa.dynamics.lagrange import (DynamicsError, HexaDynamicParameters, MotionState, _Geometry, _Velocity,
-                                    inverse_dynamics, momentum_terms, motion_from_joint_rates,
+from hexa.dynamics.lagrange import (DynamicsError, HexaDynamicParameters, MotionState, _Geometry, _momentum_terms,
+                                    _Velocity, inverse_dynamics, motion_from_joint_rates, pose_to_position_rotation,
                                     wrench_to_generalized_zyz)
 
 if TYPE_CHECKING:
@@ -559,8 +559,16 @@ def momentum_residual_batch(params: HexaDynamicParameters, t: NDArray, zeta: NDA
     t = np.asarray(t, dtype=float).reshape(-1)
     if t.size < 2 or np.any(np.diff(t) <= 0):
         raise ObserverError("batch times must be strictly increasing with at least 2 samples")
-    state = motion_from_joint_rates(params, zeta, zeta_dot, poses)
-    mt = momentum_terms(params, state, tau)
+    zeta = np.atleast_2d(np.asarray(zeta, dtype=float))
+    zd = np.atleast_2d(np.asarray(zeta_dot, dtype=float))
+    p, R = pose_to_position_rotation(poses)
+    g = _Geometry(params, zeta, p, R)  # one geometry for the twist and the momentum terms
+    try:
+        V = np.linalg.solve(g.j, zd[..., None])[..., 0]
+    except np.linalg.LinAlgError as exc:
+        raise DynamicsError(f"J_ζ is singular (type II singularity) in the batch: {exc}") from exc
+    mt = _momentum_terms(params, g, _Velocity(params, g, V, R), R, np.atleast_2d(np.asarray(tau, dtype=float)))
+    state = MotionState(zeta=zeta, zeta_dot=zd, p=p, R=R, V=V)
     dt = np.diff(t)
     w_bar = np.zeros((t.size, 6))
     w_bar[1:] = np.diff(mt.momentum, axis=0) / dt[:, None] - 0.5 * (mt.known_rate[1:] + mt.known_rate[:-1])
