@@ -1,0 +1,364 @@
+"""Observer node: ζ estimator + residual observer (seed 000 §3.1, eqs 23-26) at the current-sample rate → `residual`,
+`collision` START/END, residual markers.
+
+Each `joint_states` sample (driver: position = COMMANDED angle, effort = K_t·(I − I₀)) feeds hexa.estimation.
+ZetaEstimator (servo model + Kalman filter, corrected by every `plate_pose` through IK), whose ζ̂, ζ̂̇ and the measured
+τ feed H5's hexa.dynamics.observer.ResidualObserver (momentum form, kinematics "arm"); the plate pose is tracked from
+ζ̂ and re-seeded from the camera when they disagree by more than `reseed_distance` (or tracking failed).
+
+Parameters (all declared; the detector and estimator ones are settable at runtime with `ros2 param set`-like calls,
+e.g. `hexa param set /hexa/observer thresholds "[3,3,3,0.3,0.3,0.3]"`):
+  description (str, ""): robot YAML (default packaged hexa.yaml).
+  zeta_source ("estimator"): "estimator" (hobby servos: position = commanded angle) or "measured" (position = measured
+    angle, velocity used when present: sim/joint_states_truth or servos with feedback).
+  gains (double[6], 25 1/s): observer gains K_j per axis [fx fy fz mx my mz].
+  thresholds (double[6], [2,2,2,0.2,0.2,0.2] N, N·m): r_low per axis.
+  release_ratio (0.5): an axis releases below release_ratio·r_low.  min_duration (0.01 s): confirmation time.
+  max_gap (0.1 s): longer joint_states spacing restarts the integration.
+  accel_sigma (60), torque_sigma (0.012 N·m), camera_sigma (0.004 rad), bias_walk (0.0005 rad/√s),
+    saturation (0.97), command_delay (0.0 s): ZetaEstimator settings (see hexa.estimation).
+  reseed_distance (0.005 m): camera pose re-seeds the observer's pose tracking when this far from it.
+  calibration_duration (1.0 s): averaging time of `~/reset` with recalibrate=true (robot at rest, untouched).
+  marker_rate_hz (10), marker_scale (0.02 m/N): residual force arrow at the plate on `markers`.
+  frame_id ("base").
+Topics (relative): sub `joint_states` (reliable), `plate_pose` (PoseStamped); pub `residual` (hexa_msgs/Residual, each
+accepted sample), `collision` (hexa_msgs/CollisionEvent, reliable keep-last 20), `zeta_estimate` (JointState ζ̂, ζ̂̇),
+`markers` (visualization_msgs/MarkerArray), `/diagnostics` (1 Hz, rejects by reason). Service `~/reset`
+(hexa_msgs/srv/ResetObserver). Time = message stamps (sim time in sim mode).
+"""
+from __future__ import annotations
+
+import dataclasses
+import math
+import sys
+from typing import Any
+
+import numpy as np
+import rclpy
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
+from geometry_msgs.msg import Point, PoseStamped
+from hexa_msgs.msg import CollisionEvent, Residual
+from hexa_msgs.srv import ResetObserver
+from rcl_interfaces.msg import SetParametersResult
+from rclpy.executors import ExternalShutdownException
+from rclpy.node import Node
+from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
+from sensor_msgs.msg import JointState
+from visualization_msgs.msg import Marker, MarkerArray
+
+JOINT_NAMES = [f"arm_{i}" for i in range(1, 7)]
+AXIS_NAMES = ("fx", "fy", "fz", "mx", "my", "mz")
+ESTIMATOR_KEYS = ("accel_sigma", "torque_sigma", "camera_sigma", "bias_walk", "saturation")
+INPUT_QOS = QoSProfile(depth=50, reliability=ReliabilityPolicy.RELIABLE, history=HistoryPolicy.KEEP_LAST)
+EVENT_QOS = QoSProfile(depth=20, reliability=ReliabilityPolicy.RELIABLE, history=HistoryPolicy.KEEP_LAST)
+
+
+def stamp_seconds(stamp: Any) -> float:
+    return float(stamp.sec) + 1e-9 * float(stamp.nanosec)
+
+
+def stamp_from_seconds(t: float) -> Any:
+    from builtin_interfaces.msg import Time
+
+    sec = math.floor(t)
+    return Time(sec=int(sec), nanosec=min(int(round((t - sec) * 1e9)), 999_999_999))
+
+
+def ordered_joints(msg: JointState, field: str) -> np.ndarray | None:
+    """The six values of `field` ordered arm_1..arm_6 by msg.name (in message order when names are absent);
+    None when the names or lengths do not fit."""
+    vals = list(getattr(msg, field))
+    if len(vals) != 6:
+        return None
+    names = list(msg.name)
+    if not names:
+        return np.asarray(vals, dtype=float)
+    if len(names) != 6 or set(names) != set(JOINT_NAMES):
+        return None
+    idx = {n: k for k, n in enumerate(names)}
+    return np.asarray([vals[idx[n]] for n in JOINT_NAMES], dtype=float)
+
+
+def declare_estimator(node: Node):
+    """Declare the ZetaEstimator parameters on `node`; returns (EstimatorConfig, ServoModel kwargs)."""
+    from hexa.estimation import EstimatorConfig
+
+    d = EstimatorConfig()
+    vals = {k: float(node.declare_parameter(k, float(getattr(d, k))).value) for k in ESTIMATOR_KEYS}
+    delay = float(node.declare_parameter("command_delay", 0.0).value)
+    return EstimatorConfig(**vals), delay
+
+
+def make_estimator(desc: Any, config: Any, delay: float):
+    from hexa.estimation import ServoModel, ZetaEstimator
+
+    return ZetaEstimator(desc, servo=ServoModel.from_description(desc, command_delay=delay), config=config)
+
+
+def diagnostic(node: Node, level: int, message: str, values: dict[str, Any]) -> DiagnosticArray:
+    arr = DiagnosticArray()
+    arr.header.stamp = node.get_clock().now().to_msg()
+    st = DiagnosticStatus(level=level, name=node.get_fully_qualified_name(), message=message)
+    st.values = [KeyValue(key=k, value=str(v)) for k, v in values.items()]
+    arr.status = [st]
+    return arr
+
+
+class ObserverNode(Node):
+    """joint_states + plate_pose → ζ̂ → residual observer → residual, collision, markers."""
+
+    def __init__(self) -> None:
+        super().__init__("observer")
+        from hexa.dynamics.lagrange import HexaDynamicParameters
+        from hexa.dynamics.observer import ObserverConfig, ResidualObserver
+        from hexa.robots.hexa_description import load_hexa
+
+        dflt = ObserverConfig()
+        p = self.declare_parameter
+        desc_path = str(p("description", "").value) or None
+        self.zeta_source = str(p("zeta_source", "estimator").value)
+        if self.zeta_source not in ("estimator", "measured"):
+            raise ValueError(f"parameter zeta_source must be 'estimator' or 'measured', got {self.zeta_source!r}")
+        gains = [float(v) for v in p("gains", [float(v) for v in dflt.gains]).value]
+        thresholds = [float(v) for v in p("thresholds", [float(v) for v in dflt.thresholds]).value]
+        release = float(p("release_ratio", dflt.release_ratio).value)
+        min_dur = float(p("min_duration", dflt.min_duration).value)
+        max_gap = float(p("max_gap", dflt.max_gap).value)
+        est_cfg, delay = declare_estimator(self)
+        self.reseed_distance = float(p("reseed_distance", 0.005).value)
+        self.calibration_duration = float(p("calibration_duration", 1.0).value)
+        self.marker_period = 1.0 / max(float(p("marker_rate_hz", 10.0).value), 1e-3)
+        self.marker_scale = float(p("marker_scale", 0.02).value)
+        self.frame_id = str(p("frame_id", "base").value)
+
+        self.desc = load_hexa(desc_path)
+        self.params = HexaDynamicParameters.from_description(self.desc)
+        cfg = ObserverConfig(gains=tuple(gains), thresholds=tuple(thresholds), release_ratio=release,
+                             min_duration=min_dur, max_gap=max_gap)  # raises ObserverError naming a bad value
+        self.observer = ResidualObserver(self.params, cfg)
+        self.estimator = make_estimator(self.desc, est_cfg, delay)
+        self.rejects = {"bad_joint_names": 0, "bad_pose": 0, "estimator": 0, "observer": 0}
+        self._last_out = None
+        self._last_marker_t = -math.inf
+        self._calib_until: float | None = None
+        self._t = -math.inf
+        self.events_sent = 0
+
+        self.pub_residual = self.create_publisher(Residual, "residual", 10)
+        self.pub_collision = self.create_publisher(CollisionEvent, "collision", EVENT_QOS)
+        self.pub_zeta = self.create_publisher(JointState, "zeta_estimate", 10)
+        self.pub_markers = self.create_publisher(MarkerArray, "markers", 10)
+        self.pub_diag = self.create_publisher(DiagnosticArray, "/diagnostics", 10)
+        self.create_subscription(JointState, "joint_states", self._on_joint_states, INPUT_QOS)
+        self.create_subscription(PoseStamped, "plate_pose", self._on_pose, 10)
+        self.create_service(ResetObserver, "~/reset", self._on_reset)
+        self.add_on_set_parameters_callback(self._on_set_parameters)
+        self.create_timer(1.0, self._diagnostics)
+        self.get_logger().info(f"observer: ζ from {self.zeta_source}, r_low {thresholds}, K {gains}")
+
+    # ------------------------------------------------------------------ parameters at runtime
+    def _on_set_parameters(self, params: list) -> SetParametersResult:
+        from hexa.dynamics.observer import ObserverConfig, ObserverError
+        from hexa.estimation import EstimationError
+
+        obs = self.observer
+        cfg = obs.config
+        est_cfg = self.estimator.config
+        fixed = {"description", "zeta_source", "max_gap", "command_delay", "frame_id"}
+        try:
+            for prm in params:
+                name, val = prm.name, prm.value
+                if name in fixed:
+                    return SetParametersResult(successful=False, reason=f"{name} is read at start-up only")
+                if name == "thresholds":
+                    obs.detector.set_thresholds([float(v) for v in val])
+                    cfg = dataclasses.replace(cfg, thresholds=tuple(float(v) for v in val))
+                elif name == "gains":
+                    cfg = dataclasses.replace(cfg, gains=tuple(float(v) for v in val))
+                elif name in ("release_ratio", "min_duration"):
+                    cfg = dataclasses.replace(cfg, **{name: float(val)})
+                elif name in ESTIMATOR_KEYS:
+                    est_cfg = dataclasses.replace(est_cfg, **{name: float(val)})
+                elif name == "reseed_distance":
+                    self.reseed_distance = float(val)
+                elif name == "calibration_duration":
+                    self.calibration_duration = float(val)
+                elif name == "marker_rate_hz":
+                    self.marker_period = 1.0 / max(float(val), 1e-3)
+                elif name == "marker_scale":
+                    self.marker_scale = float(val)
+        except (ObserverError, EstimationError, TypeError, ValueError) as exc:
+            return SetParametersResult(successful=False, reason=str(exc))
+        # adapter over H5's observer: the detector reads its config on every sample, the gains live in _K
+        obs.config = cfg
+        obs.detector.config = cfg
+        obs.detector.set_thresholds(cfg.thresholds)
+        obs._K = np.asarray(cfg.gains, dtype=float)
+        self.estimator.config = est_cfg
+        self.get_logger().info(f"parameters set: {[p.name for p in params]}")
+        return SetParametersResult(successful=True)
+
+    # ------------------------------------------------------------------ inputs
+    def _on_pose(self, msg: PoseStamped) -> None:
+        from hexa_dynamics.conversions import hexa_pose_from_msg
+
+        try:
+            pose = hexa_pose_from_msg(msg.pose)
+        except ValueError:
+            self.rejects["bad_pose"] += 1
+            return
+        t = stamp_seconds(msg.header.stamp)
+        if not np.all(np.isfinite(pose)):
+            self.rejects["bad_pose"] += 1
+            return
+        if self.zeta_source == "estimator":
+            self.estimator.update_camera(t, pose)
+        last = self._last_out
+        if last is None or float(np.max(np.abs(last.pose[:3] - pose[:3]))) > self.reseed_distance:
+            self.observer.update_pose(t, pose)
+
+    def _on_joint_states(self, msg: JointState) -> None:
+        t = stamp_seconds(msg.header.stamp)
+        pos = ordered_joints(msg, "position")
+        tau = ordered_joints(msg, "effort")
+        if pos is None or tau is None:
+            self.rejects["bad_joint_names"] += 1
+            return
+        if self.zeta_source == "estimator":
+            e = self.estimator.update(t, pos, tau)
+            if e is None:
+                self.rejects["estimator"] += 1
+                return
+            zeta, zeta_dot = e.zeta, e.zeta_dot
+        else:
+            zeta = pos
+            zeta_dot = ordered_joints(msg, "velocity")
+        out = self.observer.update_arm(t, zeta, tau, zeta_dot)
+        self._last_out = out
+        if out is None:
+            self.rejects["observer"] += 1
+            return
+        self._t = t
+        self._publish(out, msg.header.stamp, zeta, zeta_dot)
+        if self._calib_until is not None and t >= self._calib_until:
+            self._calib_until = None
+            try:
+                off = self.observer.finish_calibration()
+                self.get_logger().info(f"observer offset recalibrated: {np.round(off, 4).tolist()}")
+            except ValueError as exc:
+                self.get_logger().error(f"recalibration failed: {exc}")
+
+    # ------------------------------------------------------------------ outputs
+    def _publish(self, out: Any, stamp: Any, zeta: np.ndarray, zeta_dot: np.ndarray | None) -> None:
+        r = Residual()
+        r.header.stamp = stamp
+        r.header.frame_id = self.frame_id
+        r.r = [float(v) for v in out.r_zyz]
+        w = out.wrench
+        r.wrench.force.x, r.wrench.force.y, r.wrench.force.z = float(w[0]), float(w[1]), float(w[2])
+        r.wrench.torque.x, r.wrench.torque.y, r.wrench.torque.z = float(w[3]), float(w[4]), float(w[5])
+        r.threshold = [float(v) for v in self.observer.detector.thresholds]
+        r.over = [bool(v) for v in out.over]
+        r.in_collision = bool(out.in_collision)
+        self.pub_residual.publish(r)
+        for ev in out.events:
+            c = CollisionEvent()
+            c.header.stamp = stamp_from_seconds(ev.time)
+            c.header.frame_id = self.frame_id
+            c.event = CollisionEvent.START if ev.kind == "START" else CollisionEvent.END
+            c.id = int(ev.id)
+            c.onset = stamp_from_seconds(ev.onset)
+            c.axis = int(ev.axis)
+            c.axis_name = AXIS_NAMES[ev.axis]
+            c.value, c.peak, c.duration = float(ev.value), float(ev.peak), float(ev.duration)
+            self.pub_collision.publish(c)
+            self.events_sent += 1
+            self.get_logger().warn(f"collision {ev.id} {ev.kind} on {AXIS_NAMES[ev.axis]}: {ev.value:.3f} "
+                                   f"(peak {ev.peak:.3f}, onset {ev.onset:.3f} s)")
+        js = JointState()
+        js.header.stamp = stamp
+        js.name = JOINT_NAMES
+        js.position = [float(v) for v in zeta]
+        if zeta_dot is not None:
+            js.velocity = [float(v) for v in zeta_dot]
+        self.pub_zeta.publish(js)
+        if out.time - self._last_marker_t >= self.marker_period or out.events:
+            self._last_marker_t = out.time
+            self.pub_markers.publish(self._markers(out, stamp))
+
+    def _markers(self, out: Any, stamp: Any) -> MarkerArray:
+        m = Marker()
+        m.header.stamp = stamp
+        m.header.frame_id = self.frame_id
+        m.ns, m.id, m.type, m.action = "residual_force", 0, Marker.ARROW, Marker.ADD
+        P = out.pose[:3]
+        F = out.wrench[:3]
+        m.points = [Point(x=float(P[0]), y=float(P[1]), z=float(P[2])),
+                    Point(x=float(P[0] + self.marker_scale * F[0]), y=float(P[1] + self.marker_scale * F[1]),
+                          z=float(P[2] + self.marker_scale * F[2]))]
+        m.scale.x, m.scale.y, m.scale.z = 0.006, 0.012, 0.015     # shaft and head diameters, head length (m)
+        m.pose.orientation.w = 1.0
+        hot = bool(out.in_collision)
+        m.color.r, m.color.g, m.color.b, m.color.a = (1.0, 0.1, 0.1, 1.0) if hot else (0.1, 0.8, 0.2, 0.8)
+        return MarkerArray(markers=[m])
+
+    # ------------------------------------------------------------------ services, diagnostics
+    def _on_reset(self, req: Any, resp: Any) -> Any:
+        self.observer.reset()
+        self.estimator.reset()
+        self._last_out = None
+        if req.recalibrate:
+            self.observer.start_calibration()
+            self._calib_until = (self._t if math.isfinite(self._t) else 0.0) + self.calibration_duration
+            resp.message = f"reset; recalibrating the rest offset over {self.calibration_duration:g} s"
+        else:
+            resp.message = "reset"
+        resp.success = True
+        self.get_logger().info(resp.message)
+        return resp
+
+    def _diagnostics(self) -> None:
+        obs, est = self.observer, self.estimator
+        values: dict[str, Any] = {"accepted": obs.accepted, "collisions": obs.detector.count,
+                                  "in_collision": obs.detector.active, "events_sent": self.events_sent,
+                                  "servo_saturated_samples": est.saturated, "camera_accepted": est.camera_accepted}
+        values.update({f"reject_node_{k}": v for k, v in self.rejects.items()})
+        values.update({f"reject_observer_{k}": v for k, v in obs.rejected.items()})
+        values.update({f"reject_estimator_{k}": v for k, v in est.rejected.items()})
+        level = DiagnosticStatus.WARN if obs.detector.active else DiagnosticStatus.OK
+        if obs.accepted == 0:
+            level, msg = DiagnosticStatus.WARN, "no accepted joint_states yet"
+        else:
+            msg = "in collision" if obs.detector.active else "ok"
+        self.pub_diag.publish(diagnostic(self, level, msg, values))
+
+
+def run_node(factory: Any, name: str, argv: list[str] | None) -> int:
+    """init, build the node (exit 2 on a configuration error naming it), spin, clean shutdown on Ctrl-C."""
+    from hexa_bringup.rosenv import apply_defaults
+
+    apply_defaults()
+    rclpy.init(args=argv if argv is not None else sys.argv)
+    try:
+        node = factory()
+    except (ValueError, OSError, KeyError) as exc:
+        print(f"hexa {name}: {exc}", file=sys.stderr)
+        rclpy.shutdown()
+        return 2
+    try:
+        rclpy.spin(node)
+    except (KeyboardInterrupt, ExternalShutdownException):
+        pass
+    finally:
+        node.destroy_node()
+        if rclpy.ok():
+            rclpy.shutdown()
+    return 0
+
+
+def main(argv: list[str] | None = None) -> int:
+    return run_node(ObserverNode, "observer", argv)
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,255 @@
+"""RNEA node: contact force at the located contact point by Newton–Euler (seed 000 §3.3, eqs 27-36) → `contact_wrench`
+and RViz/Foxglove markers (contact sphere + force arrow).
+
+It runs its own ζ estimator on `joint_states` (hexa.estimation, as the observer node), tracks the plate pose with
+forward kinematics from ζ̂ seeded by `plate_pose`, low-pass differentiates ζ̂̇ for ζ̈, averages τ over
+`torque_window`, and calls H5's hexa.dynamics.identification.identify_contact_force on each `contact` of the active
+collision, and again at `rate_hz` (message time) with the latest contact of that collision until its END.
+
+Parameters: description (""), zeta_source ("estimator" | "measured"), accel_sigma, torque_sigma, camera_sigma,
+bias_walk, saturation, command_delay (ZetaEstimator, as the observer), rate_hz (100; 0 = only on contact messages),
+torque_window (0.02 s), accel_tau (0.02 s: time constant of the ζ̈ low-pass derivative), require_collision (true:
+ignore contacts outside a START..END), marker_scale (0.02 m/N), frame_id ("base").
+Topics (relative): sub `joint_states` (reliable), `plate_pose`, `contact` (hexa_msgs/Contact), `collision`
+(reliable); pub `contact_wrench` (hexa_msgs/ContactWrench), `contact_markers` (visualization_msgs/MarkerArray),
+`/diagnostics` (rejects by reason).
+"""
+from __future__ import annotations
+
+import math
+import sys
+from collections import deque
+from typing import Any
+
+import numpy as np
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
+from geometry_msgs.msg import Point, PoseStamped
+from hexa_msgs.msg import CollisionEvent, Contact, ContactWrench
+from rclpy.node import Node
+from sensor_msgs.msg import JointState
+from visualization_msgs.msg import Marker, MarkerArray
+
+from hexa_dynamics.observer_node import (EVENT_QOS, INPUT_QOS, declare_estimator, diagnostic, make_estimator,
+                                         ordered_joints, run_node, stamp_seconds)
+
+LINK_NAMES = {Contact.PLATE: "plate", Contact.ARM: "arm", Contact.ROD: "rod"}
+REJECT_REASONS = ("non_finite", "unknown_link", "bad_chain", "no_state", "not_in_collision", "identification",
+                  "bad_joint_names", "bad_pose", "estimator", "pose_tracking")
+
+
+class RneaNode(Node):
+    """contact + states → identified contact force (ContactWrench) and markers."""
+
+    def __init__(self) -> None:
+        super().__init__("rnea")
+        from hexa.dynamics.lagrange import HexaDynamicParameters
+        from hexa.robots.hexa_description import load_hexa
+
+        p = self.declare_parameter
+        desc_path = str(p("description", "").value) or None
+        self.zeta_source = str(p("zeta_source", "estimator").value)
+        if self.zeta_source not in ("estimator", "measured"):
+            raise ValueError(f"parameter zeta_source must be 'estimator' or 'measured', got {self.zeta_source!r}")
+        est_cfg, delay = declare_estimator(self)
+        rate = float(p("rate_hz", 100.0).value)
+        self.period = 1.0 / rate if rate > 0 else math.inf
+        self.torque_window = float(p("torque_window", 0.02).value)
+        self.accel_tau = float(p("accel_tau", 0.02).value)
+        self.require_collision = bool(p("require_collision", True).value)
+        self.marker_scale = float(p("marker_scale", 0.02).value)
+        self.frame_id = str(p("frame_id", "base").value)
+        if not (self.torque_window >= 0 and self.accel_tau > 0):
+            raise ValueError(f"torque_window {self.torque_window!r} must be >= 0 and accel_tau {self.accel_tau!r} > 0")
+        self.desc = load_hexa(desc_path)
+        self.params = HexaDynamicParameters.from_description(self.desc)
+        self.estimator = make_estimator(self.desc, est_cfg, delay)
+        self.rejects = {k: 0 for k in REJECT_REASONS}
+        self.published = 0
+        self._tau: deque[tuple[float, np.ndarray]] = deque()
+        self._state: tuple | None = None        # (t, ζ, ζ̇, ζ̈)
+        self._zd_prev: tuple[float, np.ndarray] | None = None
+        self._zdd = np.zeros(6)
+        self._pose: np.ndarray | None = None     # plate pose tracked from ζ̂
+        self._cam_pose: np.ndarray | None = None
+        self._active: int | None = None          # id of the collision in progress
+        self._contacts: dict[int, Contact] = {}  # latest contact per collision id
+        self._last_ident_t = -math.inf
+
+        self.pub_wrench = self.create_publisher(ContactWrench, "contact_wrench", EVENT_QOS)
+        self.pub_markers = self.create_publisher(MarkerArray, "contact_markers", 10)
+        self.pub_diag = self.create_publisher(DiagnosticArray, "/diagnostics", 10)
+        self.create_subscription(JointState, "joint_states", self._on_joint_states, INPUT_QOS)
+        self.create_subscription(PoseStamped, "plate_pose", self._on_pose, 10)
+        self.create_subscription(Contact, "contact", self._on_contact, EVENT_QOS)
+        self.create_subscription(CollisionEvent, "collision", self._on_collision, EVENT_QOS)
+        self.create_timer(1.0, self._diagnostics)
+        self.get_logger().info(f"rnea: ζ from {self.zeta_source}, identification at {rate:g} Hz while in collision")
+
+    # ------------------------------------------------------------------ state
+    def _on_pose(self, msg: PoseStamped) -> None:
+        from hexa_dynamics.conversions import hexa_pose_from_msg
+
+        try:
+            pose = hexa_pose_from_msg(msg.pose)
+        except ValueError:
+            self.rejects["bad_pose"] += 1
+            return
+        if not np.all(np.isfinite(pose)):
+            self.rejects["bad_pose"] += 1
+            return
+        self._cam_pose = pose
+        if self.zeta_source == "estimator":
+            self.estimator.update_camera(stamp_seconds(msg.header.stamp), pose)
+
+    def _on_joint_states(self, msg: JointState) -> None:
+        t = stamp_seconds(msg.header.stamp)
+        pos = ordered_joints(msg, "position")
+        tau = ordered_joints(msg, "effort")
+        if pos is None or tau is None:
+            self.rejects["bad_joint_names"] += 1
+            return
+        if self.zeta_source == "estimator":
+            e = self.estimator.update(t, pos, tau)
+            if e is None:
+                self.rejects["estimator"] += 1
+                return
+            zeta, zd = e.zeta, e.zeta_dot
+        else:
+            zeta, zd = pos, ordered_joints(msg, "velocity")
+            if zd is None or not (np.all(np.isfinite(zeta)) and np.all(np.isfinite(tau))):
+                self.rejects["non_finite"] += 1
+                return
+        if self._zd_prev is not None and t > self._zd_prev[0]:
+            h = t - self._zd_prev[0]
+            a = math.exp(-h / self.accel_tau)
+            self._zdd = a * self._zdd + (1 - a) * (zd - self._zd_prev[1]) / h
+        self._zd_prev = (t, zd.copy())
+        self._tau.append((t, tau))
+        while self._tau and self._tau[0][0] < t - self.torque_window:
+            self._tau.popleft()
+        self._state = (t, zeta, zd, self._zdd.copy())
+        if self._active is not None and t - self._last_ident_t >= self.period:
+            c = self._contacts.get(self._active)
+            if c is not None:
+                self._identify(c, msg.header.stamp)
+
+    def _plate_pose(self, zeta: np.ndarray) -> np.ndarray | None:
+        from hexa.kinematics.hexa6rus import forward_kinematics
+
+        guess = self._cam_pose if self._pose is None else self._pose
+        if guess is None:
+            return None
+        try:
+            pose = np.asarray(forward_kinematics(self.desc, zeta, guess=guess), dtype=float)
+        except (ValueError, ArithmeticError):
+            return None
+        if self._cam_pose is not None and np.max(np.abs(pose[:3] - self._cam_pose[:3])) > 0.02:
+            try:  # lost the assembly branch: start again from the camera
+                pose = np.asarray(forward_kinematics(self.desc, zeta, guess=self._cam_pose), dtype=float)
+            except (ValueError, ArithmeticError):
+                return None
+        return pose if np.all(np.isfinite(pose)) else None
+
+    # ------------------------------------------------------------------ contacts and collisions
+    def _on_collision(self, msg: CollisionEvent) -> None:
+        if msg.event == CollisionEvent.START:
+            self._active = int(msg.id)
+        elif self._active == int(msg.id):
+            self._active = None
+            self._contacts.pop(int(msg.id), None)
+            m = Marker(action=Marker.DELETEALL)
+            m.header.frame_id = self.frame_id
+            self.pub_markers.publish(MarkerArray(markers=[m]))
+
+    def _on_contact(self, msg: Contact) -> None:
+        pt = np.array([msg.point.x, msg.point.y, msg.point.z])
+        if not np.all(np.isfinite(pt)):
+            self.rejects["non_finite"] += 1
+            return
+        if msg.link not in LINK_NAMES:
+            self.rejects["unknown_link"] += 1
+            return
+        if msg.link != Contact.PLATE and not 1 <= msg.chain <= 6:
+            self.rejects["bad_chain"] += 1
+            return
+        if self.require_collision and (self._active is None or int(msg.collision_id) != self._active):
+            self.rejects["not_in_collision"] += 1
+            return
+        self._contacts[int(msg.collision_id)] = msg
+        self._identify(msg, msg.header.stamp)
+
+    def _identify(self, c: Contact, stamp: Any) -> None:
+        from hexa.dynamics.identification import identify_contact_force
+        from hexa.dynamics.lagrange import DynamicsError, motion_from_joint_rates
+
+        if self._state is None:
+            self.rejects["no_state"] += 1
+            return
+        t, zeta, zd, zdd = self._state
+        pose = self._plate_pose(zeta)
+        if pose is None:
+            self.rejects["pose_tracking"] += 1
+            return
+        self._pose = pose
+        tau = np.mean([v for _, v in self._tau], axis=0)
+        link = LINK_NAMES[c.link]
+        chain = 0 if link == "plate" else int(c.chain)
+        point = np.array([c.point.x, c.point.y, c.point.z])
+        try:
+            st = motion_from_joint_rates(self.params, zeta[None], zd[None], pose[None], zdd[None])
+            est = identify_contact_force(self.params, st, tau, link, chain, point)
+        except (ValueError, DynamicsError, np.linalg.LinAlgError) as exc:
+            self.rejects["identification"] += 1
+            self.get_logger().warn(f"identification failed: {exc}", throttle_duration_sec=1.0)
+            return
+        self._last_ident_t = t
+        w = ContactWrench()
+        w.header.stamp = stamp
+        w.header.frame_id = self.frame_id
+        w.collision_id = c.collision_id
+        w.link, w.chain = c.link, chain
+        w.point = Point(x=float(point[0]), y=float(point[1]), z=float(point[2]))
+        w.force.x, w.force.y, w.force.z = (float(v) for v in est.force)
+        w.rank = int(est.rank)
+        w.condition = float(est.condition)
+        w.observable = bool(est.observable)
+        w.residual_norm = float(est.residual_norm)
+        self.pub_wrench.publish(w)
+        self.published += 1
+        self.pub_markers.publish(self._markers(point, est.force, stamp, est.observable))
+
+    def _markers(self, point: np.ndarray, force: np.ndarray, stamp: Any, observable: bool) -> MarkerArray:
+        s = Marker()
+        s.header.stamp = stamp
+        s.header.frame_id = self.frame_id
+        s.ns, s.id, s.type, s.action = "contact_point", 0, Marker.SPHERE, Marker.ADD
+        s.pose.position = Point(x=float(point[0]), y=float(point[1]), z=float(point[2]))
+        s.pose.orientation.w = 1.0
+        s.scale.x = s.scale.y = s.scale.z = 0.015
+        s.color.r, s.color.g, s.color.b, s.color.a = 1.0, 0.8, 0.0, 1.0
+        a = Marker()
+        a.header = s.header
+        a.ns, a.id, a.type, a.action = "contact_force", 0, Marker.ARROW, Marker.ADD
+        end = point + self.marker_scale * np.asarray(force)
+        a.points = [s.pose.position, Point(x=float(end[0]), y=float(end[1]), z=float(end[2]))]
+        a.pose.orientation.w = 1.0
+        a.scale.x, a.scale.y, a.scale.z = 0.006, 0.012, 0.015
+        a.color.r, a.color.g, a.color.b, a.color.a = (1.0, 0.2, 0.2, 1.0) if observable else (1.0, 0.6, 0.2, 1.0)
+        return MarkerArray(markers=[s, a])
+
+    def _diagnostics(self) -> None:
+        values: dict[str, Any] = {"published": self.published, "active_collision": self._active,
+                                  "servo_saturated_samples": self.estimator.saturated}
+        values.update({f"reject_{k}": v for k, v in self.rejects.items()})
+        values.update({f"reject_estimator_{k}": v for k, v in self.estimator.rejected.items()})
+        level = DiagnosticStatus.OK if self._state is not None else DiagnosticStatus.WARN
+        msg = "ok" if self._state is not None else "no joint_states yet"
+        self.pub_diag.publish(diagnostic(self, level, msg, values))
+
+
+def main(argv: list[str] | None = None) -> int:
+    return run_node(RneaNode, "rnea", argv)
+
+
+if __name__ == "__main__":
+    sys.exit(main())
