@@ -89,3 +89,8 @@ def test_a_different_file_changes_the_robot_and_extra_sections_are_kept(raw, tmp
     assert d.section("sim")["timestep"] == 0.001  # copies, the model stays immutable
     with pytest.raises(RobotDescriptionError, match="no_such_section"):
         d.section("no_such_section")
+
+
+def test_description_is_hashable_by_identity():
+    d = load_hexa()
+    assert {d: 1}[d] == 1 and d == d

@@ -18,7 +18,7 @@ DEFAULT_PATH = DESCRIPTION_DIR / "hexa.yaml"
 _OWN_SECTIONS = ("name", "kind", "geometry", "kinematics", "inertia", "actuators")
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, eq=False)
 class LinkInertia:
     """Mass (kg), centre of mass (m) and inertia about the COM (kg·m²), both in the link's body frame."""
 
@@ -27,7 +27,7 @@ class LinkInertia:
     inertia: np.ndarray
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, eq=False)
 class HexaDescription:
     """Immutable Hexa model: geometry (seed 000 §2.1), joint limits, inertias and servo data, all SI.
 
