@@ -74,3 +74,33 @@ def test_onnx_export_matches_torch(tmp_path) -> None:
 def test_missing_weights_raise_a_clear_error(tmp_path) -> None:
     with pytest.raises(D.DetectorError, match="no ONNX weights"):
         D.PlateDetector("onnx", onnx_path=tmp_path / "none.onnx")
+
+
+def test_committed_weights_find_the_plate_in_a_render() -> None:
+    """The trained weights (onnxruntime) box the plate of a rendered top-camera frame with IoU ≥ 0.6."""
+    if not D.ONNX_PATH.exists():
+        pytest.skip("no committed weights")
+    pytest.importorskip("mujoco")
+    import sys
+    from pathlib import Path
+
+    sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "scripts"))
+    from train_detector import plate_box
+
+    from hexa.kinematics.hexa6rus import rotation_zyx
+    from hexa.sim import Simulator
+    from hexa.vision.camera import CameraModel
+
+    pose = np.array([-0.04, 0.05, -0.56, 0.2, 0.1, -0.2])
+    with Simulator(pose=pose, seed=4) as sim:
+        rgb, _ = sim.render("cam_top")
+        cam = CameraModel.from_any(sim.camera_model("cam_top"), "cam_top")
+        st = sim.state()
+        Cp = np.asarray(sim.desc.C, float)[:, :2]
+        half_t = float(sim.desc.section("appearance")["plate_thickness"]) / 2
+    T = np.eye(4)
+    T[:3, :3], T[:3, 3] = rotation_zyx(*st.pose[3:]), st.pose[:3]
+    truth = plate_box(cam, T, Cp[np.argsort(np.arctan2(Cp[:, 1], Cp[:, 0]))], half_t)
+    dets = D.PlateDetector("onnx").detect(rgb)
+    assert dets and D.box_iou(dets[0].box, truth)[0, 0] >= 0.6
+    assert dets[0].score > 0.5

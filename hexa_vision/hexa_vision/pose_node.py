@@ -63,7 +63,8 @@ class PoseNode(Node):
 
     def _on_info(self, msg: CameraInfo) -> None:
         self.assembler.set_camera_info(msg.width, msg.height, msg.k, msg.d)
-        if self.assembler.camera is not None and (self.markers is None or self.markers.camera != self.assembler.camera):
+        if self.assembler.camera is not None and not self.assembler.camera.same_as(
+                self.markers.camera if self.markers else None):
             self.markers = MarkerDetector(self.layout, self.assembler.camera)
 
     def _on_color(self, msg: Image) -> None:

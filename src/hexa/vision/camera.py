@@ -10,7 +10,7 @@ class CameraModelError(ValueError):
     """Intrinsics/extrinsics are malformed, or CameraInfo fields cannot define a pinhole camera."""
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, eq=False)
 class CameraModel:
     """A pinhole camera: intrinsics K (px), image size, and the pose of its optical frame in `base`.
 
@@ -41,6 +41,11 @@ class CameraModel:
         object.__setattr__(self, "T_base_camera", T)
         object.__setattr__(self, "width", int(self.width))
         object.__setattr__(self, "height", int(self.height))
+
+    def same_as(self, other: "CameraModel | None") -> bool:
+        """True when `other` has the same intrinsics, size and extrinsics."""
+        return (other is not None and self.width == other.width and self.height == other.height
+                and np.array_equal(self.K, other.K) and np.array_equal(self.T_base_camera, other.T_base_camera))
 
     # --- frames -------------------------------------------------------------------------------------------------
     @property

@@ -267,12 +267,38 @@ def evaluate_markers(n: int, seed: int = 0) -> MarkerReport:
                         float(np.percentile(p, 90)) if p.size else nan, float(np.percentile(r, 90)) if r.size else nan)
 
 
+def write_debug_images(desc: Any, folder: str, seed: int = 0) -> list[str]:
+    """One debug mosaic (Figs. 12/17/22 style) per link, from the first correctly isolated sample of each."""
+    import os
+
+    import cv2
+
+    from hexa.vision.isolation import debug_image
+
+    os.makedirs(folder, exist_ok=True)
+    done: list[str] = []
+    for s in contact_samples(30, seed + 100, desc=desc):
+        if s.link in done:
+            continue
+        est, geom, iso = isolate_sample(s, desc, debug=True)
+        if est.link_name != s.link or (s.link != "plate" and est.chain != s.chain):
+            continue
+        img = debug_image(est.per_camera[est.camera], iso, geom)
+        path = os.path.join(folder, f"vision_{s.link}.png")
+        cv2.imwrite(path, cv2.cvtColor(img, cv2.COLOR_RGB2BGR))
+        done.append(s.link)
+        if len(done) == 3:
+            break
+    return done
+
+
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(prog="python -m hexa.vision.evaluation", description=__doc__.split("\n")[0])
     ap.add_argument("--contacts", type=int, default=120)
     ap.add_argument("--markers", type=int, default=60)
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--json", default="")
+    ap.add_argument("--debug-dir", default="", help="write one debug mosaic per link (vision_<link>.png) here")
     a = ap.parse_args(argv)
     from hexa.robots.hexa_description import load_hexa
 
@@ -285,6 +311,8 @@ def main(argv: list[str] | None = None) -> int:
         print(f"isolation: n={rep.n} link {100 * rep.link_correct:.1f}% link+chain {100 * rep.link_chain_correct:.1f}% "
               f"median {1e3 * rep.median_error:.1f} mm p90 {1e3 * rep.p90_error:.1f} mm")
         print(rep.confusion_markdown())
+    if a.debug_dir:
+        write_debug_images(desc, a.debug_dir, a.seed)
     if a.markers:
         mr = evaluate_markers(a.markers, a.seed)
         out["markers"] = mr.as_dict()

@@ -181,6 +181,7 @@ class IsolationConfig:
     contact_sigma: float = 0.003        # m: width of the Gaussian weights on the nearest points
     smooth_px: int = 7                  # normalised box filter (px) of the object's depth before lifting to 3D
     axis_elongation: float = 2.5        # object point spread ratio above which its axis guides the plate contact
+    axis_max_shift: float = 0.03        # m: farther from the paper's centre-line border point → use that one
     min_confidence: float = 0.5         # a camera earlier in `order` wins unless its confidence is below this
     min_touch_points: int = 12          # fewer candidates → no contact in this camera
     min_object_area: int = 30           # px, smaller object blobs are noise
@@ -465,8 +466,9 @@ class CollisionIsolator:
                 if a @ (-q[:2]) < 0:
                     a = -a
                 border = hexagon_line_entry(geom.hexagon, q[:2], a)
-            if border is None:   # the paper's line through the plate centre
-                border = hexagon_border_point(geom.hexagon, q[:2])
+            polar = hexagon_border_point(geom.hexagon, q[:2])   # the paper's line through the plate centre
+            if border is None or np.linalg.norm(border - polar) > cfg.axis_max_shift:
+                border = polar
             point = t + R @ np.array([border[0], border[1], 0.0])
         else:
             code, chain, seg, radius = links[best]
