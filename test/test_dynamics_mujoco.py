@@ -151,19 +151,10 @@ def test_pose_driven_observer_with_noisy_camera_poses_and_commanded_angles():
     as the commanded angle (a seed). No false alarm in free motion; the plate contact is detected at its onset."""
     case = dict(CONTACT_CASES[0], t_on=1.5)
     run = simulate(_trajectory("ellipse"), 2.3, contact=case, desc=DESC)
-    obs = ResidualObserver(PRM, ObserverConfig(kinematics="pose"))
-    rng = np.random.default_rng(0)
-    out = np.full((run.t.size, 6), np.nan)
-    events = []
-    commanded = run.zeta + 0.01  # the servo target, not where the arm is
-    for k, t in enumerate(run.t):
-        if k % 33 == 0:
-            noise = np.concatenate([rng.normal(scale=1e-3, size=3), rng.normal(scale=5e-3, size=3)])
-            obs.update_pose(t, run.pose[k] + noise)
-        res = obs.update_arm(t, commanded[k], run.tau[k])
-        if res is not None:
-            out[k] = res.wrench
-            events += res.events
+    from hexa.dynamics.validation import pose_driven_residual
+
+    out, events, obs = pose_driven_residual(run, PRM, pose_noise=(1e-3, 5e-3), seed=0)
+    commanded = run.zeta + 0.01
     assert sum(obs.rejected.values()) == 0
     free = (run.t > 0.3) & (run.t < case["t_on"])
     peak = np.nanmax(np.abs(out[free]), axis=0)
