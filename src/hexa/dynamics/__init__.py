@@ -8,6 +8,13 @@ Modules:
 """
 from __future__ import annotations
 
-from hexa.dynamics.lagrange import DynamicsError, HexaDynamicParameters, MotionState
+from hexa.dynamics.identification import ContactForceEstimate, IdentificationError, identify_contact_force
+from hexa.dynamics.lagrange import (DynamicsError, HexaDynamicParameters, MotionState, inverse_dynamics,
+                                    momentum_terms, motion_from_joint_rates, motion_from_plate)
+from hexa.dynamics.observer import (CollisionEvent, ObserverConfig, ObserverError, ResidualObserver, ResidualSample,
+                                    direct_residual_batch, momentum_residual_batch)
 
-__all__ = ["DynamicsError", "HexaDynamicParameters", "MotionState"]
+__all__ = ["CollisionEvent", "ContactForceEstimate", "DynamicsError", "HexaDynamicParameters", "IdentificationError",
+           "MotionState", "ObserverConfig", "ObserverError", "ResidualObserver", "ResidualSample",
+           "direct_residual_batch", "identify_contact_force", "inverse_dynamics", "momentum_residual_batch",
+           "momentum_terms", "motion_from_joint_rates", "motion_from_plate"]

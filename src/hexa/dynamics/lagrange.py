@@ -503,11 +503,10 @@ def inverse_dynamics(prm: HexaDynamicParameters, state: MotionState, tau: NDArra
 
 
 class _Accelerations:
+    """Body accelerations and inertial-minus-gravity loads of a batch (filled by `_accelerations`)."""
+
     __slots__ = ("zdd", "Cdd", "Bdd", "a_r", "alpha_r", "a_p", "plate_gen", "rod_fc", "rod_fb", "rod_F", "rod_M",
                  "plate_F", "plate_M")
-
-    def __init__(self) -> None:
-        pass
 
 
 def _accelerations(prm, g: _Geometry, vel: _Velocity, V: NDArray, Vd: NDArray, R: NDArray) -> _Accelerations:

@@ -365,7 +365,9 @@ class ResidualObserver:
     def update_arm(self, t: float, zeta: NDArray, tau: NDArray, zeta_dot: NDArray | None = None,
                    pose: NDArray | None = None, zeta_ddot: NDArray | None = None) -> ResidualSample | None:
         """One arm sample: angles ζ (rad), torques τ = K_t·I (N·m), optional ζ̇ (rad/s), optional plate pose at the
-        same instant (else tracked), ζ̈ (direct form only; else differentiated). Returns None when rejected."""
+        same instant (else tracked), ζ̈ (direct form only; else differentiated). Returns None when rejected (or, without
+        ζ̇, for the first sample, kept to difference the next). With kinematics="pose", ζ is only a seed (may be None
+        after the first sample) and `pose` is not used: poses come through update_pose."""
         try:
             t = float(t)  # a numpy scalar here would turn every kernel operation into a numpy call
         except (TypeError, ValueError):
