@@ -111,8 +111,12 @@ def test_isolation_node_publishes_a_contact_on_collision_start(ros_env, procs, r
     pub_col = node.create_publisher(CollisionEvent, "/hexa/collision", RELIABLE_QOS)
     contacts: list[Contact] = []
     node.create_subscription(Contact, "/hexa/contact", contacts.append, RELIABLE_QOS)
-    procs.start([PY, "-m", "hexa_vision.isolation_node", "--ros-args", "-r", "__ns:=/hexa", "-p",
-                 "background_delay:=0.0", "-p", "debug_image:=false"], ros_env)
+    from diagnostic_msgs.msg import DiagnosticArray
+
+    diags: list[DiagnosticArray] = []
+    node.create_subscription(DiagnosticArray, "/diagnostics", diags.append, RELIABLE_QOS)
+    proc = procs.start([PY, "-m", "hexa_vision.isolation_node", "--ros-args", "-r", "__ns:=/hexa", "-p",
+                        "background_delay:=0.0", "-p", "debug_image:=false"], ros_env)
     time.sleep(3.0)
 
     def send(frames: dict, t: float) -> None:
@@ -145,7 +149,12 @@ def test_isolation_node_publishes_a_contact_on_collision_start(ros_env, procs, r
         send(sample.frames, 11.0 + 0.1 * k)
         if _wait(node, lambda: bool(contacts), 0.5):
             break
-    assert contacts, "no contact published"
+    if not contacts:
+        _wait(node, lambda: False, 1.5)
+        values = [(v.key, v.value) for d in diags[-1:] for st in d.status for v in st.values]
+        proc.terminate()
+        _, err = proc.communicate(timeout=10)
+        pytest.fail(f"no contact published; diagnostics {values}; stderr {err[-2000:]}")
     c = contacts[-1]
     assert c.collision_id == 7 and c.header.frame_id == "base"
     link = {"plate": Contact.PLATE, "arm": Contact.ARM, "rod": Contact.ROD}[sample.link]

@@ -55,7 +55,7 @@ class IsolationNode(Node):
         self.t_start: float | None = None
         self.want_background = set(CAMERAS)
         self.active: CollisionEvent | None = None
-        self.last_eval: dict[str, float] = {}
+        self.last_eval: dict[str, float] = {}   # stamp and camera count of the last evaluation
         for c in CAMERAS:
             self.create_subscription(Image, f"{c}/color/image_raw", lambda m, c=c: self._on_image(c, m, True),
                                      SENSOR_QOS)
@@ -129,7 +129,8 @@ class IsolationNode(Node):
                 f = self.frames[c][-1]
                 if abs(f.stamp - now) < 0.05:
                     pair[c] = f
-            if now - self.last_eval.get("t", -1.0) > 1e-6:
+            t_last, n_last = self.last_eval.get("t", -1.0), self.last_eval.get("n", 0)
+            if now - t_last > 1e-6 or (abs(now - t_last) <= 0.05 and len(pair) > n_last):
                 self._evaluate(pair)
 
     # ------------------------------------------------------------------ work
@@ -152,7 +153,7 @@ class IsolationNode(Node):
 
     def _evaluate(self, pair: dict[str, RGBDFrame]) -> None:
         stamp = max(f.stamp for f in pair.values())
-        self.last_eval["t"] = stamp
+        self.last_eval["t"], self.last_eval["n"] = stamp, len(pair)
         missing = [c for c in pair if c not in self.isolator.backgrounds]
         for c in missing:
             self.counters["no background"] += 1
