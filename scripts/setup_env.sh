@@ -57,7 +57,7 @@ PYINC=$("$VENV/bin/python" -c 'import sysconfig; print(sysconfig.get_paths()["in
 NPINC=$("$VENV/bin/python" -c 'import numpy; print(numpy.get_include())')
 if ! fresh cmake-fix "$PYINC:$NPINC"; then
   log "repairing CMake exports under .venv/share"
-  grep -rlF "/opt/python/cp311-cp311" "$VENV/share" --include='*.cmake' | while read -r f; do
+  { grep -rlF "/opt/python/cp311-cp311" "$VENV/share" --include="*.cmake" || true; } | while read -r f; do
     sed -i -e "s#/opt/python/cp311-cp311/include/python3.11#$PYINC#g" \
            -e "s#/opt/python/cp311-cp311/lib/python3.11/site-packages/numpy/_core/include#$NPINC#g" \
            -e "s#/opt/python/cp311-cp311#$VENV#g" "$f"
@@ -88,7 +88,9 @@ if ! fresh pkgs "$h"; then
   log "installing hexa packages (editable)"
   for p in "${PKGS[@]}"; do
     if [ -f "$p/setup.py" ] || [ -f "$p/pyproject.toml" ]; then
-      "${PIP[@]}" --no-deps --no-build-isolation -e "$p" 2> >(grep -v "is ignored: it is neither" >&2)
+      mkdir -p build
+      "${PIP[@]}" --no-deps --no-build-isolation -e "$p" > build/pip-editable.log 2>&1 \
+        || { cat build/pip-editable.log >&2; exit 1; }
     fi
   done
   mark pkgs "$h"
