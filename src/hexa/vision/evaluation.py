@@ -168,17 +168,23 @@ def _label(link: str | int, chain: int) -> str:
     return "plate" if name == "plate" else ("none" if name == "none" else f"{name} {chain}")
 
 
-def contact_samples(n: int, seed: int = 0, min_clearance: float = 0.003, desc: Any = None
-                    ) -> Iterator[ContactSample]:
-    """n feasible contact samples (see draw_contacts, render_contact); infeasible draws are replaced."""
+def contact_samples(n: int, seed: int = 0, min_clearance: float = 0.003, desc: Any = None,
+                    stats: dict[str, int] | None = None) -> Iterator[ContactSample]:
+    """n feasible contact samples (see draw_contacts, render_contact); infeasible draws are replaced and counted
+    in `stats` ("drawn <link>", "infeasible <link>")."""
     made = k = 0
     pool = draw_contacts(4 * n + 12, seed)
+    stats = {} if stats is None else stats
     while made < n and k < len(pool):
+        link = pool[k].link
+        stats[f"drawn {link}"] = stats.get(f"drawn {link}", 0) + 1
         s = render_contact(pool[k], seed + k, desc, min_clearance)
         k += 1
         if s is not None:
             made += 1
             yield s
+        else:
+            stats[f"infeasible {link}"] = stats.get(f"infeasible {link}", 0) + 1
 
 
 def evaluate_isolation(samples: Iterator[ContactSample] | list[ContactSample], desc: Any,
@@ -306,8 +312,11 @@ def main(argv: list[str] | None = None) -> int:
     t0 = time.time()
     out: dict[str, Any] = {}
     if a.contacts:
-        rep = evaluate_isolation(contact_samples(a.contacts, a.seed, desc=desc), desc)
+        stats: dict[str, int] = {}
+        rep = evaluate_isolation(contact_samples(a.contacts, a.seed, desc=desc, stats=stats), desc)
         out["isolation"] = rep.as_dict()
+        out["isolation"]["draws"] = stats
+        print("draws:", stats)
         print(f"isolation: n={rep.n} link {100 * rep.link_correct:.1f}% link+chain {100 * rep.link_chain_correct:.1f}% "
               f"median {1e3 * rep.median_error:.1f} mm p90 {1e3 * rep.p90_error:.1f} mm")
         print(rep.confusion_markdown())
