@@ -289,7 +289,18 @@ def write_debug_images(desc: Any, folder: str, seed: int = 0) -> list[str]:
         est, geom, iso = isolate_sample(s, desc, debug=True)
         if est.link_name != s.link or (s.link != "plate" and est.chain != s.chain):
             continue
-        img = debug_image(est.per_camera[est.camera], iso, geom)
+        if s.link in ("plate", "rod") and est.camera != "cam_top":
+            continue   # the paper's case 1 / 3 figures come from the top camera
+        box = None
+        if est.camera == "cam_top":
+            try:
+                from hexa.vision.detector import PlateDetector
+
+                dets = PlateDetector().detect(s.frames["cam_top"][0])
+                box = dets[0].box if dets else None
+            except Exception:  # noqa: BLE001 - no weights: no box in the mosaic
+                box = None
+        img = debug_image(est.per_camera[est.camera], iso, geom, box=box)
         path = os.path.join(folder, f"vision_{s.link}.png")
         cv2.imwrite(path, cv2.cvtColor(img, cv2.COLOR_RGB2BGR))
         done.append(s.link)
