@@ -161,3 +161,41 @@ def test_isolation_node_publishes_a_contact_on_collision_start(ros_env, procs, r
     assert c.link == link and c.chain == sample.chain
     assert np.linalg.norm([c.point.x - sample.point[0], c.point.y - sample.point[1],
                            c.point.z - sample.point[2]]) < 0.02
+
+
+def test_bag_camera_republishes_recorded_frames(tmp_path, ros_env, procs, rclpy_node) -> None:
+    from rclpy.qos import qos_profile_sensor_data
+    from rclpy.serialization import serialize_message
+    from sensor_msgs.msg import CameraInfo, Image
+
+    from hexa.vision.camera import CameraModel, intrinsics
+    from hexa.vision.images import from_message
+    from hexa_bringup.bag import BagRecorder
+    from hexa_vision.common import camera_info_msg, image_msg
+
+    cam = CameraModel(intrinsics(32, 24, 1.0), 32, 24)
+    rgb = np.random.default_rng(0).integers(0, 255, (24, 32, 3)).astype(np.uint8)
+    depth = np.full((24, 32), 812, np.uint16)
+    bag = tmp_path / "cams"
+    with BagRecorder(bag) as rec:
+        for topic, typ in (("/hexa/cam_top/color/image_raw", "sensor_msgs/msg/Image"),
+                           ("/hexa/cam_top/aligned_depth_to_color/image_raw", "sensor_msgs/msg/Image"),
+                           ("/hexa/cam_top/color/camera_info", "sensor_msgs/msg/CameraInfo")):
+            rec.add_topic(topic, typ, reliable=False)
+        for k in range(5):
+            stamp = rclpy_node.get_clock().now().to_msg()
+            t_ns = 10 ** 9 + k * 10 ** 8
+            rec.write("/hexa/cam_top/color/camera_info", t_ns, serialize_message(camera_info_msg(cam, "f", stamp)))
+            rec.write("/hexa/cam_top/color/image_raw", t_ns, serialize_message(image_msg(rgb, "rgb8", "f", stamp)))
+            rec.write("/hexa/cam_top/aligned_depth_to_color/image_raw", t_ns,
+                      serialize_message(image_msg(depth, "16UC1", "f", stamp)))
+    got: list[Image] = []
+    infos: list[CameraInfo] = []
+    rclpy_node.create_subscription(Image, "/hexa/cam_top/aligned_depth_to_color/image_raw", got.append,
+                                   qos_profile_sensor_data)
+    rclpy_node.create_subscription(CameraInfo, "/hexa/cam_top/color/camera_info", infos.append,
+                                   qos_profile_sensor_data)
+    procs.start([PY, "-m", "hexa_vision.camera_node", "--ros-args", "-r", "__ns:=/hexa", "-p", "source:=bag",
+                 "-p", f"path:={bag}", "-p", "loop:=true"], ros_env)
+    assert _wait(rclpy_node, lambda: len(got) >= 2 and infos, 30.0), "no depth image republished from the bag"
+    assert np.array_equal(from_message(got[-1]), depth) and infos[-1].width == 32
