@@ -163,6 +163,26 @@ def hexagon_line_entry(hexagon: np.ndarray, origin: np.ndarray, direction: np.nd
     return None if best is None else origin + best * direction
 
 
+def hexagon_line_crossing(hexagon: np.ndarray, origin: np.ndarray, direction: np.ndarray, near: np.ndarray
+                          ) -> np.ndarray | None:
+    """The crossing of the 2D line origin + s·direction with the hexagon border that lies nearest to `near`, or
+    None when the line misses the hexagon."""
+    best, best_d = None, np.inf
+    n = len(hexagon)
+    for k in range(n):
+        a, b = hexagon[k], hexagon[(k + 1) % n]
+        M = np.column_stack([direction, a - b])
+        if abs(np.linalg.det(M)) < 1e-12:
+            continue
+        s, u = np.linalg.solve(M, a - origin)
+        if -1e-9 <= u <= 1 + 1e-9:
+            p = origin + s * direction
+            d = float(np.linalg.norm(p - near))
+            if d < best_d:
+                best, best_d = p, d
+    return best
+
+
 # ----------------------------------------------------------------------------------------------------------------
 @dataclass
 class IsolationConfig:
@@ -181,7 +201,8 @@ class IsolationConfig:
     contact_sigma: float = 0.003        # m: width of the Gaussian weights on the nearest points
     smooth_px: int = 7                  # normalised box filter (px) of the object's depth before lifting to 3D
     axis_elongation: float = 2.5        # object point spread ratio above which its axis guides the plate contact
-    axis_max_shift: float = 0.03        # m: farther from the paper's centre-line border point → use that one
+    above_plate: float = 0.010          # m: a coloured pixel this far above the plate's surface is an object
+    tip_length: float = 0.02            # m of the object's ends compared to find its pushing end
     min_confidence: float = 0.5         # a camera earlier in `order` wins unless its confidence is below this
     min_touch_points: int = 12          # fewer candidates → no contact in this camera
     min_object_area: int = 30           # px, smaller object blobs are noise
@@ -285,12 +306,14 @@ class CollisionIsolator:
         return cam
 
     # -- masks -------------------------------------------------------------------------------------------------
-    def robot_mask(self, camera: str, geom: RobotGeometry, rgb: np.ndarray | None = None) -> np.ndarray:
+    def robot_mask(self, camera: str, geom: RobotGeometry, rgb: np.ndarray | None = None,
+                   depth: np.ndarray | None = None) -> np.ndarray:
         """uint8 mask of the robot's links drawn from the geometry (the "determined" robot), with a margin.
 
         With `rgb`, pixels whose colour cannot be a link's — saturated and not the arms' HSV blue (the rods are
         unsaturated, as the paper's YCbCr step assumes) — are released everywhere but on the plate itself (its
-        markers are coloured): an object in front of or next to a link is kept as object.
+        markers are coloured; there, with `depth`, only pixels standing `above_plate` clear of its surface): an
+        object in front of or next to a link is kept as object.
         """
         cam = self.cameras[camera]
         cfg = self.config
@@ -324,6 +347,21 @@ class CollisionIsolator:
             blue = cv2.inRange(hsv, np.array(cfg.blue_hsv[0]), np.array(cfg.blue_hsv[1])) > 0
             foreign = (hsv[:, :, 1] >= cfg.foreign_min_saturation) & (hsv[:, :, 2] >= cfg.foreign_min_value) & ~blue
             mask[foreign & (plate == 0)] = 0
+            if depth is not None:
+                # on the plate, a foreign pixel is an object only when it stands clear of the plate's top surface
+                # (the coloured markers are flush with it); median-filtered depth against the plate plane
+                vv, uu = np.nonzero(foreign & (plate > 0))
+                if vv.size:
+                    dmm = np.nan_to_num(np.asarray(depth, np.float32) * 1000.0, nan=0.0)
+                    dmed = cv2.medianBlur(np.clip(dmm, 0, 65535).astype(np.uint16), 5)[vv, uu] * 1e-3
+                    ok = dmed > 0
+                    ray = self._rays[camera][vv[ok], uu[ok]]
+                    pc = np.column_stack([ray * dmed[ok][:, None], dmed[ok]])
+                    pb = pc @ cam.T_base_camera[:3, :3].T + cam.T_base_camera[:3, 3]
+                    h = (pb - geom.T_plate[:3, 3]) @ geom.T_plate[:3, 2]
+                    side = np.sign((cam.position - geom.T_plate[:3, 3]) @ geom.T_plate[:3, 2]) or 1.0
+                    clear = side * h - geom.plate_half_thickness > cfg.above_plate
+                    mask[vv[ok][clear], uu[ok][clear]] = 0
         return mask
 
     def paper_colour_cues(self, rgb: np.ndarray) -> dict[str, Any]:
@@ -367,7 +405,7 @@ class CollisionIsolator:
         with np.errstate(invalid="ignore"):
             changed |= valid & (~bg_valid | (np.abs(depth - bg.depth) > cfg.depth_change))
         changed &= valid
-        robot = self.robot_mask(camera, geom, rgb)
+        robot = self.robot_mask(camera, geom, rgb, depth)
         cand = changed & (robot == 0)
         cand = cv2.morphologyEx(cand.astype(np.uint8), cv2.MORPH_OPEN, np.ones((3, 3), np.uint8)) > 0
         vv, uu = np.nonzero(cand)
@@ -456,19 +494,34 @@ class CollisionIsolator:
             R, t = geom.T_plate[:3, :3], geom.T_plate[:3, 3]
             q = R.T @ (mean_pt - t)
             border = None
-            # the object's own axis (principal direction of its points), followed from its tip to the border
+            # the object's own axis (principal direction of its points, corrected for seeing only its near
+            # side), followed to where it crosses the plate's hexagonal border nearest the object's tip
             loc = (pts - t) @ R
             c = loc.mean(axis=0)
             _, sv, vt = np.linalg.svd(loc - c, full_matrices=False)
-            a = vt[0][:2]
-            if sv[0] > cfg.axis_elongation * max(sv[1], 1e-12) and np.linalg.norm(a) > 0.3:
-                a = a / np.linalg.norm(a)
-                if a @ (-q[:2]) < 0:
+            a = vt[0]
+            if sv[0] > cfg.axis_elongation * max(sv[1], 1e-12):
+                if a @ (q - c) < 0:
                     a = -a
-                border = hexagon_line_entry(geom.hexagon, q[:2], a)
-            polar = hexagon_border_point(geom.hexagon, q[:2])   # the paper's line through the plate centre
-            if border is None or np.linalg.norm(border - polar) > cfg.axis_max_shift:
-                border = polar
+                eye = R.T @ (cam.position - t)
+                wv = (eye - c) - ((eye - c) @ a) * a
+                if np.linalg.norm(wv) > 1e-9:
+                    wv /= np.linalg.norm(wv)
+                    u = np.cross(a, wv)
+                    off = (loc - c) @ u
+                    r_est = 0.5 * float(np.percentile(off, 95) - np.percentile(off, 5))
+                    c = c - wv * (2.0 / np.pi) * r_est
+                # the pushing end: of the object's two ends (along its axis), the one nearer the plate
+                sa = (loc - loc.mean(axis=0)) @ a
+                lo, hi = np.percentile(sa, 1), np.percentile(sa, 99)
+                d_plate = D[-1]
+                end_lo = float(np.median(d_plate[sa <= lo + cfg.tip_length]))
+                end_hi = float(np.median(d_plate[sa >= hi - cfg.tip_length]))
+                tip = loc.mean(axis=0) + a * (hi if end_hi <= end_lo else lo)
+                if np.linalg.norm(a[:2]) > 0.2:
+                    border = hexagon_line_crossing(geom.hexagon, c[:2], a[:2] / np.linalg.norm(a[:2]), tip[:2])
+            if border is None:   # the paper's line through the plate centre
+                border = hexagon_border_point(geom.hexagon, q[:2])
             point = t + R @ np.array([border[0], border[1], 0.0])
         else:
             code, chain, seg, radius = links[best]
