@@ -5,8 +5,14 @@ import numpy as np
 import pytest
 
 from hexa.vision.camera import CameraModel, intrinsics, look_at
-from hexa.vision.markers import (MarkerDetector, MarkerError, MarkerLayout, fit_marker_set, pose_from_transform,
-                                 quaternion_from_matrix)
+from hexa.vision.markers import (
+    MarkerDetector,
+    MarkerError,
+    MarkerLayout,
+    fit_marker_set,
+    pose_from_transform,
+    quaternion_from_matrix,
+)
 from hexa.vision.rigid import rotation_angle
 
 LAYOUT = MarkerLayout(("red", "green", "yellow", "magenta"),
@@ -62,7 +68,7 @@ def test_marker_pose_accuracy_on_noisy_depth(seed: int) -> None:
     T = _pose_T(*rng.uniform(-0.08, 0.08, 2), -0.55, *np.radians(rng.uniform(-25, 25, 3)))
     rgb, depth = render_plate(T, noise_rel=0.01, seed=seed)
     det = MarkerDetector(LAYOUT, CAM)
-    fit, obs = det.estimate(rgb, depth)
+    fit, _ = det.estimate(rgb, depth)
     assert fit.ok, fit.reason
     assert np.linalg.norm(fit.t - T[:3, 3]) < 0.002
     assert np.degrees(rotation_angle(fit.R, T[:3, :3])) < 1.0

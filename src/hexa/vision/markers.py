@@ -5,9 +5,9 @@ plus one redundant, any three enough to reconstruct the pose).
 """
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 from itertools import combinations
-from typing import Sequence
 
 import cv2
 import numpy as np
@@ -31,13 +31,13 @@ class MarkerLayout:
     surface_offset: float = 0.0   # height of the marker tops above the plate surface (m)
 
     @classmethod
-    def from_description(cls, desc) -> "MarkerLayout":
+    def from_description(cls, desc) -> MarkerLayout:
         """Layout from the robot description's `markers` section (top face of each disc: position + plate
         half-thickness + disc thickness along z of {P})."""
         try:
             mk = desc.section("markers")
             ap = desc.section("appearance")
-        except Exception as exc:  # noqa: BLE001 - description without the vision sections
+        except Exception as exc:
             raise MarkerError(f"robot description has no markers/appearance section ({exc})") from exc
         items = mk.get("items") or []
         if len(items) < 3:
@@ -296,7 +296,7 @@ class MarkerDetector:
             if keep.sum() < 50:
                 return
             c = pts[keep].mean(axis=0)
-            _, sv, vt = np.linalg.svd(pts[keep] - c, full_matrices=False)
+            _, _, vt = np.linalg.svd(pts[keep] - c, full_matrices=False)
             n = vt[2] if vt[2][2] < 0 else -vt[2]          # normal towards the camera
             r = (pts - c) @ n
             sigma = max(self.depth_rel_sigma * zmed, 1e-3)
