@@ -3,11 +3,18 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from hypothesis import given, settings, strategies as st
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from hexa.vision.camera import CameraModel, CameraModelError, intrinsics, look_at
-from hexa.vision.images import (ENCODINGS, ImageConversionError, depth_to_meters, image_to_numpy, numpy_to_image,
-                                to_rgb)
+from hexa.vision.images import (
+    ENCODINGS,
+    ImageConversionError,
+    depth_to_meters,
+    image_to_numpy,
+    numpy_to_image,
+    to_rgb,
+)
 
 
 def _array_for(encoding: str, h: int, w: int, rng: np.random.Generator) -> np.ndarray:

@@ -7,8 +7,16 @@ import numpy as np
 import pytest
 
 from hexa.vision.camera import CameraModel, intrinsics, look_at
-from hexa.vision.isolation import (LINK_UNKNOWN, CollisionIsolator, IsolationError, RobotGeometry,
-                                   hexagon_border_point, hexagon_line_entry, plate_distance, segment_distance)
+from hexa.vision.isolation import (
+    LINK_UNKNOWN,
+    CollisionIsolator,
+    IsolationError,
+    RobotGeometry,
+    hexagon_border_point,
+    hexagon_line_entry,
+    plate_distance,
+    segment_distance,
+)
 
 HEX = np.array([[np.cos(a), np.sin(a)] for a in np.radians([0, 60, 120, 180, 240, 300])]) * 0.1
 

@@ -2,7 +2,6 @@
 from __future__ import annotations
 
 import os
-import subprocess
 import sys
 import time
 
@@ -60,9 +59,9 @@ def test_camera_node_reports_missing_sources_clearly(ros_env, procs) -> None:
 
 def test_folder_camera_and_pose_node_publish_the_plate_pose(tmp_path, ros_env, procs, rclpy_node) -> None:
     from geometry_msgs.msg import PoseStamped
-    from hexa_msgs.msg import PlateDetections
 
     from hexa.sim import Simulator
+    from hexa_msgs.msg import PlateDetections
 
     pose = np.array([0.03, -0.02, -0.54, 0.1, -0.15, 0.2])
     with Simulator(pose=pose, seed=2) as sim:
@@ -88,15 +87,15 @@ def test_folder_camera_and_pose_node_publish_the_plate_pose(tmp_path, ros_env, p
 
 def test_isolation_node_publishes_a_contact_on_collision_start(ros_env, procs, rclpy_node) -> None:
     from geometry_msgs.msg import PoseStamped
-    from hexa_msgs.msg import CollisionEvent, Contact
+    from hexa_vision.common import RELIABLE_QOS, camera_info_msg, image_msg
     from rclpy.qos import qos_profile_sensor_data
     from sensor_msgs.msg import CameraInfo, Image
 
+    from hexa.kinematics.hexa6rus import rotation_zyx
     from hexa.robots.hexa_description import load_hexa
     from hexa.vision.evaluation import contact_samples
     from hexa.vision.markers import quaternion_from_matrix
-    from hexa.kinematics.hexa6rus import rotation_zyx
-    from hexa_vision.common import RELIABLE_QOS, camera_info_msg, image_msg
+    from hexa_msgs.msg import CollisionEvent, Contact
 
     desc = load_hexa()
     sample = next(contact_samples(1, seed=5, desc=desc))
@@ -164,14 +163,14 @@ def test_isolation_node_publishes_a_contact_on_collision_start(ros_env, procs, r
 
 
 def test_bag_camera_republishes_recorded_frames(tmp_path, ros_env, procs, rclpy_node) -> None:
+    from hexa_bringup.bag import BagRecorder
+    from hexa_vision.common import camera_info_msg, image_msg
     from rclpy.qos import qos_profile_sensor_data
     from rclpy.serialization import serialize_message
     from sensor_msgs.msg import CameraInfo, Image
 
     from hexa.vision.camera import CameraModel, intrinsics
     from hexa.vision.images import from_message
-    from hexa_bringup.bag import BagRecorder
-    from hexa_vision.common import camera_info_msg, image_msg
 
     cam = CameraModel(intrinsics(32, 24, 1.0), 32, 24)
     rgb = np.random.default_rng(0).integers(0, 255, (24, 32, 3)).astype(np.uint8)

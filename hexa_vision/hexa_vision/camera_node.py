@@ -12,18 +12,17 @@ camera_info.yaml (width, height, k[9]) overrides the description's intrinsics.
 from __future__ import annotations
 
 import sys
-import time
 from pathlib import Path
 
 import cv2
 import numpy as np
 import rclpy
 import yaml
+from hexa_bringup.rosenv import apply_defaults
 from rclpy.node import Node
 from sensor_msgs.msg import CameraInfo, Image
 
 from hexa.vision.camera import CameraModel
-from hexa_bringup.rosenv import apply_defaults
 from hexa_vision.common import SENSOR_QOS, camera_info_msg, description_cameras, image_msg
 
 
@@ -96,7 +95,7 @@ class CameraNode(Node):
             return CameraModel.from_camera_info(d["width"], d["height"], d["k"], d.get("d"), name=self.cam_name)
         try:
             return description_cameras(desc_path)[self.cam_name]
-        except Exception as exc:  # noqa: BLE001
+        except Exception as exc:
             raise SourceError(f"no camera_info.yaml in {self.path} and no intrinsics for {self.cam_name} in the "
                               f"robot description ({exc})") from exc
 
@@ -136,9 +135,8 @@ class CameraNode(Node):
         threading.Thread(target=self._run_bag, daemon=True).start()
 
     def _run_bag(self) -> None:
-        from rclpy.serialization import deserialize_message
-
         from hexa_bringup.bag import paced
+        from rclpy.serialization import deserialize_message
 
         while rclpy.ok():
             for topic, msgtype, _, cdr in paced(self._reader(self.path), self.rate if self.rate > 0 else 1.0):

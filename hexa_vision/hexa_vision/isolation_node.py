@@ -18,16 +18,24 @@ import numpy as np
 import rclpy
 from diagnostic_msgs.msg import DiagnosticArray
 from geometry_msgs.msg import PoseStamped
-from hexa_msgs.msg import CollisionEvent, Contact
+from hexa_bringup.rosenv import apply_defaults
 from rclpy.node import Node
 from sensor_msgs.msg import CameraInfo, Image
 from std_srvs.srv import Trigger
 
-from hexa.vision.isolation import (LINK_UNKNOWN, CollisionIsolator, IsolationError, RobotGeometry, debug_image)
+from hexa.vision.isolation import LINK_UNKNOWN, CollisionIsolator, IsolationError, RobotGeometry, debug_image
 from hexa.vision.sync import FrameAssembler, RGBDFrame
-from hexa_bringup.rosenv import apply_defaults
-from hexa_vision.common import (CAMERAS, RELIABLE_QOS, SENSOR_QOS, description_cameras, diagnostic_status,
-                                image_msg, sec_to_stamp, stamp_to_sec)
+from hexa_msgs.msg import CollisionEvent, Contact
+from hexa_vision.common import (
+    CAMERAS,
+    RELIABLE_QOS,
+    SENSOR_QOS,
+    description_cameras,
+    diagnostic_status,
+    image_msg,
+    sec_to_stamp,
+    stamp_to_sec,
+)
 
 
 def _rot_from_quat(x: float, y: float, z: float, w: float) -> np.ndarray:

@@ -16,13 +16,13 @@ import numpy as np
 import rclpy
 from diagnostic_msgs.msg import DiagnosticArray
 from geometry_msgs.msg import PoseStamped, PoseWithCovarianceStamped
-from hexa_msgs.msg import PlateDetection, PlateDetections
+from hexa_bringup.rosenv import apply_defaults
 from rclpy.node import Node
 from sensor_msgs.msg import CameraInfo, Image
 
 from hexa.vision.markers import MarkerDetector, MarkerError, MarkerLayout, quaternion_from_matrix
 from hexa.vision.sync import FrameAssembler, RGBDFrame
-from hexa_bringup.rosenv import apply_defaults
+from hexa_msgs.msg import PlateDetection, PlateDetections
 from hexa_vision.common import RELIABLE_QOS, SENSOR_QOS, description_cameras, diagnostic_status, stamp_to_sec
 
 

@@ -42,7 +42,7 @@ class CameraModel:
         object.__setattr__(self, "width", int(self.width))
         object.__setattr__(self, "height", int(self.height))
 
-    def same_as(self, other: "CameraModel | None") -> bool:
+    def same_as(self, other: CameraModel | None) -> bool:
         """True when `other` has the same intrinsics, size and extrinsics."""
         return (other is not None and self.width == other.width and self.height == other.height
                 and np.array_equal(self.K, other.K) and np.array_equal(self.T_base_camera, other.T_base_camera))
@@ -121,7 +121,7 @@ class CameraModel:
 
     @classmethod
     def from_camera_info(cls, width: int, height: int, k, d=None, T_base_camera: np.ndarray | None = None,
-                         name: str = "camera", frame_id: str = "camera_color_optical_frame") -> "CameraModel":
+                         name: str = "camera", frame_id: str = "camera_color_optical_frame") -> CameraModel:
         """Model from CameraInfo fields (k row-major 9 values); non-zero distortion is rejected.
 
         Raises:
@@ -136,7 +136,7 @@ class CameraModel:
                    np.eye(4) if T_base_camera is None else np.asarray(T_base_camera, dtype=float), name, frame_id)
 
     @classmethod
-    def from_any(cls, obj, name: str = "camera") -> "CameraModel":
+    def from_any(cls, obj, name: str = "camera") -> CameraModel:
         """Model from another object with K, width, height and T_base_camera attributes or keys (e.g. the simulator's)."""
         if isinstance(obj, CameraModel):
             return obj

@@ -7,9 +7,9 @@ non-maximum suppression run in numpy, so inference needs only onnxruntime (torch
 """
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Sequence
 
 import cv2
 import numpy as np
@@ -65,7 +65,7 @@ def build_model():
                 self.head.bias.zero_()
                 self.head.bias[0] = -4.0
 
-        def forward(self, x: "torch.Tensor") -> "torch.Tensor":
+        def forward(self, x: torch.Tensor) -> torch.Tensor:
             return self.head(self.features(x))
 
     return GridDetector()
@@ -223,7 +223,7 @@ class PlateDetector:
                 self._session = ort.InferenceSession(str(onnx_path), opts, providers=["CPUExecutionProvider"])
                 self.backend = "onnx"
                 return
-            except Exception as exc:  # noqa: BLE001 - fall back to torch
+            except Exception as exc:
                 errors.append(f"onnxruntime: {exc}")
                 if backend == "onnx":
                     raise DetectorError("; ".join(errors)) from exc
@@ -238,7 +238,7 @@ class PlateDetector:
             m.eval()
             self._model = m
             self.backend = "torch"
-        except Exception as exc:  # noqa: BLE001
+        except Exception as exc:
             errors.append(f"torch: {exc}")
             raise DetectorError("no detector back-end: " + "; ".join(errors)) from exc
 

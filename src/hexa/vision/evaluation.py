@@ -11,15 +11,25 @@ import argparse
 import json
 import sys
 import time
+from collections.abc import Iterator
 from dataclasses import dataclass, field
-from typing import Any, Iterator
+from typing import Any
 
 import numpy as np
 
 from hexa.vision.camera import CameraModel
 from hexa.vision.images import depth_to_meters
-from hexa.vision.isolation import (LINK_ARM, LINK_NAMES, LINK_PLATE, LINK_ROD, LINK_UNKNOWN, CollisionIsolator,
-                                   ContactEstimate, IsolationConfig, RobotGeometry)
+from hexa.vision.isolation import (
+    LINK_ARM,
+    LINK_NAMES,
+    LINK_PLATE,
+    LINK_ROD,
+    LINK_UNKNOWN,
+    CollisionIsolator,
+    ContactEstimate,
+    IsolationConfig,
+    RobotGeometry,
+)
 
 LINK_CODE = {"plate": LINK_PLATE, "arm": LINK_ARM, "rod": LINK_ROD, "none": LINK_UNKNOWN}
 TRAJECTORIES = ("circle", "helix", "ellipse")

@@ -18,8 +18,9 @@ finds nothing, and the more confident answer is kept when both do. Pixels → 3D
 """
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass, field
-from typing import Any, Sequence
+from typing import Any
 
 import cv2
 import numpy as np
@@ -52,7 +53,7 @@ class RobotGeometry:
     plate_half_thickness: float
 
     @classmethod
-    def from_state(cls, desc: Any, pose: np.ndarray, zeta: np.ndarray | None = None) -> "RobotGeometry":
+    def from_state(cls, desc: Any, pose: np.ndarray, zeta: np.ndarray | None = None) -> RobotGeometry:
         """Geometry from the plate pose [x y z α β γ] (m, rad) and arm angles ζ (IK of the pose when None)."""
         from hexa.kinematics import hexa6rus as kin
 
