@@ -42,12 +42,12 @@ def module_available(module: str) -> bool:
 
 def ros_args(name: str, namespace: str, params: Path | None, sim_time: bool, extra: list[str] | None = None
              ) -> list[str]:
-    """The `--ros-args` part of a node's command line."""
-    args = ["--ros-args", "-r", f"__ns:={namespace}", "-r", f"__node:={name}",
-            "-p", f"use_sim_time:={'true' if sim_time else 'false'}"]
-    if params is not None and params.is_file():
+    """The `--ros-args` part of a node's command line: remaps, the parameters file, then `-p` overrides (in ROS 2
+    the later of a file value and a `-p` value wins)."""
+    args = ["--ros-args", "-r", f"__ns:={namespace}", "-r", f"__node:={name}"]
+    if params is not None and params.is_file():  # first: later -p arguments override the file
         args += ["--params-file", str(params)]
-    return args + (extra or [])
+    return args + ["-p", f"use_sim_time:={'true' if sim_time else 'false'}"] + (extra or [])
 
 
 def build_graph(mode: str, namespace: str = "/hexa", params: Path | None = DEFAULT_PARAMS,
