@@ -13,7 +13,7 @@ import numpy as np
 
 from hexa_bringup.rosenv import apply_defaults
 
-DT = 0.002
+DT = 0.005          # the driver's default Mega stream rate (200 Hz)
 FORCE = np.array([0.0, 0.0, 3.0])
 F_ON, F_OFF, T_END = 2.0, 3.0, 4.0
 TAU_COUNT = 0.0119
@@ -45,7 +45,7 @@ def simulate(seed: int = 0) -> dict:
             sim.clear_external_force()
         sim.step()
         s = sim.state()
-        if k % 2 == 1:
+        if k % 5 == 4:
             tau = np.round((s.tau + rng.normal(0.0, 0.008, 6)) / TAU_COUNT) * TAU_COUNT
             out["t"].append(s.time)
             out["u"].append(u.tolist())
@@ -75,10 +75,11 @@ def main() -> int:
 
     rclpy.init()
     node = rclpy.create_node("observer_peer", namespace="/hexa")
-    rel = QoSProfile(depth=50, reliability=ReliabilityPolicy.RELIABLE, history=HistoryPolicy.KEEP_LAST)
+    rel = QoSProfile(depth=500, reliability=ReliabilityPolicy.RELIABLE, history=HistoryPolicy.KEEP_LAST)
     pub_js = node.create_publisher(JointState, "joint_states", rel)
     pub_pose = node.create_publisher(PoseStamped, "plate_pose", 10)
-    pub_contact = node.create_publisher(Contact, "contact", QoSProfile(depth=20, reliability=ReliabilityPolicy.RELIABLE))
+    ev_qos = QoSProfile(depth=20, reliability=ReliabilityPolicy.RELIABLE)
+    pub_contact = node.create_publisher(Contact, "contact", ev_qos)
     events: list[dict] = []
     residuals: list[tuple[float, list[float], bool]] = []
     wrenches: list[dict] = []
@@ -96,7 +97,7 @@ def main() -> int:
         for st in m.status:
             diags[st.name] = {kv.key: kv.value for kv in st.values}
 
-    node.create_subscription(CollisionEvent, "collision", on_collision, QoSProfile(depth=20, reliability=ReliabilityPolicy.RELIABLE))
+    node.create_subscription(CollisionEvent, "collision", on_collision, ev_qos)
     node.create_subscription(Residual, "residual",
                              lambda m: (residuals.append((stamp_seconds(m.header.stamp),
                                                           [m.wrench.force.x, m.wrench.force.y, m.wrench.force.z],
@@ -210,10 +211,10 @@ def main() -> int:
         for k in range(5):
             pub_js.publish(js_msg(t + k * DT, [float("nan")] * 6, data["tau"][-1]))
         for k in range(3):
-            pub_js.publish(js_msg(t + (5 + k) * DT, data["u"][-1], data["tau"][-1], names=["a", "b", "c", "d", "e", "f"]))
+            pub_js.publish(js_msg(t + (5 + k) * DT, data["u"][-1], data["tau"][-1], names=list("abcdef")))
         spin(0.2)
         n_res2 = len(residuals)
-        for k in range(50):
+        for k in range(40):
             pub_js.publish(js_msg(t + (10 + k) * DT, data["u"][-1], data["tau"][-1]))
             spin(DT)
         spin(2.5)

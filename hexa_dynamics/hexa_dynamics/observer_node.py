@@ -11,18 +11,21 @@ e.g. `hexa param set /hexa/observer thresholds "[3,3,3,0.3,0.3,0.3]"`):
   description (str, ""): robot YAML (default packaged hexa.yaml).
   zeta_source ("estimator"): "estimator" (hobby servos: position = commanded angle) or "measured" (position = measured
     angle, velocity used when present: sim/joint_states_truth or servos with feedback).
+  time_source ("auto"): sample times from the current board's clock (motor_currents.board_time_us, τ = K_t·I) once
+    motor_currents arrive, else joint_states header stamps (τ = effort); "board" / "stamp" force one.
   gains (double[6], 25 1/s): observer gains K_j per axis [fx fy fz mx my mz].
   thresholds (double[6], [2,2,2,0.2,0.2,0.2] N, N·m): r_low per axis.
   release_ratio (0.5): an axis releases below release_ratio·r_low.  min_duration (0.01 s): confirmation time.
   max_gap (0.1 s): longer joint_states spacing restarts the integration.
-  accel_sigma (60), torque_sigma (0.012 N·m), camera_sigma (0.004 rad), bias_walk (0.0005 rad/√s),
+  accel_sigma (10), torque_sigma (0.012 N·m), camera_sigma (0.004 rad), bias_walk (0.0005 rad/√s),
     saturation (0.97), command_delay (0.0 s): ZetaEstimator settings (see hexa.estimation).
   reseed_distance (0.005 m): camera pose re-seeds the observer's pose tracking when this far from it.
   calibration_duration (1.0 s): averaging time of `~/reset` with recalibrate=true (robot at rest, untouched).
   marker_rate_hz (10), marker_scale (0.02 m/N): residual force arrow at the plate on `markers`.
   frame_id ("base").
-Topics (relative): sub `joint_states` (reliable), `plate_pose` (PoseStamped); pub `residual` (hexa_msgs/Residual, each
-accepted sample), `collision` (hexa_msgs/CollisionEvent, reliable keep-last 20), `zeta_estimate` (JointState ζ̂, ζ̂̇),
+Topics (relative): sub `joint_states` (reliable), `motor_currents` (reliable), `plate_pose` (PoseStamped);
+pub `residual` (hexa_msgs/Residual, each accepted sample), `collision` (hexa_msgs/CollisionEvent, reliable keep-last
+20), `zeta_estimate` (JointState ζ̂, ζ̂̇),
 `markers` (visualization_msgs/MarkerArray), `/diagnostics` (1 Hz, rejects by reason). Service `~/reset`
 (hexa_msgs/srv/ResetObserver). Time = message stamps (sim time in sim mode).
 """
@@ -49,7 +52,7 @@ from visualization_msgs.msg import Marker, MarkerArray
 JOINT_NAMES = [f"arm_{i}" for i in range(1, 7)]
 AXIS_NAMES = ("fx", "fy", "fz", "mx", "my", "mz")
 ESTIMATOR_KEYS = ("accel_sigma", "torque_sigma", "camera_sigma", "bias_walk", "saturation")
-INPUT_QOS = QoSProfile(depth=50, reliability=ReliabilityPolicy.RELIABLE, history=HistoryPolicy.KEEP_LAST)
+INPUT_QOS = QoSProfile(depth=500, reliability=ReliabilityPolicy.RELIABLE, history=HistoryPolicy.KEEP_LAST)
 EVENT_QOS = QoSProfile(depth=20, reliability=ReliabilityPolicy.RELIABLE, history=HistoryPolicy.KEEP_LAST)
 
 
@@ -104,6 +107,96 @@ def diagnostic(node: Node, level: int, message: str, values: dict[str, Any]) -> 
     return arr
 
 
+class BoardClock:
+    """Sample times from the current board's microsecond clock (MotorCurrents.board_time_us, wraps at 2³²) on the ROS
+    time axis: t = offset + unwrapped board time, the offset following (stamp − board time) with time constant `tau`
+    (host/board clock drift) and re-anchored when they disagree by more than `jump` s (board reset).
+
+    Host receive stamps jitter by milliseconds (USB, scheduling; in sim mode they are quantized by /clock), which at
+    200-1000 Hz would corrupt the observer's Δt; the board's clock does not."""
+
+    def __init__(self, tau: float = 10.0, jump: float = 0.5) -> None:
+        self.tau, self.jump = tau, jump
+        self._raw: int | None = None
+        self._board = 0.0
+        self._offset = 0.0
+        self.backwards = 0
+
+    def time(self, stamp: float, board_us: int) -> float | None:
+        raw = int(board_us) & 0xFFFFFFFF
+        if self._raw is None:
+            self._raw, self._board, self._offset = raw, 0.0, stamp
+            return stamp
+        d = (raw - self._raw) & 0xFFFFFFFF
+        if d == 0 or d >= 1 << 31:  # repeated or older sample
+            self.backwards += 1
+            return None
+        dt = d * 1e-6
+        self._raw = raw
+        self._board += dt
+        err = stamp - (self._offset + self._board)
+        if abs(err) > self.jump:
+            self._offset = stamp - self._board
+        else:
+            self._offset += err * min(1.0, dt / self.tau)
+        return self._offset + self._board
+
+
+class ArmSampleInput:
+    """joint_states / motor_currents → (t, commanded ζ, τ, velocity) samples for `on_sample`.
+
+    time_source "auto": once `motor_currents` arrive, each of them is a sample (t from the board clock, τ = K_t·I,
+    the commanded angles from the latest joint_states); until then (bags or peers without motor_currents) each
+    joint_states is a sample at its header stamp with τ = effort. "board" / "stamp" force one of the two."""
+
+    def __init__(self, node: Node, k_t: float, on_sample: Any, rejects: dict[str, int]) -> None:
+        from hexa_msgs.msg import MotorCurrents
+
+        self.node, self.k_t, self.on_sample, self.rejects = node, float(k_t), on_sample, rejects
+        self.source = str(node.declare_parameter("time_source", "auto").value)
+        if self.source not in ("auto", "board", "stamp"):
+            raise ValueError(f"parameter time_source must be 'auto', 'board' or 'stamp', got {self.source!r}")
+        self.clock = BoardClock()
+        self.board_seen = False
+        self._cmd: np.ndarray | None = None
+        self._vel: np.ndarray | None = None
+        rejects.setdefault("bad_joint_names", 0)
+        rejects.setdefault("bad_currents", 0)
+        rejects.setdefault("board_time", 0)
+        node.create_subscription(JointState, "joint_states", self._on_joint_states, INPUT_QOS)
+        if self.source != "stamp":
+            node.create_subscription(MotorCurrents, "motor_currents", self._on_currents, INPUT_QOS)
+
+    def _on_joint_states(self, msg: JointState) -> None:
+        pos = ordered_joints(msg, "position")
+        if pos is None:
+            self.rejects["bad_joint_names"] += 1
+            return
+        self._cmd = pos
+        self._vel = ordered_joints(msg, "velocity")
+        if self.board_seen or self.source == "board":
+            return
+        tau = ordered_joints(msg, "effort")
+        if tau is None:
+            self.rejects["bad_joint_names"] += 1
+            return
+        self.on_sample(stamp_seconds(msg.header.stamp), pos, tau, self._vel)
+
+    def _on_currents(self, msg: Any) -> None:
+        self.board_seen = True
+        if self._cmd is None:
+            return
+        cur = np.asarray(msg.current, dtype=float)
+        if cur.shape != (6,):
+            self.rejects["bad_currents"] += 1
+            return
+        t = self.clock.time(stamp_seconds(msg.header.stamp), msg.board_time_us)
+        if t is None:
+            self.rejects["board_time"] += 1
+            return
+        self.on_sample(t, self._cmd, self.k_t * cur, self._vel)
+
+
 class ObserverNode(Node):
     """joint_states + plate_pose → ζ̂ → residual observer → residual, collision, markers."""
 
@@ -137,7 +230,8 @@ class ObserverNode(Node):
                              min_duration=min_dur, max_gap=max_gap)  # raises ObserverError naming a bad value
         self.observer = ResidualObserver(self.params, cfg)
         self.estimator = make_estimator(self.desc, est_cfg, delay)
-        self.rejects = {"bad_joint_names": 0, "bad_pose": 0, "estimator": 0, "observer": 0}
+        self.settling = 0
+        self.rejects = {"bad_pose": 0, "estimator": 0, "observer": 0}
         self._last_out = None
         self._last_marker_t = -math.inf
         self._calib_until: float | None = None
@@ -149,7 +243,7 @@ class ObserverNode(Node):
         self.pub_zeta = self.create_publisher(JointState, "zeta_estimate", 10)
         self.pub_markers = self.create_publisher(MarkerArray, "markers", 10)
         self.pub_diag = self.create_publisher(DiagnosticArray, "/diagnostics", 10)
-        self.create_subscription(JointState, "joint_states", self._on_joint_states, INPUT_QOS)
+        self.input = ArmSampleInput(self, self.desc.K_t, self._on_sample, self.rejects)
         self.create_subscription(PoseStamped, "plate_pose", self._on_pose, 10)
         self.create_service(ResetObserver, "~/reset", self._on_reset)
         self.add_on_set_parameters_callback(self._on_set_parameters)
@@ -158,20 +252,19 @@ class ObserverNode(Node):
 
     # ------------------------------------------------------------------ parameters at runtime
     def _on_set_parameters(self, params: list) -> SetParametersResult:
-        from hexa.dynamics.observer import ObserverConfig, ObserverError
+        from hexa.dynamics.observer import ObserverError
         from hexa.estimation import EstimationError
 
         obs = self.observer
         cfg = obs.config
         est_cfg = self.estimator.config
-        fixed = {"description", "zeta_source", "max_gap", "command_delay", "frame_id"}
+        fixed = {"description", "zeta_source", "time_source", "max_gap", "command_delay", "frame_id"}
         try:
             for prm in params:
                 name, val = prm.name, prm.value
                 if name in fixed:
                     return SetParametersResult(successful=False, reason=f"{name} is read at start-up only")
-                if name == "thresholds":
-                    obs.detector.set_thresholds([float(v) for v in val])
+                if name == "thresholds":  # validated by ObserverConfig; applied only when every parameter is valid
                     cfg = dataclasses.replace(cfg, thresholds=tuple(float(v) for v in val))
                 elif name == "gains":
                     cfg = dataclasses.replace(cfg, gains=tuple(float(v) for v in val))
@@ -217,29 +310,25 @@ class ObserverNode(Node):
         if last is None or float(np.max(np.abs(last.pose[:3] - pose[:3]))) > self.reseed_distance:
             self.observer.update_pose(t, pose)
 
-    def _on_joint_states(self, msg: JointState) -> None:
-        t = stamp_seconds(msg.header.stamp)
-        pos = ordered_joints(msg, "position")
-        tau = ordered_joints(msg, "effort")
-        if pos is None or tau is None:
-            self.rejects["bad_joint_names"] += 1
-            return
+    def _on_sample(self, t: float, pos: np.ndarray, tau: np.ndarray, vel: np.ndarray | None) -> None:
         if self.zeta_source == "estimator":
             e = self.estimator.update(t, pos, tau)
             if e is None:
                 self.rejects["estimator"] += 1
                 return
+            if not e.settled:  # ζ̇ still converging after a (re)start: the observer restarts after it
+                self.settling += 1
+                return
             zeta, zeta_dot = e.zeta, e.zeta_dot
         else:
-            zeta = pos
-            zeta_dot = ordered_joints(msg, "velocity")
+            zeta, zeta_dot = pos, vel
         out = self.observer.update_arm(t, zeta, tau, zeta_dot)
         self._last_out = out
         if out is None:
             self.rejects["observer"] += 1
             return
         self._t = t
-        self._publish(out, msg.header.stamp, zeta, zeta_dot)
+        self._publish(out, stamp_from_seconds(t), zeta, zeta_dot)
         if self._calib_until is not None and t >= self._calib_until:
             self._calib_until = None
             try:
@@ -321,7 +410,9 @@ class ObserverNode(Node):
         obs, est = self.observer, self.estimator
         values: dict[str, Any] = {"accepted": obs.accepted, "collisions": obs.detector.count,
                                   "in_collision": obs.detector.active, "events_sent": self.events_sent,
-                                  "servo_saturated_samples": est.saturated, "camera_accepted": est.camera_accepted}
+                                  "servo_saturated_samples": est.saturated, "camera_accepted": est.camera_accepted,
+                                  "time_source": "board" if self.input.board_seen else "stamp",
+                                  "estimator_settling_samples": self.settling}
         values.update({f"reject_node_{k}": v for k, v in self.rejects.items()})
         values.update({f"reject_observer_{k}": v for k, v in obs.rejected.items()})
         values.update({f"reject_estimator_{k}": v for k, v in est.rejected.items()})
@@ -333,12 +424,24 @@ class ObserverNode(Node):
         self.pub_diag.publish(diagnostic(self, level, msg, values))
 
 
+def _raise_keyboard_interrupt(_signum: int, _frame: Any) -> None:
+    raise KeyboardInterrupt
+
+
 def run_node(factory: Any, name: str, argv: list[str] | None) -> int:
-    """init, build the node (exit 2 on a configuration error naming it), spin, clean shutdown on Ctrl-C."""
+    """init, build the node (exit 2 on a configuration error naming it), spin, clean shutdown on SIGINT/SIGTERM.
+
+    rclpy's own signal handler would invalidate the context while a callback is still publishing (RCLError on
+    Ctrl-C); here SIGINT and SIGTERM raise KeyboardInterrupt in the spinning thread and the node is torn down after."""
+    import signal
+
     from hexa_bringup.rosenv import apply_defaults
+    from rclpy.signals import SignalHandlerOptions
 
     apply_defaults()
-    rclpy.init(args=argv if argv is not None else sys.argv)
+    signal.signal(signal.SIGINT, _raise_keyboard_interrupt)
+    signal.signal(signal.SIGTERM, _raise_keyboard_interrupt)
+    rclpy.init(args=argv if argv is not None else sys.argv, signal_handler_options=SignalHandlerOptions.NO)
     try:
         node = factory()
     except (ValueError, OSError, KeyError) as exc:

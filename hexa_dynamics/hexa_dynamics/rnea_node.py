@@ -10,7 +10,8 @@ Parameters: description (""), zeta_source ("estimator" | "measured"), accel_sigm
 bias_walk, saturation, command_delay (ZetaEstimator, as the observer), rate_hz (100; 0 = only on contact messages),
 torque_window (0.02 s), accel_tau (0.02 s: time constant of the ζ̈ low-pass derivative), require_collision (true:
 ignore contacts outside a START..END), marker_scale (0.02 m/N), frame_id ("base").
-Topics (relative): sub `joint_states` (reliable), `plate_pose`, `contact` (hexa_msgs/Contact), `collision`
+Topics (relative): sub `joint_states`, `motor_currents` (reliable; time_source as the observer), `plate_pose`,
+`contact` (hexa_msgs/Contact), `collision`
 (reliable); pub `contact_wrench` (hexa_msgs/ContactWrench), `contact_markers` (visualization_msgs/MarkerArray),
 `/diagnostics` (rejects by reason).
 """
@@ -26,11 +27,10 @@ from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
 from geometry_msgs.msg import Point, PoseStamped
 from hexa_msgs.msg import CollisionEvent, Contact, ContactWrench
 from rclpy.node import Node
-from sensor_msgs.msg import JointState
 from visualization_msgs.msg import Marker, MarkerArray
 
-from hexa_dynamics.observer_node import (EVENT_QOS, INPUT_QOS, declare_estimator, diagnostic, make_estimator,
-                                         ordered_joints, run_node, stamp_seconds)
+from hexa_dynamics.observer_node import (EVENT_QOS, ArmSampleInput, declare_estimator, diagnostic, make_estimator,
+                                         run_node, stamp_from_seconds, stamp_seconds)
 
 LINK_NAMES = {Contact.PLATE: "plate", Contact.ARM: "arm", Contact.ROD: "rod"}
 REJECT_REASONS = ("non_finite", "unknown_link", "bad_chain", "no_state", "not_in_collision", "identification",
@@ -63,6 +63,7 @@ class RneaNode(Node):
         self.desc = load_hexa(desc_path)
         self.params = HexaDynamicParameters.from_description(self.desc)
         self.estimator = make_estimator(self.desc, est_cfg, delay)
+        self.settling = 0
         self.rejects = {k: 0 for k in REJECT_REASONS}
         self.published = 0
         self._tau: deque[tuple[float, np.ndarray]] = deque()
@@ -78,7 +79,7 @@ class RneaNode(Node):
         self.pub_wrench = self.create_publisher(ContactWrench, "contact_wrench", EVENT_QOS)
         self.pub_markers = self.create_publisher(MarkerArray, "contact_markers", 10)
         self.pub_diag = self.create_publisher(DiagnosticArray, "/diagnostics", 10)
-        self.create_subscription(JointState, "joint_states", self._on_joint_states, INPUT_QOS)
+        self.input = ArmSampleInput(self, self.desc.K_t, self._on_sample, self.rejects)
         self.create_subscription(PoseStamped, "plate_pose", self._on_pose, 10)
         self.create_subscription(Contact, "contact", self._on_contact, EVENT_QOS)
         self.create_subscription(CollisionEvent, "collision", self._on_collision, EVENT_QOS)
@@ -101,22 +102,19 @@ class RneaNode(Node):
         if self.zeta_source == "estimator":
             self.estimator.update_camera(stamp_seconds(msg.header.stamp), pose)
 
-    def _on_joint_states(self, msg: JointState) -> None:
-        t = stamp_seconds(msg.header.stamp)
-        pos = ordered_joints(msg, "position")
-        tau = ordered_joints(msg, "effort")
-        if pos is None or tau is None:
-            self.rejects["bad_joint_names"] += 1
-            return
+    def _on_sample(self, t: float, pos: np.ndarray, tau: np.ndarray, vel: np.ndarray | None) -> None:
         if self.zeta_source == "estimator":
             e = self.estimator.update(t, pos, tau)
             if e is None:
                 self.rejects["estimator"] += 1
                 return
+            if not e.settled:  # ζ̇ still converging after a (re)start: the observer restarts after it
+                self.settling += 1
+                return
             zeta, zd = e.zeta, e.zeta_dot
         else:
-            zeta, zd = pos, ordered_joints(msg, "velocity")
-            if zd is None or not (np.all(np.isfinite(zeta)) and np.all(np.isfinite(tau))):
+            zeta, zd = pos, vel
+            if zd is None or not (np.all(np.isfinite(zeta)) and np.all(np.isfinite(zd)) and np.all(np.isfinite(tau))):
                 self.rejects["non_finite"] += 1
                 return
         if self._zd_prev is not None and t > self._zd_prev[0]:
@@ -131,7 +129,7 @@ class RneaNode(Node):
         if self._active is not None and t - self._last_ident_t >= self.period:
             c = self._contacts.get(self._active)
             if c is not None:
-                self._identify(c, msg.header.stamp)
+                self._identify(c)
 
     def _plate_pose(self, zeta: np.ndarray) -> np.ndarray | None:
         from hexa.kinematics.hexa6rus import forward_kinematics
@@ -176,9 +174,9 @@ class RneaNode(Node):
             self.rejects["not_in_collision"] += 1
             return
         self._contacts[int(msg.collision_id)] = msg
-        self._identify(msg, msg.header.stamp)
+        self._identify(msg)
 
-    def _identify(self, c: Contact, stamp: Any) -> None:
+    def _identify(self, c: Contact) -> None:
         from hexa.dynamics.identification import identify_contact_force
         from hexa.dynamics.lagrange import DynamicsError, motion_from_joint_rates
 
@@ -186,6 +184,7 @@ class RneaNode(Node):
             self.rejects["no_state"] += 1
             return
         t, zeta, zd, zdd = self._state
+        stamp = stamp_from_seconds(t)
         pose = self._plate_pose(zeta)
         if pose is None:
             self.rejects["pose_tracking"] += 1

@@ -81,9 +81,10 @@ class EstimatorConfig:
     saturation·τ_max is stalled and its sample is not used as a measurement; camera_sigma: noise of ζ from a camera
     pose through IK (rad, 1σ; 0 disables the camera); bias_sigma: initial uncertainty of the servo-model offset
     b (rad); bias_walk: its random walk (rad/√s); camera_gate: largest |ζ_IK − ζ̂| accepted (rad); max_gap: longer
-    sample spacing restarts the filter (s); history: how far back camera stamps are matched (s)."""
+    sample spacing restarts the filter (s); history: how far back camera stamps are matched (s); settle_time: after a
+    (re)start the estimate is flagged not `settled` this long (s) while ζ̇ converges from 0."""
 
-    accel_sigma: float = 60.0
+    accel_sigma: float = 10.0
     torque_sigma: float = 0.012
     saturation: float = 0.97
     camera_sigma: float = 0.004
@@ -92,12 +93,14 @@ class EstimatorConfig:
     camera_gate: float = 0.15
     max_gap: float = 0.1
     history: float = 0.5
+    settle_time: float = 0.03
 
     def __post_init__(self) -> None:
         checks = {"accel_sigma": self.accel_sigma > 0, "torque_sigma": self.torque_sigma > 0,
                   "saturation": 0 < self.saturation <= 1.0, "camera_sigma": self.camera_sigma >= 0,
                   "bias_sigma": self.bias_sigma > 0, "bias_walk": self.bias_walk >= 0,
-                  "camera_gate": self.camera_gate > 0, "max_gap": self.max_gap > 0, "history": self.history > 0}
+                  "camera_gate": self.camera_gate > 0, "max_gap": self.max_gap > 0, "history": self.history > 0,
+                  "settle_time": self.settle_time >= 0}
         for name, ok in checks.items():
             if not (ok and math.isfinite(getattr(self, name))):
                 raise EstimationError(f"estimator {name} out of range, got {getattr(self, name)!r}")
@@ -106,7 +109,7 @@ class EstimatorConfig:
 @dataclass(frozen=True)
 class ArmEstimate:
     """ζ̂ (rad), ζ̂̇ (rad/s) at `time`; bias: servo-model offset b (rad); setpoint: servo set-point c (rad);
-    sigma: 1σ uncertainty of ζ̂ (rad)."""
+    sigma: 1σ uncertainty of ζ̂ (rad); settled: False during `settle_time` after a (re)start."""
 
     time: float
     zeta: NDArray
@@ -114,6 +117,7 @@ class ArmEstimate:
     bias: NDArray
     setpoint: NDArray
     sigma: NDArray
+    settled: bool = True
 
 
 def _six(x: Any) -> NDArray | None:
@@ -150,6 +154,7 @@ class ZetaEstimator:
     def reset(self) -> None:
         """Forget the filter state; the next sample re-initialises it."""
         self._t: float | None = None
+        self._t_start = -math.inf
         self._c: NDArray | None = None
         self._x = np.zeros((6, 3))
         self._P = np.zeros((6, 3, 3))
@@ -206,6 +211,7 @@ class ZetaEstimator:
             self._x = x
             self._P = np.tile(np.diag([r_s + cfg.bias_sigma ** 2, 1.0, cfg.bias_sigma ** 2]), (6, 1, 1))
             self._P[:, 0, 2] = self._P[:, 2, 0] = -cfg.bias_sigma ** 2
+            self._t_start = t
         else:
             h = t - self._t
             step = sv.speed_max * h
@@ -241,7 +247,8 @@ class ZetaEstimator:
     def _estimate(self) -> ArmEstimate:
         return ArmEstimate(time=self._t, zeta=self._x[:, 0].copy(), zeta_dot=self._x[:, 1].copy(),
                            bias=self._x[:, 2].copy(), setpoint=self._c.copy(),
-                           sigma=np.sqrt(np.maximum(self._P[:, 0, 0], 0.0)))
+                           sigma=np.sqrt(np.maximum(self._P[:, 0, 0], 0.0)),
+                           settled=self._t - self._t_start >= self.config.settle_time)
 
     # ------------------------------------------------------------------ camera correction
     def _filter_at(self, t: float) -> NDArray | None:
