@@ -84,7 +84,8 @@ OBJECT_RADIUS, OBJECT_LENGTH = 0.015, 0.25   # the simulator's pushing capsule (
 def object_clearance(desc: Any, pose: np.ndarray, zeta: np.ndarray, link: str, chain: int, point: np.ndarray,
                      direction: np.ndarray) -> float:
     """Smallest gap (m) between the simulator's pushing capsule (touching `point`, pushing along `direction`) and
-    every link other than the touched one; negative when the capsule would pass through another link."""
+    every link other than the touched one (and the plate itself beyond the capsule's tip, for plate contacts);
+    negative when the capsule would pass through a link."""
     from hexa.vision.isolation import plate_distance, segment_distance
 
     geom = RobotGeometry.from_state(desc, pose, zeta)
@@ -99,6 +100,9 @@ def object_clearance(desc: Any, pose: np.ndarray, zeta: np.ndarray, link: str, c
         gap = min(gap, float(dist.min()) - radius - OBJECT_RADIUS)
     if link != "plate":
         gap = min(gap, float(plate_distance(axis, geom).min()) - OBJECT_RADIUS)
+    else:   # pushing the border from the plate's inside would pass the capsule through the plate
+        far = np.linalg.norm(axis - c0, axis=1) > 2 * OBJECT_RADIUS
+        gap = min(gap, float(plate_distance(axis[far], geom).min()) - OBJECT_RADIUS)
     return gap
 
 
@@ -135,13 +139,27 @@ def render_contact(collision: Any, seed: int = 0, desc: Any = None, min_clearanc
         sim.close()
 
 
-def isolate_sample(sample: ContactSample, desc: Any, config: IsolationConfig | None = None, debug: bool = False
-                   ) -> tuple[ContactEstimate, RobotGeometry, CollisionIsolator]:
-    """Run the isolation on one sample (robot geometry from the sample's pose and ζ)."""
+def marker_pose(sample: ContactSample, desc: Any) -> np.ndarray | None:
+    """Plate pose [x y z α β γ] from the sample's top-camera markers, or None when the fit fails."""
+    from hexa.vision.markers import MarkerDetector, MarkerLayout, pose_from_transform
+
+    det = MarkerDetector(MarkerLayout.from_description(desc), sample.cameras["cam_top"])
+    fit, _ = det.estimate(*sample.frames["cam_top"])
+    return pose_from_transform(fit.T) if fit.ok else None
+
+
+def isolate_sample(sample: ContactSample, desc: Any, config: IsolationConfig | None = None, debug: bool = False,
+                   pose_from_markers: bool = False) -> tuple[ContactEstimate, RobotGeometry, CollisionIsolator]:
+    """Run the isolation on one sample: robot geometry from the sample's pose and ζ, or (`pose_from_markers`)
+    from the plate pose the markers give and the inverse kinematics (the simulator's pose when the fit fails;
+    `sample.meta["pose_source"]` says which)."""
     iso = CollisionIsolator(sample.cameras, config)
     for name, (rgb, d) in sample.backgrounds.items():
         iso.set_background(name, rgb, d)
-    geom = RobotGeometry.from_state(desc, sample.pose, sample.zeta)
+    pose = marker_pose(sample, desc) if pose_from_markers else None
+    sample.meta["pose_source"] = "markers" if pose is not None else "simulator"
+    geom = (RobotGeometry.from_state(desc, pose) if pose is not None else
+            RobotGeometry.from_state(desc, sample.pose, sample.zeta))
     return iso.isolate(sample.frames, geom, debug=debug), geom, iso
 
 
@@ -198,15 +216,15 @@ def contact_samples(n: int, seed: int = 0, min_clearance: float = 0.003, desc: A
 
 
 def evaluate_isolation(samples: Iterator[ContactSample] | list[ContactSample], desc: Any,
-                       config: IsolationConfig | None = None) -> IsolationReport:
-    """Isolation accuracy over samples (see IsolationReport)."""
+                       config: IsolationConfig | None = None, pose_from_markers: bool = False) -> IsolationReport:
+    """Isolation accuracy over samples (see IsolationReport and `isolate_sample`)."""
     labels = ["plate"] + [f"arm {i}" for i in range(1, 7)] + [f"rod {i}" for i in range(1, 7)] + ["none"]
     idx = {lab: i for i, lab in enumerate(labels)}
     conf = np.zeros((len(labels), len(labels)), int)
     errors, cases = [], []
     ok_link = ok_both = n = 0
     for s in samples:
-        est, _, _ = isolate_sample(s, desc, config)
+        est, _, _ = isolate_sample(s, desc, config, pose_from_markers=pose_from_markers)
         t_lab, e_lab = _label(s.link, s.chain), _label(est.link, est.chain)
         conf[idx[t_lab], idx[e_lab]] += 1
         n += 1
@@ -325,6 +343,8 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--markers", type=int, default=60)
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--json", default="")
+    ap.add_argument("--pose-from-markers", action="store_true",
+                    help="robot geometry from the marker pose + IK instead of the simulator's pose")
     ap.add_argument("--debug-dir", default="", help="write one debug mosaic per link (vision_<link>.png) here")
     a = ap.parse_args(argv)
     from hexa.robots.hexa_description import load_hexa
@@ -334,7 +354,8 @@ def main(argv: list[str] | None = None) -> int:
     out: dict[str, Any] = {}
     if a.contacts:
         stats: dict[str, int] = {}
-        rep = evaluate_isolation(contact_samples(a.contacts, a.seed, desc=desc, stats=stats), desc)
+        rep = evaluate_isolation(contact_samples(a.contacts, a.seed, desc=desc, stats=stats), desc,
+                                 pose_from_markers=a.pose_from_markers)
         out["isolation"] = rep.as_dict()
         out["isolation"]["draws"] = stats
         print("draws:", stats)
