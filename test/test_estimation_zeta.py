@@ -88,3 +88,25 @@ def test_configuration_errors_name_the_value():
         EstimatorConfig(accel_sigma=-1.0)
     with pytest.raises(EstimationError, match="kp"):
         ServoModel(kp=0.0, kv=0.6, speed_max=6.0)
+
+
+def test_an_arm_far_off_the_camera_is_restarted_from_it():
+    from hexa.kinematics.hexa6rus import inverse_kinematics
+    from hexa.robots.hexa_description import load_hexa
+
+    desc = load_hexa()
+    pose = np.asarray(desc.home_pose, dtype=float)
+    z = np.asarray(inverse_kinematics(desc, pose))
+    u = z.copy()
+    u[0] += 0.3                      # arm 1's horn is 0.3 rad off: beyond camera_gate (0.15 rad)
+    est = ZetaEstimator(desc)
+    t = 0.0
+    for frame in range(10):
+        for _ in range(33):
+            t += 0.001
+            e = est.update(t, u, np.zeros(6))
+        est.update_camera(t, pose)
+    e = est.update(t + 0.001, u, np.zeros(6))
+    assert est.camera_resets == 1 and est.rejected["camera_gate"] == 5
+    assert np.allclose(e.zeta, z, atol=2e-3)       # arm 1 follows the camera, the others were never off
+    assert e.bias[0] == pytest.approx(0.3, abs=2e-3)

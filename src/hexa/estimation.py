@@ -9,14 +9,18 @@ plate pose every ~33 ms. The servo is modelled as the simulator models it (hexa.
     τ   = k_p (c − ζ) − k_v ζ̇                                  the servo's position loop (MuJoCo position actuator)
 
 so y_k = c_k − τ_k/k_p = ζ_k + (k_v/k_p)·ζ̇_k is a direct measurement of the arm state, accurate to σ_τ/k_p (0.3 mrad
-for 10-bit current sensing). Per arm a constant-velocity Kalman filter on x = [ζ, ζ̇] (white acceleration of spectral
-density q = accel_sigma²) fuses y_k with H = [1, k_v/k_p], R = (torque_sigma/k_p)². All six arms receive the same
-measurements at the same times, so they share one covariance and one gain (six 2-state filters for the price of one).
+for 10-bit current sensing). Per arm a constant-velocity Kalman filter on x = [ζ, ζ̇, b] (white acceleration of
+spectral density q = accel_sigma²) fuses y_k with H = [1, k_v/k_p, 1], R = (torque_sigma/k_p)²; the six arms are
+filtered together as (6, 3) states and (6, 3, 3) covariances (numpy, ≈ 40 µs per sample).
 
-Camera correction: each plate pose p(t_c) gives ζ_IK = IK(p) (eq 18). The innovation against the estimate at t_c
-(interpolated from a short history, so the camera latency is respected) drives a per-arm bias b (complementary
-filter, gain `camera_gain` per frame, innovations larger than `camera_gate` rad rejected); the output is ζ̂ = ζ_KF + b.
-b absorbs what the servo model cannot know: horn mounting offsets, pot non-linearity, a wrong I_0.
+Stalled servos: when |τ_i| > saturation·τ_max the position loop no longer says where the arm is, so that arm's
+sample is not used and its acceleration density is raised to stall_accel_sigma (the camera carries it).
+
+Camera correction: each plate pose p(t_c) gives ζ_IK = IK(p) (eq 18), a measurement of ζ at t_c (noise camera_sigma)
+applied now as ζ_IK + (ζ̂(now) − ζ̂(t_c)) (ζ̂(t_c) interpolated from a short history, so camera latency is respected).
+The servo measurement sees ζ + b, the camera sees ζ: a third state b per arm (random walk bias_walk) absorbs what the
+servo model cannot know — horn mounting offsets, pot non-linearity, a wrong I₀. Per arm, innovations larger than
+camera_gate are skipped; an arm that fails the gate gate_reset_frames frames in a row is restarted from the camera.
 
 Bad input never touches the state and is counted by reason in `rejected`.
 """
@@ -78,13 +82,16 @@ class EstimatorConfig:
 
     accel_sigma: white-acceleration density √q_a of the constant-velocity model (rad/s^1.5); torque_sigma: torque
     noise (N·m, 1σ) → servo-measurement variance (torque_sigma/k_p)²; saturation: a servo whose |τ| exceeds
-    saturation·τ_max is stalled and its sample is not used as a measurement; camera_sigma: noise of ζ from a camera
+    saturation·τ_max is stalled: its sample is not used as a measurement and its acceleration density is
+    stall_accel_sigma (the camera carries it); camera_sigma: noise of ζ from a camera
     pose through IK (rad, 1σ; 0 disables the camera); bias_sigma: initial uncertainty of the servo-model offset
     b (rad); bias_walk: its random walk (rad/√s); camera_gate: largest |ζ_IK − ζ̂| accepted (rad); max_gap: longer
     sample spacing restarts the filter (s); history: how far back camera stamps are matched (s); settle_time: after a
-    (re)start the estimate is flagged not `settled` this long (s) while ζ̇ converges from 0."""
+    (re)start the estimate is flagged not `settled` this long (s) while ζ̇ converges from 0; gate_reset_frames: an arm
+    whose camera innovation exceeds camera_gate in this many consecutive frames is restarted from the camera."""
 
     accel_sigma: float = 10.0
+    stall_accel_sigma: float = 100.0
     torque_sigma: float = 0.012
     saturation: float = 0.97
     camera_sigma: float = 0.004
@@ -94,13 +101,14 @@ class EstimatorConfig:
     max_gap: float = 0.1
     history: float = 0.5
     settle_time: float = 0.03
+    gate_reset_frames: int = 5
 
     def __post_init__(self) -> None:
-        checks = {"accel_sigma": self.accel_sigma > 0, "torque_sigma": self.torque_sigma > 0,
+        checks = {"accel_sigma": self.accel_sigma > 0, "stall_accel_sigma": self.stall_accel_sigma > 0, "torque_sigma": self.torque_sigma > 0,
                   "saturation": 0 < self.saturation <= 1.0, "camera_sigma": self.camera_sigma >= 0,
                   "bias_sigma": self.bias_sigma > 0, "bias_walk": self.bias_walk >= 0,
                   "camera_gate": self.camera_gate > 0, "max_gap": self.max_gap > 0, "history": self.history > 0,
-                  "settle_time": self.settle_time >= 0}
+                  "settle_time": self.settle_time >= 0, "gate_reset_frames": self.gate_reset_frames >= 1}
         for name, ok in checks.items():
             if not (ok and math.isfinite(getattr(self, name))):
                 raise EstimationError(f"estimator {name} out of range, got {getattr(self, name)!r}")
@@ -146,6 +154,8 @@ class ZetaEstimator:
         self.accepted = 0
         self.camera_accepted = 0
         self.saturated = 0
+        self.camera_resets = 0
+        self._gated = np.zeros(6, dtype=int)
         self.torque_max = float(getattr(desc, "torque_max", math.inf))
         self._commands: deque[tuple[float, NDArray]] = deque()
         self._hist: deque[tuple[float, NDArray]] = deque()
@@ -161,6 +171,13 @@ class ZetaEstimator:
         self._commands.clear()
         self._hist.clear()
         self.last: ArmEstimate | None = None
+
+    def _initial_covariance(self) -> NDArray:
+        """P of [ζ, ζ̇, b] at a (re)start: ζ = y − b with b ~ N(0, bias_sigma²), ζ̇ ~ N(0, 1 rad²/s²)."""
+        cfg = self.config
+        r_s = (cfg.torque_sigma / self.servo.kp) ** 2
+        sb2 = cfg.bias_sigma ** 2
+        return np.array([[r_s + sb2, 0.0, -sb2], [0.0, 1.0, 0.0], [-sb2, 0.0, sb2]])
 
     def _reject(self, reason: str) -> None:
         self.rejected[reason] += 1
@@ -209,8 +226,7 @@ class ZetaEstimator:
             x[:, 0] = c - tq / sv.kp
             x[:, 2] = 0.0
             self._x = x
-            self._P = np.tile(np.diag([r_s + cfg.bias_sigma ** 2, 1.0, cfg.bias_sigma ** 2]), (6, 1, 1))
-            self._P[:, 0, 2] = self._P[:, 2, 0] = -cfg.bias_sigma ** 2
+            self._P = np.tile(self._initial_covariance(), (6, 1, 1))
             self._t_start = t
         else:
             h = t - self._t
@@ -220,9 +236,9 @@ class ZetaEstimator:
             # predict: constant velocity (white acceleration), bias random walk
             x[:, 0] += h * x[:, 1]
             F = np.array([[1.0, h, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]])
-            qa = cfg.accel_sigma ** 2
-            Q = np.array([[qa * h ** 3 / 3, qa * h ** 2 / 2, 0.0], [qa * h ** 2 / 2, qa * h, 0.0],
-                          [0.0, 0.0, cfg.bias_walk ** 2 * h]])
+            qa = np.where(free, cfg.accel_sigma ** 2, cfg.stall_accel_sigma ** 2)[:, None, None]  # (6, 1, 1)
+            Q = qa * np.array([[h ** 3 / 3, h ** 2 / 2, 0.0], [h ** 2 / 2, h, 0.0], [0.0, 0.0, 0.0]])
+            Q[:, 2, 2] = cfg.bias_walk ** 2 * h
             P = F @ P @ F.T + Q
             # servo-model update y = c − τ/k_p = ζ + (k_v/k_p) ζ̇ + b, on the arms whose servo is not saturated
             if free.any():
@@ -235,6 +251,7 @@ class ZetaEstimator:
                 x += K * innov[:, None]
                 P = np.where(free[:, None, None], P - K[:, :, None] * PH[:, None, :], P)
             self._P = 0.5 * (P + np.swapaxes(P, 1, 2))
+        self._y = c - tq / sv.kp
         self._c = c
         self._t = t
         self.accepted += 1
@@ -300,15 +317,29 @@ class ZetaEstimator:
             self._reject("camera_unreachable")
             return False
         e = np.remainder(z_ik - z_then + math.pi, 2 * math.pi) - math.pi
-        if np.max(np.abs(e)) > self.config.camera_gate:
-            self._reject("camera_gate")
-            return False
+        cfg = self.config
+        ok = np.abs(e) <= cfg.camera_gate  # per arm: an outlier (or a lost arm) does not move the others
+        self._gated = np.where(ok, 0, self._gated + 1)
+        lost = self._gated >= cfg.gate_reset_frames  # the camera disagrees frame after frame: restart from it
         x, P = self._x, self._P
-        S = P[:, 0, 0] + self.config.camera_sigma ** 2
-        K = P[:, :, 0] / S[:, None]                     # (6, 3)
-        x += K * e[:, None]
-        P = P - K[:, :, None] * P[:, 0, None, :]
-        self._P = 0.5 * (P + np.swapaxes(P, 1, 2))
+        if lost.any():
+            x[lost, 0] += e[lost]
+            x[lost, 1] = 0.0
+            x[lost, 2] = self._y[lost] - x[lost, 0]  # the offset that makes the servo model agree with the camera
+            P[lost] = self._initial_covariance()
+            self._gated[lost] = 0
+            self.camera_resets += int(lost.sum())
+        if not ok.all():
+            self._reject("camera_gate")
+        use = ok & ~lost
+        if use.any():
+            S = P[:, 0, 0] + cfg.camera_sigma ** 2
+            K = P[:, :, 0] / S[:, None] * use[:, None]      # (6, 3); zero gain on gated arms
+            x += K * e[:, None]
+            P = P - K[:, :, None] * P[:, 0, None, :]
+            self._P = 0.5 * (P + np.swapaxes(P, 1, 2))
+        if not use.any() and not lost.any():
+            return False
         self.camera_accepted += 1
         self.last = self._estimate()
         return True
