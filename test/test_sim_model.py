@@ -268,3 +268,28 @@ def test_set_pose_reassembles_the_closed_robot_at_rest_without_rebuilding(desc):
         sim.step(300)                                        # the servos hold it there
         assert np.linalg.norm(sim.state().pose[:3] - pose[:3]) < 0.005
     assert id(sim.model) == model_id
+
+
+@needs_trajectories
+@pytest.mark.parametrize("case", ["plate", "arm", "rod"])
+def test_physical_contact_mode_touches_only_the_intended_link_through_mujoco_contacts(desc, case):
+    sim = Simulator(desc, scenario=case, cameras=False, contact_model="physical")
+    c = sim.collision
+    assert sim.model.opt.disableflags & mujoco.mjtDisableBit.mjDSBL_CONTACT == 0
+    sim.run_until(c.end_time + 0.3)
+    log = sim.truth_log()
+    f = np.linalg.norm(log["force"], axis=1)
+    on = f > 0
+    assert on.any()
+    codes = {"plate": 0, "arm": 1, "rod": 2}
+    assert set(log["link"][on].tolist()) == {codes[case]} and set(log["chain"][on].tolist()) == {c.chain}
+    k = int(np.argmax(f))
+    assert 0.8 * c.peak_force <= f[k] <= 1.3 * c.peak_force        # MuJoCo's contact force, near the script
+    assert abs(log["time"][k] - c.peak_time) < 0.1
+    assert log["force"][k] @ sim._scripted_dir > 0.5 * f[k]   # pushes (along the surface normal, not the script)
+    assert not on[log["time"] > c.end_time + 0.1].any()            # released
+
+
+def test_contact_model_is_checked(desc):
+    with pytest.raises(SimulatorError, match="contact_model"):
+        Simulator(desc, cameras=False, contact_model="magnetic")

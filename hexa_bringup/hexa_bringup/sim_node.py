@@ -5,7 +5,8 @@ possible), camera_rate_hz (30), cameras (true), clock_rate_hz (250: every 4 ms o
 handles each /clock message, so 1 kHz costs the whole graph CPU), truth_rate_hz (100), boards (true: the virtual
 Uno/Mega ptys linked at link_dir, /tmp/hexa_sim/{uno,mega}), duration (0 = run until shut down), start_delay (wall s
 with sim time frozen at 0 before stepping, while the rest of the graph starts), lead_in (sim s at rest before the
-trajectory and the scenario's clock start; the collision happens at lead_in + the scenario's onset).
+trajectory and the scenario's clock start; the collision happens at lead_in + the scenario's onset), contact_model
+(scripted | physical, see hexa.sim.Simulator).
 Topics (relative, under the node namespace, e.g. /hexa): cam_{top,side}/color/image_raw (rgb8),
 cam_{top,side}/color/camera_info, cam_{top,side}/aligned_depth_to_color/image_raw (16UC1 mm),
 cam_{top,side}/aligned_depth_to_color/camera_info (sensor-data QoS); sim/wrench_truth (WrenchStamped: force at the
@@ -73,9 +74,11 @@ def main(argv: list[str] | None = None) -> int:
             self.duration = float(p("duration", 0.0).value)
             self.lead_in = float(p("lead_in", 0.0).value)
             self.start_delay = float(p("start_delay", 0.0).value)
+            self.contact_model = str(p("contact_model", "scripted").value)
             scenario = None if self.scenario in ("", "none") else self.scenario
             self.sim = Simulator(seed=self.seed, scenario=scenario, cameras=self.use_cams,
-                                 randomize=self.randomize, lead_in=self.lead_in)
+                                 randomize=self.randomize, lead_in=self.lead_in,
+                                 contact_model=self.contact_model)
             self.boards = VirtualBoards(self.sim, link_dir=self.link_dir).start() if self.use_boards else None
             self.clock_pub = self.create_publisher(Clock, "/clock", 10)
             self.cam_pubs = {}

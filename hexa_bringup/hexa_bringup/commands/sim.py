@@ -17,6 +17,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     s.add_argument("--randomize", action="store_true", help="draw the collision from the scenario's ranges")
     s.add_argument("--at", choices=["onset", "peak"], default="peak", help="instant of the snapshot")
     s.add_argument("--no-noise", action="store_true", help="render without the colour/depth noise models")
+    s.add_argument("--contact-model", choices=["scripted", "physical"], default="scripted")
     s.add_argument("--json", action="store_true", help="print JSON (files, ground truth in SI units)")
     s.set_defaults(func=run)
     r = ssub.add_parser("run", help="simulate a case (physics only) and report the ground-truth contact; --out "
@@ -26,6 +27,8 @@ def register(sub: argparse._SubParsersAction) -> None:
     r.add_argument("--randomize", action="store_true", help="draw the collision from the scenario's ranges")
     r.add_argument("--duration", type=float, default=None, help="sim seconds (default: 1 s after the release)")
     r.add_argument("--out", help="write the truth log (time, force, point, link, chain, plate_pose, zeta, tau) here")
+    r.add_argument("--contact-model", choices=["scripted", "physical"], default="scripted",
+                   help="scripted: exact wrench at the point; physical: a pusher through MuJoCo contacts")
     r.add_argument("--json", action="store_true", help="print JSON (SI units)")
     r.set_defaults(func=run_case)
 
@@ -54,7 +57,8 @@ def run(args: argparse.Namespace) -> int:
     cases = ["plate", "arm", "rod"] if args.case == "all" else [args.case]
     report = []
     for case in cases:
-        with Simulator(seed=args.seed, scenario=case, randomize=args.randomize) as sim:
+        with Simulator(seed=args.seed, scenario=case, randomize=args.randomize,
+                       contact_model=args.contact_model) as sim:
             c = sim.collision
             t_snap = c.peak_time if args.at == "peak" else c.onset + 0.05
             sim.run_until(t_snap)
@@ -87,7 +91,8 @@ def run_case(args: argparse.Namespace) -> int:
     from hexa import trajectories
     from hexa.sim import Simulator
 
-    with Simulator(seed=args.seed, scenario=args.case, randomize=args.randomize, cameras=False) as sim:
+    with Simulator(seed=args.seed, scenario=args.case, randomize=args.randomize, cameras=False,
+                   contact_model=args.contact_model) as sim:
         c = sim.collision
         sim.run_until(args.duration if args.duration is not None else c.end_time + 1.0)
         log = sim.truth_log()

@@ -19,6 +19,7 @@ from hexa.sim.config import SimConfig, sim_config_of
 
 HOME_POSE = np.array([0.0, 0.0, -0.55, 0.0, 0.0, 0.0])
 PARK_POS = (0.0, 0.0, 5.0)      # where unused mocap bodies (object, occluders) wait: outside every view
+PUSHER_RADIUS, PUSHER_LENGTH, PUSHER_MASS = 0.015, 0.25, 0.05   # the physical-contact pusher (m, kg)
 N_OCCLUDERS = 3
 
 
@@ -70,13 +71,16 @@ def _inertial(mass: float, com: np.ndarray, inertia: np.ndarray) -> str:
     return f'<inertial pos="{_f(com)}" mass="{mass:.9g}" fullinertia="{_f(full)}"/>'
 
 
-def build_mjcf(desc: Any, pose: np.ndarray | None = None, config: SimConfig | None = None) -> str:
+def build_mjcf(desc: Any, pose: np.ndarray | None = None, config: SimConfig | None = None,
+               physical_contact: bool = False) -> str:
     """MJCF text of the Hexa of `desc`, assembled at plate `pose` [x y z α β γ] (m, rad; Z-Y-X, eq 38).
 
     Args:
         desc: a HexaDescription (hexa.robots.hexa_description.load_hexa()).
         pose: assembly pose (default HOME_POSE); qpos0 is consistent there (constraints exactly satisfied).
         config: simulator sections (default: read from `desc`).
+        physical_contact: add the force-driven pusher (a capsule on a slide joint under a kinematic carrier) that
+            touches the arms, rods and plate through MuJoCo contacts; without it nothing collides.
 
     Raises:
         MJCFError: an unusable dimension; UnreachablePoseError from the inverse kinematics.
@@ -99,12 +103,13 @@ def build_mjcf(desc: Any, pose: np.ndarray | None = None, config: SimConfig | No
     tau_max = float(desc.torque_max)
     lo, hi = float(desc.zeta_min), float(desc.zeta_max)
 
+    aff = ' conaffinity="2"' if physical_contact else ""
     out: list[str] = []
     w = out.append
     w('<mujoco model="hexa">')
     w(f'<compiler angle="radian" autolimits="true"/>')
     w(f'<option timestep="{cfg.timestep:.9g}" integrator="Euler" gravity="0 0 -9.81" cone="elliptic">'
-      '<flag contact="disable"/></option>')
+      + ('</option>' if physical_contact else '<flag contact="disable"/></option>'))
     w('<visual><global offwidth="640" offheight="480"/><quality shadowsize="0" offsamples="0"/>'
       '<headlight ambient="0.35 0.35 0.35" diffuse="0.55 0.55 0.55" specular="0.05 0.05 0.05"/>'
       '<map znear="0.005" zfar="40"/></visual>')
@@ -153,7 +158,7 @@ def build_mjcf(desc: Any, pose: np.ndarray | None = None, config: SimConfig | No
           f'limited="false" armature="{servo.armature:.9g}"/>')
         w(_inertial(mp["arm"]["mass"], mp["arm"]["com"], mp["arm"]["inertia"]))
         w(f'<geom name="arm_{n}" type="capsule" fromto="0 0 0 {l_a:.9g} 0 0" size="{ap["arm_radius"]:.6g}" '
-          'material="arm"/>')
+          f'material="arm"{aff}/>')
         x_rod = (C[i] - B[i]) / l_d
         R_rod = _frame_from_xz(x_rod, ax[i])
         R_rel = R_arm.T @ R_rod
@@ -163,14 +168,14 @@ def build_mjcf(desc: Any, pose: np.ndarray | None = None, config: SimConfig | No
         w(f'<joint name="u2_{n}" type="hinge" axis="0 1 0" damping="0"/>')
         w(_inertial(mp["rod"]["mass"], mp["rod"]["com"], mp["rod"]["inertia"]))
         w(f'<geom name="rod_{n}" type="capsule" fromto="0 0 0 {l_d:.9g} 0 0" size="{ap["rod_radius"]:.6g}" '
-          'material="rod"/>')
+          f'material="rod"{aff}/>')
         w(f'<site name="rod_tip_{n}" pos="{l_d:.12g} 0 0" size="0.004"/>')
         w('</body></body>')
 
     w(f'<body name="plate" pos="{_f(pose[:3])}" quat="{_f(_quat(R_p))}">')
     w('<freejoint name="plate"/>')
     w(_inertial(mp["plate"]["mass"], mp["plate"]["com"], mp["plate"]["inertia"]))
-    w('<geom name="plate" type="mesh" mesh="plate_hex" material="plate"/>')
+    w(f'<geom name="plate" type="mesh" mesh="plate_hex" material="plate"{aff}/>')
     mz = t2 + cfg.markers.thickness / 2
     for mk in cfg.markers.items:
         w(f'<geom name="marker_{mk.name}" type="cylinder" size="{cfg.markers.radius:.6g} '
@@ -180,6 +185,15 @@ def build_mjcf(desc: Any, pose: np.ndarray | None = None, config: SimConfig | No
         w(f'<site name="plate_joint_{i + 1}" pos="{_f(Cp[i])}" size="0.004"/>')
     w('</body>')
 
+    if physical_contact:
+        # pusher: kinematic carrier (mocap) + capsule sliding along the carrier's z (the push direction); it is the
+        # only geom with contype 2, the robot's links the only ones with conaffinity 2
+        w(f'<body name="pusher_carrier" mocap="true" pos="{_f(PARK_POS)}">'
+          '<body name="pusher" gravcomp="1"><joint name="pusher_slide" type="slide" axis="0 0 1" damping="0"/>'
+          f'<inertial pos="0 0 -{PUSHER_LENGTH / 2:.6g}" mass="{PUSHER_MASS:.6g}" diaginertia="1e-4 1e-4 1e-5"/>'
+          f'<geom name="pusher" type="capsule" fromto="0 0 -{PUSHER_LENGTH:.6g} 0 0 -{PUSHER_RADIUS:.6g}" '
+          f'size="{PUSHER_RADIUS:.6g}" material="object" contype="2" conaffinity="0" condim="3" friction="0.3"/>'
+          '</body></body>')
     # external object (scripted contact) and occluders: mocap bodies, visual only
     w(f'<body name="object" mocap="true" pos="{_f(PARK_POS)}">'
       '<geom name="object" type="capsule" fromto="0 0 0 0 0 0.25" size="0.015" material="object"/></body>')
@@ -197,6 +211,8 @@ def build_mjcf(desc: Any, pose: np.ndarray | None = None, config: SimConfig | No
     for i in range(6):
         w(f'<position name="servo_{i + 1}" joint="arm_{i + 1}" kp="{servo.kp:.9g}" kv="{servo.kv:.9g}" '
           f'forcerange="{-tau_max:.9g} {tau_max:.9g}" ctrlrange="{lo:.9g} {hi:.9g}"/>')
+    if physical_contact:
+        w('<motor name="pusher" joint="pusher_slide" gear="1"/>')
     w('</actuator>')
     w('</mujoco>')
     return "\n".join(out)

@@ -147,11 +147,16 @@ class Simulator:
             duration (hexa.trajectories.DURATIONS), then hold its last pose.
         lead_in: seconds of sim time at rest at the start pose before the trajectory (and the scenario's clock)
             starts, e.g. to let a ROS graph come up and calibrate; collision times are shifted by it.
+        contact_model: "scripted" (the scenario's force is applied exactly at the point, mj_applyFT; the object is
+            visual) or "physical" (a capsule on a force-driven slide pushes the link through MuJoCo contacts; the
+            ground truth is then MuJoCo's contact force and contact point, the force profile only approximately
+            the scenario's).
     """
 
     def __init__(self, desc: Any = None, seed: int = 0, scenario: Any = None, cameras: bool = True,
                  pose: np.ndarray | None = None, drive: str | None = None, randomize: bool = False,
-                 settle: float = 0.5, trajectory: str | None = None, lead_in: float = 0.0) -> None:
+                 settle: float = 0.5, trajectory: str | None = None, lead_in: float = 0.0,
+                 contact_model: str = "scripted") -> None:
         self.desc = _desc_default(desc)
         self.config: SimConfig = sim_config_of(self.desc)
         self.seed = int(seed)
@@ -197,7 +202,11 @@ class Simulator:
             start_pose = HOME_POSE if pose is None else np.asarray(pose, dtype=float)
         self.start_pose = start_pose
 
-        self.xml = build_mjcf(self.desc, start_pose, self.config)
+        if contact_model not in ("scripted", "physical"):
+            raise SimulatorError(f"contact_model must be 'scripted' or 'physical', got {contact_model!r}")
+        self.contact_model = contact_model
+        physical = contact_model == "physical"
+        self.xml = build_mjcf(self.desc, start_pose, self.config, physical_contact=physical)
         self.model = mujoco.MjModel.from_xml_string(self.xml)
         self.data = mujoco.MjData(self.model)
         m = self.model
@@ -211,6 +220,16 @@ class Simulator:
         self._arm_body = [m.body(f"arm_{i}").id for i in range(1, 7)]
         self._rod_body = [m.body(f"rod_{i}").id for i in range(1, 7)]
         self._object_mocap = int(m.body_mocapid[m.body("object").id])
+        self._pusher: dict[str, Any] | None = None
+        if physical:
+            links = {m.geom("plate").id: ("plate", 0)}
+            for i in range(1, 7):
+                links[m.geom(f"arm_{i}").id] = ("arm", i)
+                links[m.geom(f"rod_{i}").id] = ("rod", i)
+            jp = m.joint("pusher_slide").id
+            self._pusher = {"mocap": int(m.body_mocapid[m.body("pusher_carrier").id]), "geom": m.geom("pusher").id,
+                            "qpos": int(m.jnt_qposadr[jp]), "dof": int(m.jnt_dofadr[jp]),
+                            "act": m.actuator("pusher").id, "links": links}
         self._cam_ids = {name: m.camera(name).id for name in CAMERA_NAMES}
         self._omega_max = float(self.desc.speed_max)
         self._dt = float(m.opt.timestep)
@@ -218,7 +237,7 @@ class Simulator:
 
         zeta0 = self.data.qpos[self._arm_qpos].copy()
         self._targets = zeta0.copy()          # commanded (before the slew limit)
-        self.data.ctrl[:] = zeta0
+        self.data.ctrl[:6] = zeta0
         self._manual: _Contact | None = None
         self._scripted: _Contact | None = None
         self._scripted_dir: np.ndarray | None = None
@@ -299,12 +318,14 @@ class Simulator:
             k = min(self._step_count, len(self._traj_targets) - 1)
             self._targets = self._traj_targets[k]
         step = self._omega_max * self._dt
-        d.ctrl[:] = d.ctrl + np.minimum(np.maximum(self._targets - d.ctrl, -step), step)
+        d.ctrl[:6] = d.ctrl[:6] + np.minimum(np.maximum(self._targets - d.ctrl[:6], -step), step)
         if use_schedule and self.collision is not None:
             self._update_scripted(t)
+            if self._pusher is not None:
+                self._drive_pusher(t)
         d.xfrc_applied[:] = 0.0
         contact = None
-        for c in (self._scripted, self._manual):
+        for c in ((self._manual,) if self._pusher is not None else (self._scripted, self._manual)):
             if c is not None:
                 R = d.xmat[c.body].reshape(3, 3)
                 p = d.xpos[c.body] + R @ c.local_point
@@ -318,8 +339,10 @@ class Simulator:
             mujoco.mj_step2(m, d)
         else:
             mujoco.mj_forward(m, d)
-        tau = d.actuator_force.copy()
-        self._sample = (t, qpos, qvel, d.qacc.copy(), tau, d.ctrl.copy(), contact)
+        tau = d.actuator_force[:6].copy()
+        if self._pusher is not None and contact is None:
+            contact = self._physical_contact()
+        self._sample = (t, qpos, qvel, d.qacc.copy(), tau, d.ctrl[:6].copy(), contact)
         k = self._step_count % len(self._tau_hist_t)
         self._tau_hist_t[k] = t
         self._tau_hist[k] = tau
@@ -388,12 +411,78 @@ class Simulator:
         assert self._scripted is not None and self._scripted_dir is not None
         self._scripted.force = self._scripted_dir * c.force_magnitude(t)
 
+    def _drive_pusher(self, t: float) -> None:
+        """Physical contact: place the carrier behind the contact point and command the slide force for time t."""
+        from hexa.sim.mjcf import PUSHER_MASS
+
+        c, pu, d = self.collision, self._pusher, self.data
+        assert c is not None and pu is not None
+        s, sd = float(d.qpos[pu["qpos"]]), float(d.qvel[pu["dof"]])
+        dist = c.object_distance(t)
+        if dist is None or self._scripted is None or self._scripted_dir is None:
+            d.mocap_pos[pu["mocap"]] = PARK_POS
+            d.qpos[pu["qpos"]] = 0.0
+            d.qvel[pu["dof"]] = 0.0
+            d.ctrl[pu["act"]] = 0.0
+            return
+        sc, direction = self._scripted, self._scripted_dir
+        R = d.xmat[sc.body].reshape(3, 3)
+        p = d.xpos[sc.body] + R @ sc.local_point
+        gap = 0.0                                     # the tip rests on the surface at s = 0
+        d.mocap_pos[pu["mocap"]] = p - direction * (gap + dist)
+        z = direction
+        x = np.cross(z, [0.0, 0.0, 1.0]) if abs(z[2]) < 0.95 else np.cross(z, [1.0, 0.0, 0.0])
+        x /= np.linalg.norm(x)
+        q = np.zeros(4)
+        mujoco.mju_mat2Quat(q, np.column_stack([x, np.cross(z, x), z]).ravel())
+        d.mocap_quat[pu["mocap"]] = q
+        kp = 400.0
+        kd = 2.0 * np.sqrt(kp * PUSHER_MASS)
+        if c.onset <= t < c.end_time:
+            d.ctrl[pu["act"]] = c.force_magnitude(t) - kd * sd          # push with the scripted force (damped)
+        else:
+            d.ctrl[pu["act"]] = -kp * s - kd * sd                     # hold retracted
+
+    def _physical_contact(self) -> tuple | None:
+        """MuJoCo's contact force of the pusher on a robot link (sum), at the force-weighted contact position."""
+        m, d, pu = self.model, self.data, self._pusher
+        assert pu is not None
+        f6 = np.zeros(6)
+        total, moment_pts, hit = np.zeros(3), [], None
+        for i in range(d.ncon):
+            con = d.contact[i]
+            g1, g2 = int(con.geom1), int(con.geom2)
+            if pu["geom"] not in (g1, g2):
+                continue
+            other = g2 if g1 == pu["geom"] else g1
+            if other not in pu["links"]:
+                continue
+            mujoco.mj_contactForce(m, d, i, f6)
+            frame = con.frame.reshape(3, 3)
+            f = frame.T @ f6[:3]                       # force on geom2 (the normal points from geom1 to geom2)
+            if other == g1:
+                f = -f
+            total += f
+            moment_pts.append((con.pos.copy(), f, max(f6[0], 0.0)))
+            hit = pu["links"][other]
+        if hit is None or not np.any(total):
+            return None
+        w = np.array([x[2] for x in moment_pts])
+        pts = np.array([x[0] for x in moment_pts])
+        point = (w[:, None] * pts).sum(0) / w.sum() if w.sum() > 0 else pts.mean(0)
+        return (hit[0], hit[1], point, total)
+
     def _init_scripted_contact(self) -> None:
         """Fix the contact point on the link and the force direction (base) when the object starts its approach."""
         c = self.collision
         assert c is not None
         d = self.data
         body = self._body_of(c.link, c.chain)
+        if self._pusher is not None:
+            # the pusher only touches the scripted link (its path in may cross others, which it would hit first)
+            target = self.model.geom("plate" if c.link == "plate" else f"{c.link}_{c.chain}").id
+            for g in self._pusher["links"]:
+                self.model.geom_conaffinity[g] = 2 if g == target else 0
         R = d.xmat[body].reshape(3, 3)
         o = d.xpos[body]
         ap = self.config.appearance
@@ -493,7 +582,8 @@ class Simulator:
         mujoco.mj_kinematics(self.model, d)
         c = self.collision
         pos, quat = np.array(PARK_POS, float), np.array([1.0, 0, 0, 0])
-        if c is not None and self._scripted is not None and self._scripted_dir is not None:
+        if (c is not None and self._pusher is None and self._scripted is not None
+                and self._scripted_dir is not None):
             dist = c.object_distance(self.time)
             if dist is not None:
                 sc = self._scripted
@@ -566,7 +656,7 @@ class Simulator:
                 self._aim_rod(i, C[i])
             d.qvel[:] = 0.0
             d.qacc_warmstart[:] = 0.0
-            d.ctrl[:] = zeta
+            d.ctrl[:6] = zeta
             self._targets = zeta.copy()
             if self.drive == "trajectory":
                 self.drive = "external"
