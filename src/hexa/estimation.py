@@ -11,7 +11,7 @@ plate pose every ~33 ms. The servo is modelled as the simulator models it (hexa.
 so y_k = c_k − τ_k/k_p = ζ_k + (k_v/k_p)·ζ̇_k is a direct measurement of the arm state, accurate to σ_τ/k_p (0.3 mrad
 for 10-bit current sensing). Per arm a constant-velocity Kalman filter on x = [ζ, ζ̇, b] (white acceleration of
 spectral density q = accel_sigma²) fuses y_k with H = [1, k_v/k_p, 1], R = (torque_sigma/k_p)²; the six arms are
-filtered together as (6, 3) states and (6, 3, 3) covariances (numpy, ≈ 40 µs per sample).
+filtered together as (6, 3) states and (6, 3, 3) covariances (numpy, ≈ 80 µs per sample).
 
 Stalled servos: when |τ_i| > saturation·τ_max the position loop no longer says where the arm is, so that arm's
 sample is not used and its acceleration density is raised to stall_accel_sigma (the camera carries it).
@@ -168,6 +168,7 @@ class ZetaEstimator:
         self._c: NDArray | None = None
         self._x = np.zeros((6, 3))
         self._P = np.zeros((6, 3, 3))
+        self._corr = np.zeros(6)
         self._commands.clear()
         self._hist.clear()
         self.last: ArmEstimate | None = None
@@ -255,7 +256,7 @@ class ZetaEstimator:
         self._c = c
         self._t = t
         self.accepted += 1
-        self._hist.append((t, self._x[:, 0].copy()))
+        self._hist.append((t, self._x[:, 0] - self._corr))  # stored without the camera corrections so far
         while self._hist and self._hist[0][0] < t - cfg.history:
             self._hist.popleft()
         self.last = self._estimate()
@@ -273,7 +274,7 @@ class ZetaEstimator:
         if not h or t < h[0][0]:
             return None
         if t >= h[-1][0]:
-            return h[-1][1] + (t - h[-1][0]) * self._x[:, 1]
+            return h[-1][1] + self._corr + (t - h[-1][0]) * self._x[:, 1]
         lo, hi = 0, len(h) - 1
         while hi - lo > 1:
             mid = (lo + hi) // 2
@@ -283,7 +284,7 @@ class ZetaEstimator:
                 hi = mid
         (t0, z0), (t1, z1) = h[lo], h[hi]
         w = (t - t0) / (t1 - t0) if t1 > t0 else 0.0
-        return z0 + w * (z1 - z0)
+        return z0 + w * (z1 - z0) + self._corr  # every camera correction so far shifts the past estimate too
 
     def update_camera(self, t: float, pose: Any) -> bool:
         """A plate pose [x y z α β γ] (m, rad) stamped t (the image time): ζ_IK = IK(pose) (eq 18) is a measurement
@@ -322,6 +323,7 @@ class ZetaEstimator:
         self._gated = np.where(ok, 0, self._gated + 1)
         lost = self._gated >= cfg.gate_reset_frames  # the camera disagrees frame after frame: restart from it
         x, P = self._x, self._P
+        z_before = x[:, 0].copy()
         if lost.any():
             x[lost, 0] += e[lost]
             x[lost, 1] = 0.0
@@ -338,6 +340,7 @@ class ZetaEstimator:
             x += K * e[:, None]
             P = P - K[:, :, None] * P[:, 0, None, :]
             self._P = 0.5 * (P + np.swapaxes(P, 1, 2))
+        self._corr = self._corr + (self._x[:, 0] - z_before)
         if not use.any() and not lost.any():
             return False
         self.camera_accepted += 1
