@@ -92,7 +92,7 @@ def test_sim_node_publishes_clock_cameras_and_ground_truth(procs, ros_env, tmp_p
     node = procs.start([PY, "-m", "hexa_bringup.sim_node", "--ros-args", "-r", "__ns:=/hexa", "-r", "__node:=sim",
                         "-p", "use_sim_time:=true", "-p", f"scenario:={scenario}", "-p", "real_time_factor:=1.5",
                         "-p", "duration:=4.3", "-p", f"link_dir:={tmp_path}", "-p", "camera_rate_hz:=10.0",
-                        "-p", "clock_rate_hz:=200.0", "-p", "truth_rate_hz:=50.0"], env)
+                        "-p", "clock_rate_hz:=200.0", "-p", "truth_rate_hz:=50.0", "-p", "start_delay:=2.0"], env)
     out, err = peer.communicate(timeout=90)
     seen = json.loads(out.strip().splitlines()[-1])
     node_out, node_err = node.communicate(timeout=20)
