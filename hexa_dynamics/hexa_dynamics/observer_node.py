@@ -109,8 +109,10 @@ def diagnostic(node: Node, level: int, message: str, values: dict[str, Any]) -> 
 
 class BoardClock:
     """Sample times from the current board's microsecond clock (MotorCurrents.board_time_us, wraps at 2³²) on the ROS
-    time axis: t = offset + unwrapped board time, the offset following (stamp − board time) with time constant `tau`
-    (host/board clock drift) and re-anchored when they disagree by more than `jump` s (board reset).
+    time axis: t = offset + unwrapped board time, the offset following the mean of (stamp − board time) with time
+    constant `tau` (receive latency, host/board clock drift), re-anchored when they disagree by more than `jump` s
+    (board reset). The lower envelope would be the better latency estimate on hardware, but in sim mode the host
+    stamps come from /clock and may lag the board (= sim) time.
 
     Host receive stamps jitter by milliseconds (USB, scheduling; in sim mode they are quantized by /clock), which at
     200-1000 Hz would corrupt the observer's Δt; the board's clock does not."""
@@ -137,7 +139,7 @@ class BoardClock:
         err = stamp - (self._offset + self._board)
         if abs(err) > self.jump:
             self._offset = stamp - self._board
-        else:
+        else:  # mean receive latency and clock drift (in sim mode the stamps lag sim time by the /clock delivery)
             self._offset += err * min(1.0, dt / self.tau)
         return self._offset + self._board
 

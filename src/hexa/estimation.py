@@ -91,7 +91,7 @@ class EstimatorConfig:
     whose camera innovation exceeds camera_gate in this many consecutive frames is restarted from the camera."""
 
     accel_sigma: float = 10.0
-    stall_accel_sigma: float = 100.0
+    stall_accel_sigma: float = 30.0
     torque_sigma: float = 0.012
     saturation: float = 0.97
     camera_sigma: float = 0.004
@@ -104,7 +104,8 @@ class EstimatorConfig:
     gate_reset_frames: int = 5
 
     def __post_init__(self) -> None:
-        checks = {"accel_sigma": self.accel_sigma > 0, "stall_accel_sigma": self.stall_accel_sigma > 0, "torque_sigma": self.torque_sigma > 0,
+        checks = {"accel_sigma": self.accel_sigma > 0, "stall_accel_sigma": self.stall_accel_sigma > 0,
+                  "torque_sigma": self.torque_sigma > 0,
                   "saturation": 0 < self.saturation <= 1.0, "camera_sigma": self.camera_sigma >= 0,
                   "bias_sigma": self.bias_sigma > 0, "bias_walk": self.bias_walk >= 0,
                   "camera_gate": self.camera_gate > 0, "max_gap": self.max_gap > 0, "history": self.history > 0,
@@ -273,8 +274,8 @@ class ZetaEstimator:
         h = self._hist
         if not h or t < h[0][0]:
             return None
-        if t >= h[-1][0]:
-            return h[-1][1] + self._corr + (t - h[-1][0]) * self._x[:, 1]
+        if t >= h[-1][0]:  # a pose newer than the newest sample: compare with the newest estimate, never
+            return h[-1][1] + self._corr  # extrapolate with the velocity the camera is about to correct
         lo, hi = 0, len(h) - 1
         while hi - lo > 1:
             mid = (lo + hi) // 2
