@@ -325,16 +325,17 @@ class CollisionIsolator:
             n = 8
             pts = seg[0] + np.linspace(0, 1, n + 1)[:, None] * (seg[1] - seg[0])
             uv, z = cam.project(pts)
+            if np.any(z <= 0.01) or np.any(np.abs(uv) > 10 ** 5):
+                keep_seg = (z[:-1] > 0.01) & (z[1:] > 0.01)
+                uv = np.clip(np.nan_to_num(uv), -10 ** 5, 10 ** 5)
+            else:
+                keep_seg = np.ones(n, bool)
+            uvi = np.round(uv).astype(int).tolist()
+            th = np.ceil(2 * (radius + cfg.robot_margin_m) * f / np.maximum(0.5 * (z[:-1] + z[1:]), 1e-3)
+                         + 2 * cfg.robot_margin_px).astype(int).tolist()
             for k in range(n):
-                if z[k] <= 0.01 or z[k + 1] <= 0.01:
-                    continue
-                zz = 0.5 * (z[k] + z[k + 1])
-                p0 = tuple(int(round(c)) for c in uv[k])
-                p1 = tuple(int(round(c)) for c in uv[k + 1])
-                if max(abs(p0[0]), abs(p0[1]), abs(p1[0]), abs(p1[1])) > 10 ** 5:
-                    continue
-                th = int(np.ceil(2 * (radius + cfg.robot_margin_m) * f / zz + 2 * cfg.robot_margin_px))
-                cv2.line(mask, p0, p1, 255, max(th, 1), cv2.LINE_8)
+                if keep_seg[k]:
+                    cv2.line(mask, uvi[k], uvi[k + 1], 255, max(th[k], 1), cv2.LINE_8)
         uv, z = cam.project(geom.plate_corners())
         if np.all(z > 0.01) and np.all(np.abs(uv) < 10 ** 5):
             hull = cv2.convexHull(np.round(uv).astype(np.int32))
