@@ -96,7 +96,7 @@ class EstimatorConfig:
     saturation: float = 0.97
     camera_sigma: float = 0.004
     bias_sigma: float = 0.02
-    bias_walk: float = 0.0005
+    bias_walk: float = 0.005
     camera_gate: float = 0.15
     max_gap: float = 0.1
     history: float = 0.5
