@@ -79,12 +79,19 @@ class _ClockWatcher:
         self._thread.join(timeout=5)
 
 
+#: wall seconds the simulator holds sim time at 0 while the graph starts (DDS discovery, serial handshakes)
+START_DELAY = 3.0
+#: sim seconds at rest before the trajectory and the scenario clock start (the estimator and observer settle, the
+#: driver's commands take over from the simulator's own start pose)
+LEAD_IN = 1.0
+
+
 def run_case(case: str, out_dir: Path, env: dict[str, str], ns: str = "/hexa", seed: int = 0,
              real_time_factor: float = 0.5, record_images: bool = False, duration: float | None = None,
              params: Path = DEFAULT_PARAMS, status_every: float = 5.0) -> CaseRun:
     """Bring up the sim graph for `case`, record a bag until the scenario is over, stop everything."""
     scenario, trajectory, default_duration = CASES[case]
-    sim_s = default_duration if duration is None else duration
+    sim_s = LEAD_IN + (default_duration if duration is None else duration)
     case_dir = out_dir / case
     case_dir.mkdir(parents=True, exist_ok=True)
     bag = case_dir / "bag"
@@ -94,9 +101,10 @@ def run_case(case: str, out_dir: Path, env: dict[str, str], ns: str = "/hexa", s
         shutil.rmtree(bag)
     node_args = {
         "sim": ["-p", f"scenario:={scenario}", "-p", f"seed:={seed}", "-p", f"real_time_factor:={real_time_factor}",
-                "-p", f"duration:={sim_s}", "-p", "use_sim_time:=false", "-p", f"link_dir:=/tmp/hexa_sim_{os.getpid()}"],
+                "-p", f"duration:={sim_s}", "-p", "use_sim_time:=false", "-p", f"link_dir:=/tmp/hexa_sim_{os.getpid()}",
+                "-p", f"start_delay:={START_DELAY}", "-p", f"lead_in:={LEAD_IN}"],
         "driver": ["-p", f"uno_port:=/tmp/hexa_sim_{os.getpid()}/uno", "-p", f"mega_port:=/tmp/hexa_sim_{os.getpid()}/mega"],
-        "trajectory": ["-p", f"trajectory:={trajectory}", "-p", "start_time:=0.0"],
+        "trajectory": ["-p", f"trajectory:={trajectory}", "-p", f"start_time:={LEAD_IN}"],
         "singularity": ["-p", "robot:=hexa"],
     }
     specs = build_graph("sim", ns, params, node_args)
