@@ -430,7 +430,9 @@ class CollisionIsolator:
         if debug:
             res.layers["workspace"] = obj.copy()
         if vv.size:
-            n, labels, stats, _ = cv2.connectedComponentsWithStats(obj.astype(np.uint8), connectivity=8)
+            ltype = cv2.CV_16U if vv.size < 65535 else cv2.CV_32S   # 16-bit labels: faster, safe below 2^16 px
+            n, labels, stats, _ = cv2.connectedComponentsWithStats(obj.astype(np.uint8), connectivity=8,
+                                                                   ltype=ltype)
             big = np.zeros(n, bool)
             big[1:] = stats[1:, cv2.CC_STAT_AREA] >= cfg.min_object_area
             keep = big[labels[vv, uu]]

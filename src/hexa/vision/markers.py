@@ -187,7 +187,9 @@ class MarkerDetector:
                 return [None] * len(self.layout.names), (u0, v0)
         hsv = cv2.cvtColor(np.ascontiguousarray(rgb[v0:v1, u0:u1]), cv2.COLOR_RGB2HSV)
         sat = ((hsv[:, :, 1] >= self.min_sat) & (hsv[:, :, 2] >= self.min_val)).astype(np.uint8)
-        n, labels, stats, cents = cv2.connectedComponentsWithStats(sat, connectivity=8)
+        # 16-bit labels are ~3x faster; safe when there are fewer set pixels than 16-bit labels
+        ltype = cv2.CV_16U if int(np.count_nonzero(sat)) < 65535 else cv2.CV_32S
+        n, labels, stats, cents = cv2.connectedComponentsWithStats(sat, connectivity=8, ltype=ltype)
         best: list = [None] * len(self.layout.names)
         if n <= 1:
             return best, (u0, v0)
