@@ -68,6 +68,7 @@ class CameraNode(Node):
         self.path = self.declare_parameter("path", "").value
         self.rate = float(self.declare_parameter("rate", 15.0).value)
         self.loop = bool(self.declare_parameter("loop", True).value)
+        self.serial = str(self.declare_parameter("serial", "").value)  # RealSense serial number ("" = first device)
         desc_path = self.declare_parameter("robot_description", "").value
         self.frame = f"{self.cam_name}_color_optical_frame"
         c = self.cam_name
@@ -159,6 +160,8 @@ class CameraNode(Node):
         self._rs = rs
         self._pipe = rs.pipeline()
         cfg = rs.config()
+        if self.serial:  # two cameras on one PC: each node opens its own device
+            cfg.enable_device(self.serial)
         cfg.enable_stream(rs.stream.color, 640, 480, rs.format.rgb8, 30)
         cfg.enable_stream(rs.stream.depth, 640, 480, rs.format.z16, 30)
         profile = self._pipe.start(cfg)

@@ -39,8 +39,9 @@ def run(args: argparse.Namespace) -> int:
                 if not (args.uno and args.mega):
                     raise SupervisorError("robot mode needs --uno PORT and --mega PORT (e.g. /dev/serial/by-id/...)")
                 node_args["driver"] = ["-p", f"uno_port:={args.uno}", "-p", f"mega_port:={args.mega}"]
-                for name, serial in zip(("camera_top", "camera_side"), args.cameras):
-                    node_args[name] = ["-p", "source:=realsense", "-p", f"serial:={serial}"]
+                serials = list(args.cameras) + [""] * (2 - len(args.cameras))
+                for (name, cam), serial in zip((("camera_top", "cam_top"), ("camera_side", "cam_side")), serials):
+                    node_args[name] = ["-p", "source:=realsense", "-p", f"camera:={cam}", "-p", f"serial:={serial}"]
             params = Path(args.params) if args.params else DEFAULT_PARAMS
             if args.mode == "upsrpu":
                 node_args["singularity"] = ["-p", "robot:=upsrpu", "-p", "input:=markers"]
