@@ -17,7 +17,7 @@ e.g. `hexa param set /hexa/observer thresholds "[3,3,3,0.3,0.3,0.3]"`):
   thresholds (double[6], [2,2,2,0.2,0.2,0.2] N, N·m): r_low per axis.
   release_ratio (0.5): an axis releases below release_ratio·r_low.  min_duration (0.01 s): confirmation time.
   max_gap (0.1 s): longer joint_states spacing restarts the integration.
-  accel_sigma (10), torque_sigma (0.012 N·m), camera_sigma (0.004 rad), bias_walk (0.005 rad/√s),
+  accel_sigma (2), torque_sigma (0.2 N·m), camera_sigma (0.004 rad), bias_walk (0.005 rad/√s),
     saturation (0.97), command_delay (0.0 s): ZetaEstimator settings (see hexa.estimation).
   reseed_distance (0.005 m): camera pose re-seeds the observer's pose tracking when this far from it.
   calibration_duration (1.0 s): averaging time of `~/reset` with recalibrate=true (robot at rest, untouched).

@@ -80,19 +80,24 @@ class ServoModel:
 class EstimatorConfig:
     """Filter settings.
 
-    accel_sigma: white-acceleration density √q_a of the constant-velocity model (rad/s^1.5); torque_sigma: torque
-    noise (N·m, 1σ) → servo-measurement variance (torque_sigma/k_p)²; saturation: a servo whose |τ| exceeds
+    accel_sigma: white-acceleration density √q_a of the constant-velocity model (rad/s^1.5); torque_sigma: noise of
+    the servo measurement expressed as torque (N·m, 1σ) → variance (torque_sigma/k_p)². The ADC alone is ≈ 0.012 N·m,
+    but commands reach the servo with a varying latency (a staircase of 3-6 mrad steps at 100 Hz), so the set-point
+    is uncertain by about a step: 0.2 N·m (5 mrad) with accel_sigma 2 halves the residual noise of a 0-40 ms jittered
+    command delivery (1.2 instead of 2.3 N peak) and costs nothing without jitter; saturation: a servo whose |τ| exceeds
     saturation·τ_max is stalled: its sample is not used as a measurement and its acceleration density is
     stall_accel_sigma (the camera carries it); camera_sigma: noise of ζ from a camera
     pose through IK (rad, 1σ; 0 disables the camera); bias_sigma: initial uncertainty of the servo-model offset
     b (rad); bias_walk: its random walk (rad/√s); camera_gate: largest |ζ_IK − ζ̂| accepted (rad); max_gap: longer
     sample spacing restarts the filter (s); history: how far back camera stamps are matched (s); settle_time: after a
     (re)start the estimate is flagged not `settled` this long (s) while ζ̇ converges from 0; gate_reset_frames: an arm
-    whose camera innovation exceeds camera_gate in this many consecutive frames is restarted from the camera."""
+    whose camera innovation exceeds camera_gate in this many consecutive frames is restarted from the camera;
+    command_smoothing: time constant (s) of a first-order low-pass on the commanded angles before the servo model —
+    a staircase of commands that reaches the servo with a varying latency is better modelled as a ramp (0 = off)."""
 
-    accel_sigma: float = 10.0
+    accel_sigma: float = 2.0
     stall_accel_sigma: float = 30.0
-    torque_sigma: float = 0.012
+    torque_sigma: float = 0.2
     saturation: float = 0.97
     camera_sigma: float = 0.004
     bias_sigma: float = 0.02
@@ -101,6 +106,7 @@ class EstimatorConfig:
     max_gap: float = 0.1
     history: float = 0.5
     settle_time: float = 0.03
+    command_smoothing: float = 0.0
     gate_reset_frames: int = 5
 
     def __post_init__(self) -> None:
@@ -109,7 +115,8 @@ class EstimatorConfig:
                   "saturation": 0 < self.saturation <= 1.0, "camera_sigma": self.camera_sigma >= 0,
                   "bias_sigma": self.bias_sigma > 0, "bias_walk": self.bias_walk >= 0,
                   "camera_gate": self.camera_gate > 0, "max_gap": self.max_gap > 0, "history": self.history > 0,
-                  "settle_time": self.settle_time >= 0, "gate_reset_frames": self.gate_reset_frames >= 1}
+                  "settle_time": self.settle_time >= 0,
+                  "command_smoothing": self.command_smoothing >= 0, "gate_reset_frames": self.gate_reset_frames >= 1}
         for name, ok in checks.items():
             if not (ok and math.isfinite(getattr(self, name))):
                 raise EstimationError(f"estimator {name} out of range, got {getattr(self, name)!r}")
@@ -219,6 +226,9 @@ class ZetaEstimator:
             self._reject("gap")
             self.reset()
         uc = self._delayed_command(t, u)
+        if cfg.command_smoothing > 0.0 and self._t is not None:
+            uc = self._us + (uc - self._us) * (1.0 - math.exp(-(t - self._t) / cfg.command_smoothing))
+        self._us = uc
         r_s = (cfg.torque_sigma / sv.kp) ** 2
         free = np.abs(tq) < cfg.saturation * self.torque_max  # saturated servos: τ no longer tells the angle
         self.saturated += int(6 - free.sum())
