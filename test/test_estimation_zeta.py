@@ -75,8 +75,8 @@ def test_bad_samples_are_counted_and_leave_the_state_alone():
     assert est.update(0.001, [np.nan] * 6, np.zeros(6)) is None
     assert est.update(0.0, z0, np.zeros(6)) is None
     assert est.update(0.002, z0[:5], np.zeros(6)) is None
-    assert est.update_camera(0.001, [0, 0, np.inf, 0, 0, 0]) is False
-    assert est.update_camera(0.001, [5.0, 0, 0, 0, 0, 0]) is False        # unreachable
+    assert est.update_camera(0.0, [0, 0, np.inf, 0, 0, 0]) is False
+    assert est.update_camera(0.0, [5.0, 0, 0, 0, 0, 0]) is False          # unreachable
     assert est.rejected["non_finite"] == 2 and est.rejected["time_not_increasing"] == 1
     assert est.rejected["bad_shape"] == 1 and est.rejected["camera_unreachable"] == 1
     assert est.last is before
@@ -110,3 +110,20 @@ def test_an_arm_far_off_the_camera_is_restarted_from_it():
     assert est.camera_resets == 1 and est.rejected["camera_gate"] == 5
     assert np.allclose(e.zeta, z, atol=2e-3)       # arm 1 follows the camera, the others were never off
     assert e.bias[0] == pytest.approx(0.3, abs=2e-3)
+
+
+def test_a_camera_pose_ahead_of_the_samples_waits_for_them():
+    from hexa.kinematics.hexa6rus import inverse_kinematics
+    from hexa.robots.hexa_description import load_hexa
+
+    desc = load_hexa()
+    pose = np.asarray(desc.home_pose, dtype=float)
+    z = np.asarray(inverse_kinematics(desc, pose))
+    est = ZetaEstimator(desc)
+    est.update(0.0, z + 0.01, np.zeros(6))        # servo model 10 mrad off
+    assert est.update_camera(0.05, pose) is True  # newer than the newest sample: queued
+    assert est.camera_accepted == 0
+    for k in range(1, 60):
+        est.update(k * 0.001, z + 0.01, np.zeros(6))
+    assert est.camera_accepted == 1              # applied once the samples passed 50 ms
+    assert np.all(np.abs(est.last.zeta - z) < 0.005)

@@ -34,6 +34,7 @@ from __future__ import annotations
 import dataclasses
 import math
 import sys
+from collections import deque
 from typing import Any
 
 import numpy as np
@@ -160,6 +161,7 @@ class ArmSampleInput:
             raise ValueError(f"parameter time_source must be 'auto', 'board' or 'stamp', got {self.source!r}")
         self.clock = BoardClock()
         self.board_seen = False
+        self._cmds: deque[tuple[float, np.ndarray]] = deque()  # (stamp, commanded ζ) from joint_states
         self._cmd: np.ndarray | None = None
         self._vel: np.ndarray | None = None
         rejects.setdefault("bad_joint_names", 0)
@@ -176,6 +178,10 @@ class ArmSampleInput:
             return
         self._cmd = pos
         self._vel = ordered_joints(msg, "velocity")
+        ts = stamp_seconds(msg.header.stamp)
+        self._cmds.append((ts, pos))
+        while len(self._cmds) > 1 and self._cmds[0][0] < ts - 2.0:
+            self._cmds.popleft()
         if self.board_seen or self.source == "board":
             return
         tau = ordered_joints(msg, "effort")
@@ -196,7 +202,18 @@ class ArmSampleInput:
         if t is None:
             self.rejects["board_time"] += 1
             return
-        self.on_sample(t, self._cmd, self.k_t * cur, self._vel)
+        self.on_sample(t, self._command_at(t), self.k_t * cur, self._vel)
+
+    def _command_at(self, t: float) -> np.ndarray:
+        """The command that was current at sample time t: current samples can reach the host late (a loaded host,
+        a board's backlog), and pairing an old torque with the newest command would be off by ζ̇ × the delay."""
+        cmds = self._cmds
+        if not cmds or t >= cmds[-1][0]:
+            return self._cmd
+        for ts, pos in reversed(cmds):
+            if ts <= t:
+                return pos
+        return cmds[0][1]
 
 
 class ObserverNode(Node):

@@ -17,7 +17,9 @@ Stalled servos: when |τ_i| > saturation·τ_max the position loop no longer say
 sample is not used and its acceleration density is raised to stall_accel_sigma (the camera carries it).
 
 Camera correction: each plate pose p(t_c) gives ζ_IK = IK(p) (eq 18), a measurement of ζ at t_c (noise camera_sigma)
-applied now as ζ_IK + (ζ̂(now) − ζ̂(t_c)) (ζ̂(t_c) interpolated from a short history, so camera latency is respected).
+applied now as ζ_IK + (ζ̂(now) − ζ̂(t_c)) (ζ̂(t_c) interpolated from a short history, so camera latency is respected;
+a pose stamped after the newest current sample waits until the samples reach its time — current samples can arrive
+late in bursts).
 The servo measurement sees ζ + b, the camera sees ζ: a third state b per arm (random walk bias_walk) absorbs what the
 servo model cannot know — horn mounting offsets, pot non-linearity, a wrong I₀. Per arm, innovations larger than
 camera_gate are skipped; an arm that fails the gate gate_reset_frames frames in a row is restarted from the camera.
@@ -179,6 +181,7 @@ class ZetaEstimator:
         self._corr = np.zeros(6)
         self._commands.clear()
         self._hist.clear()
+        self._pending_cam: deque[tuple[float, Any]] = deque(maxlen=10)
         self.last: ArmEstimate | None = None
 
     def _initial_covariance(self) -> NDArray:
@@ -271,6 +274,9 @@ class ZetaEstimator:
         while self._hist and self._hist[0][0] < t - cfg.history:
             self._hist.popleft()
         self.last = self._estimate()
+        while self._pending_cam and self._pending_cam[0][0] <= t:  # camera poses that were ahead of the samples
+            tc, q = self._pending_cam.popleft()
+            self.update_camera(tc, q)
         return self.last
 
     def _estimate(self) -> ArmEstimate:
@@ -284,8 +290,8 @@ class ZetaEstimator:
         h = self._hist
         if not h or t < h[0][0]:
             return None
-        if t >= h[-1][0]:  # a pose newer than the newest sample: compare with the newest estimate, never
-            return h[-1][1] + self._corr  # extrapolate with the velocity the camera is about to correct
+        if t >= h[-1][0]:  # never extrapolate with the velocity the camera is about to correct
+            return h[-1][1] + self._corr
         lo, hi = 0, len(h) - 1
         while hi - lo > 1:
             mid = (lo + hi) // 2
@@ -319,6 +325,9 @@ class ZetaEstimator:
             return False
         if self.config.camera_sigma <= 0.0:
             return False
+        if t > self._t:  # the pose is newer than the newest current sample (samples can arrive late): wait for them
+            self._pending_cam.append((t, q))
+            return True
         z_then = self._filter_at(t)
         if z_then is None:
             self._reject("camera_too_old")
