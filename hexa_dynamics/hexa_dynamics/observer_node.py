@@ -27,7 +27,7 @@ Topics (relative): sub `joint_states` (reliable), `motor_currents` (reliable), `
 pub `residual` (hexa_msgs/Residual, each accepted sample), `collision` (hexa_msgs/CollisionEvent, reliable keep-last
 20), `zeta_estimate` (JointState ζ̂, ζ̂̇),
 `markers` (visualization_msgs/MarkerArray), `/diagnostics` (1 Hz, rejects by reason). Service `~/reset`
-(hexa_msgs/srv/ResetObserver). Time = message stamps (sim time in sim mode).
+(hexa_msgs/srv/ResetObserver). Time: the board clock of motor_currents, else message stamps (sim time in sim mode).
 """
 from __future__ import annotations
 
