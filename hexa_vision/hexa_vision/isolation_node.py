@@ -7,11 +7,20 @@ covered), until END. Publishes `contact` (hexa_msgs/Contact, reliable), `isolati
 steps, like the paper's Figs. 12/17/22) and `/diagnostics` (evaluations, contacts, rejects by reason).
 Backgrounds are captured from the first frames after start-up (`background_delay` s) and again on the
 `capture_background` service (std_srvs/Trigger) — with the workspace clear of objects.
-Parameters: robot_description, background_delay (s), debug_image (bool), max_pose_age (s).
+
+Live timing: the plate pose of a frame comes from the pose node, which lags the cameras (0.3 s median, > 1 s under
+load). A frame pair is therefore queued until a `plate_pose` at or after its stamp has arrived and evaluated with the
+pose interpolated at its stamp (`hexa.vision.sync.PoseBuffer`); a stale pose would draw the links where they were
+and leave phantom robot pixels touching a link. After `pose_wait` wall seconds without such a pose the nearest pose
+within `max_pose_age` is used (counted), else the pair is dropped (counted). At most `max_pending` pairs wait; the
+onset pair is never dropped for a newer one.
+Parameters: robot_description, background_delay (s), debug_image (bool), max_pose_age (s), pose_wait (s, wall),
+max_pending.
 """
 from __future__ import annotations
 
 import sys
+import time
 from collections import Counter, deque
 
 import numpy as np
@@ -24,7 +33,7 @@ from sensor_msgs.msg import CameraInfo, Image
 from std_srvs.srv import Trigger
 
 from hexa.vision.isolation import LINK_UNKNOWN, CollisionIsolator, IsolationError, RobotGeometry, debug_image
-from hexa.vision.sync import FrameAssembler, RGBDFrame
+from hexa.vision.sync import FrameAssembler, PoseBuffer, RGBDFrame
 from hexa_msgs.msg import CollisionEvent, Contact
 from hexa_vision.common import (
     CAMERAS,
@@ -51,6 +60,8 @@ class IsolationNode(Node):
         self.background_delay = float(self.declare_parameter("background_delay", 1.0).value)
         self.want_debug = bool(self.declare_parameter("debug_image", True).value)
         self.max_pose_age = float(self.declare_parameter("max_pose_age", 0.2).value)
+        self.pose_wait = float(self.declare_parameter("pose_wait", 3.0).value)
+        self.max_pending = int(self.declare_parameter("max_pending", 4).value)
         from hexa.robots.hexa_description import load_hexa
 
         self.desc = load_hexa(desc_path or None)
@@ -58,7 +69,9 @@ class IsolationNode(Node):
         self.isolator = CollisionIsolator({c: models[c] for c in CAMERAS})
         self.assemblers = {c: FrameAssembler(c, models[c].T_base_camera) for c in CAMERAS}
         self.frames: dict[str, deque[RGBDFrame]] = {c: deque(maxlen=30) for c in CAMERAS}
-        self.poses: deque[tuple[float, np.ndarray]] = deque(maxlen=200)
+        self.poses = PoseBuffer(keep=400)
+        # (wall time queued, frame pair, is the onset pair, collision id)
+        self.pending: list[tuple[float, dict[str, RGBDFrame], bool, int]] = []
         self.counters: Counter[str] = Counter()
         self.t_start: float | None = None
         self.want_background = set(CAMERAS)
@@ -78,6 +91,7 @@ class IsolationNode(Node):
         self.pub_diag = self.create_publisher(DiagnosticArray, "/diagnostics", RELIABLE_QOS)
         self.create_service(Trigger, "capture_background", self._on_capture)
         self.create_timer(1.0, self._diagnostics)
+        self.create_timer(0.05, self._drain)
 
     # ------------------------------------------------------------------ inputs
     def _on_info(self, cam: str, msg: CameraInfo) -> None:
@@ -96,7 +110,8 @@ class IsolationNode(Node):
         T = np.eye(4)
         T[:3, :3] = _rot_from_quat(q.x, q.y, q.z, q.w)
         T[:3, 3] = [p.x, p.y, p.z]
-        self.poses.append((stamp_to_sec(msg.header.stamp), T))
+        self.poses.add(stamp_to_sec(msg.header.stamp), T)
+        self._drain()
 
     def _on_capture(self, request: Trigger.Request, response: Trigger.Response) -> Trigger.Response:
         self.want_background = set(CAMERAS)
@@ -114,7 +129,7 @@ class IsolationNode(Node):
                 if self.frames[c]:
                     pair[c] = min(self.frames[c], key=lambda f: abs(f.stamp - onset))
             if pair:
-                self._evaluate(pair)
+                self._submit(pair, onset=True)
         elif msg.event == CollisionEvent.END:
             self.active = None
 
@@ -139,16 +154,38 @@ class IsolationNode(Node):
                     pair[c] = f
             t_last, n_last = self.last_eval.get("t", -1.0), self.last_eval.get("n", 0)
             if now - t_last > 1e-6 or (abs(now - t_last) <= 0.05 and len(pair) > n_last):
-                self._evaluate(pair)
+                self.last_eval["t"], self.last_eval["n"] = now, len(pair)
+                self._submit(pair)
 
     # ------------------------------------------------------------------ work
-    def _geometry(self, stamp: float) -> RobotGeometry | None:
-        if not self.poses:
-            self.counters["reject: no plate_pose yet"] += 1
-            return None
-        t, T = min(self.poses, key=lambda p: abs(p[0] - stamp))
-        if abs(t - stamp) > self.max_pose_age:
-            self.counters["reject: plate_pose too old"] += 1
+    def _submit(self, pair: dict[str, RGBDFrame], onset: bool = False) -> None:
+        """Queue a frame pair until the plate pose of its stamp has arrived (see module docstring)."""
+        cid = int(self.active.id) if self.active is not None else 0
+        self.pending.append((time.monotonic(), pair, onset, cid))
+        while len(self.pending) > self.max_pending:
+            drop = next((i for i, p in enumerate(self.pending) if not p[2]), 0)
+            self.pending.pop(drop)
+            self.counters["dropped: waiting for plate_pose"] += 1
+        self._drain()
+
+    def _drain(self) -> None:
+        """Evaluate the queued pairs whose pose has arrived (or whose wait is over), oldest first."""
+        now = time.monotonic()
+        keep = []
+        for queued, pair, onset, cid in self.pending:
+            stamp = max(f.stamp for f in pair.values())
+            if self.poses.covers(stamp):
+                self._evaluate(pair, self.poses.at(stamp, self.max_pose_age), cid)
+            elif now - queued > self.pose_wait:
+                self.counters["pose wait expired"] += 1
+                self._evaluate(pair, self.poses.at(stamp, self.max_pose_age), cid)
+            else:
+                keep.append((queued, pair, onset, cid))
+        self.pending = keep
+
+    def _geometry(self, T: np.ndarray | None) -> RobotGeometry | None:
+        if T is None:
+            self.counters["reject: no plate_pose near the frame"] += 1
             return None
         R = T[:3, :3]
         pose = np.array([T[0, 3], T[1, 3], T[2, 3], np.arctan2(R[1, 0], R[0, 0]),
@@ -159,16 +196,15 @@ class IsolationNode(Node):
             self.counters["reject: plate_pose unreachable"] += 1
             return None
 
-    def _evaluate(self, pair: dict[str, RGBDFrame]) -> None:
+    def _evaluate(self, pair: dict[str, RGBDFrame], T_plate: np.ndarray | None, collision_id: int = 0) -> None:
         stamp = max(f.stamp for f in pair.values())
-        self.last_eval["t"], self.last_eval["n"] = stamp, len(pair)
         missing = [c for c in pair if c not in self.isolator.backgrounds]
         for c in missing:
             self.counters["no background"] += 1
             pair.pop(c)
         if not pair:
             return
-        geom = self._geometry(stamp)
+        geom = self._geometry(T_plate)
         if geom is None:
             return
         try:
@@ -185,7 +221,7 @@ class IsolationNode(Node):
             msg = Contact()
             sec_to_stamp(msg.header.stamp, stamp)
             msg.header.frame_id = "base"
-            msg.collision_id = int(self.active.id) if self.active is not None else 0
+            msg.collision_id = collision_id
             msg.link, msg.chain = int(est.link), int(est.chain)
             msg.point.x, msg.point.y, msg.point.z = (float(v) for v in est.point)
             msg.pixel_u, msg.pixel_v = (float(v) for v in est.pixel)

@@ -197,6 +197,8 @@ class IsolationConfig:
     robot_margin_m: float = 0.002       # m added to link radii when drawing the robot
     touch_distance: float = 0.03        # m between an object point and a link surface to count as touching
     rod_end_clearance: float = 0.03     # m of each rod next to its plate joint attributed to the plate
+    corner_radius: float = 0.045        # m: a rod contact this near its plate joint is the plate's corner when
+    #                                     another camera finds the plate touched
     closest_points: int = 12            # k nearest object points that decide which link the object comes closest to
     contact_gap: float = 0.018          # m: the object must come this close to a link to call it a contact
     contact_sigma: float = 0.003        # m: width of the Gaussian weights on the nearest points
@@ -581,6 +583,13 @@ class CollisionIsolator:
         best = found[0]   # the paper's order: top camera (plate, rods) first, then the side camera
         if best.confidence < self.config.min_confidence:
             best = max(found, key=lambda r: (r.confidence, r.n_candidates))
+        if best.link == LINK_ROD:
+            # a rod answer at the rod's plate joint while another camera sees the plate touched: the object sits
+            # on the plate's corner (the top camera sees the object's far side and the rod next to it)
+            joint = geom.rods[best.chain - 1, 1]
+            plate = [r for r in found if r.link == LINK_PLATE]
+            if plate and np.linalg.norm(best.point - joint) <= self.config.corner_radius:
+                best = plate[0]
         return ContactEstimate(best.link, best.chain, best.point, best.pixel, best.camera, best.confidence, results)
 
 
