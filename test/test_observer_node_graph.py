@@ -1,9 +1,10 @@
 """The observer node in its own process, fed by a peer replaying a MuJoCo run as driver-like joint_states (commanded
 angles + ADC-quantized torques, 200 Hz) and noisy 30 Hz plate poses: no collision in free motion, START on fz after
-3 N upwards on the plate, END after release, runtime thresholds, bad input counted and the node alive."""
+3 N upwards on the plate, END after release, runtime thresholds, bad input counted and the node alive, clean exit on SIGINT."""
 from __future__ import annotations
 
 import json
+import signal
 import sys
 
 import pytest
@@ -37,6 +38,9 @@ def test_observer_node_detects_the_push_and_takes_runtime_thresholds(procs, ros_
     assert int(d["reject_estimator_non_finite"]) == 5 and int(d["reject_node_bad_joint_names"]) == 3
     assert r["alive_after_bad_input"] > 10
     assert node.poll() is None
+    node.send_signal(signal.SIGINT)                                            # clean Ctrl-C
+    _out, err = node.communicate(timeout=20)
+    assert node.returncode == 0 and "Traceback" not in err, err
 
 
 def test_observer_node_rejects_a_bad_parameter_at_start_naming_it(procs, ros_env):

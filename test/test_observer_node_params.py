@@ -5,6 +5,7 @@ from __future__ import annotations
 import re
 from pathlib import Path
 
+import numpy as np
 import pytest
 import yaml
 
@@ -85,3 +86,41 @@ def test_runtime_parameters_reach_the_detector_and_the_estimator(rcl):
     assert node.observer.detector.thresholds[1] == 3.0          # unchanged
     ro = node.set_parameters([Parameter("zeta_source", value="measured")])
     assert not ro[0].successful and node.zeta_source == "estimator"
+
+
+def test_reset_with_recalibrate_removes_a_rest_offset(rcl):
+    """~/reset(recalibrate=true) at rest: a wrong I₀ (+0.05 N·m on every servo) shows as a steady residual; after the
+    calibration window it is averaged into the offset and the residual returns to ≈ 0."""
+    from hexa_msgs.srv import ResetObserver
+
+    from hexa.sim import Simulator
+    from hexa_dynamics.observer_node import ObserverNode
+
+    node = ObserverNode()
+    rcl.append(node)
+    node.calibration_duration = 0.5
+    sim = Simulator(cameras=False)
+    s = sim.state()
+    node.observer.update_pose(0.0, s.pose)
+    node.estimator.update_camera(0.0, s.pose)
+    u = s.zeta.copy()
+    outs = []
+
+    def run(t0: float, t1: float) -> None:
+        t = t0
+        while t < t1:
+            sim.step(5)
+            st = sim.state()
+            node._on_sample(t, u, st.tau + 0.05, None)
+            if node._last_out is not None:
+                outs.append((t, node._last_out.wrench.copy()))
+            t += 0.005
+
+    run(0.005, 1.0)
+    before = np.abs(outs[-1][1][:3]).max()
+    resp = node._on_reset(ResetObserver.Request(recalibrate=True), ResetObserver.Response())
+    assert resp.success and "recalibrating" in resp.message
+    run(1.0, 2.5)
+    after = np.abs(outs[-1][1][:3]).max()
+    assert before > 0.5                                # N: the wrong I₀ is visible
+    assert after < 0.1 and np.abs(node.observer.offset[:3]).max() > 0.5
