@@ -1,6 +1,7 @@
 """The observer node in its own process, fed by a peer replaying a MuJoCo run as driver-like joint_states (commanded
 angles + ADC-quantized torques, 200 Hz) and noisy 30 Hz plate poses: no collision in free motion, START on fz after
-3 N upwards on the plate, END after release, runtime thresholds, bad input counted and the node alive, clean exit on SIGINT."""
+3 N upwards on the plate, END after release, runtime thresholds, bad input counted and the node alive, clean exit
+on SIGINT."""
 from __future__ import annotations
 
 import json
