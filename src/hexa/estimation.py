@@ -181,7 +181,7 @@ class ZetaEstimator:
         self._corr = np.zeros(6)
         self._commands.clear()
         self._hist.clear()
-        self._pending_cam: deque[tuple[float, Any]] = deque(maxlen=10)
+        self._pending_cam: deque[tuple[float, Any]] = deque(maxlen=64)
         self.last: ArmEstimate | None = None
 
     def _initial_covariance(self) -> NDArray:
