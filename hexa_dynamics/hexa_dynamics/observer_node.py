@@ -13,6 +13,9 @@ e.g. `hexa param set /hexa/observer thresholds "[3,3,3,0.3,0.3,0.3]"`):
     angle, velocity used when present: sim/joint_states_truth or servos with feedback).
   time_source ("auto"): sample times from the current board's clock (motor_currents.board_time_us, τ = K_t·I) once
     motor_currents arrive, else joint_states header stamps (τ = effort); "board" / "stamp" force one.
+  board_clock ("auto"): "sim" = board time is sim time (hexa.sim.boards: the virtual boards run on sim time),
+    "track" = follow the mean (stamp − board time); auto = sim when use_sim_time is true. Set "track" to replay a
+    bag recorded on the real robot with --clock.
   gains (double[6], 25 1/s): observer gains K_j per axis [fx fy fz mx my mz].
   thresholds (double[6], [2,2,2,0.2,0.2,0.2] N, N·m): r_low per axis.
   release_ratio (0.5): an axis releases below release_ratio·r_low.  min_duration (0.01 s): confirmation time.
@@ -118,8 +121,8 @@ class BoardClock:
     Host receive stamps jitter by milliseconds (USB, scheduling; in sim mode they are quantized by /clock), which at
     200-1000 Hz would corrupt the observer's Δt; the board's clock does not."""
 
-    def __init__(self, tau: float = 10.0, jump: float = 0.5) -> None:
-        self.tau, self.jump = tau, jump
+    def __init__(self, tau: float = 10.0, jump: float = 0.5, fixed_offset: float | None = None) -> None:
+        self.tau, self.jump, self.fixed_offset = tau, jump, fixed_offset
         self._raw: int | None = None
         self._board = 0.0
         self._offset = 0.0
@@ -127,6 +130,14 @@ class BoardClock:
 
     def time(self, stamp: float, board_us: int) -> float | None:
         raw = int(board_us) & 0xFFFFFFFF
+        if self.fixed_offset is not None:  # board time is ROS time + offset (the simulator's boards run on sim time)
+            d = 0 if self._raw is None else (raw - self._raw) & 0xFFFFFFFF
+            if self._raw is not None and (d == 0 or d >= 1 << 31):
+                self.backwards += 1
+                return None
+            self._board = raw * 1e-6 if self._raw is None else self._board + d * 1e-6
+            self._raw = raw
+            return self._board + self.fixed_offset
         if self._raw is None:
             self._raw, self._board, self._offset = raw, 0.0, stamp
             return stamp
@@ -159,7 +170,11 @@ class ArmSampleInput:
         self.source = str(node.declare_parameter("time_source", "auto").value)
         if self.source not in ("auto", "board", "stamp"):
             raise ValueError(f"parameter time_source must be 'auto', 'board' or 'stamp', got {self.source!r}")
-        self.clock = BoardClock()
+        mode = str(node.declare_parameter("board_clock", "auto").value)
+        if mode not in ("auto", "sim", "track"):
+            raise ValueError(f"parameter board_clock must be 'auto', 'sim' or 'track', got {mode!r}")
+        use_sim = bool(node.get_parameter("use_sim_time").value)
+        self.clock = BoardClock(fixed_offset=0.0 if mode == "sim" or (mode == "auto" and use_sim) else None)
         self.board_seen = False
         self._cmds: deque[tuple[float, np.ndarray]] = deque()  # (stamp, commanded ζ) from joint_states
         self._cmd: np.ndarray | None = None
@@ -277,7 +292,7 @@ class ObserverNode(Node):
         obs = self.observer
         cfg = obs.config
         est_cfg = self.estimator.config
-        fixed = {"description", "zeta_source", "time_source", "max_gap", "command_delay", "frame_id"}
+        fixed = {"description", "zeta_source", "time_source", "board_clock", "max_gap", "command_delay", "frame_id"}
         try:
             for prm in params:
                 name, val = prm.name, prm.value
