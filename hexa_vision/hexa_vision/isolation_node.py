@@ -214,6 +214,10 @@ class IsolationNode(Node):
             self.get_logger().debug(str(exc))
             return
         self.counters["evaluations"] += 1
+        self.get_logger().info(
+            f"isolation at {stamp:.3f} s (pose lag {self.poses.latest - stamp:+.3f} s, cameras {sorted(pair)}): "
+            f"{est.link_name} {est.chain} from {est.camera}, point {np.round(1e3 * np.asarray(est.point), 1).tolist()} "
+            f"mm; " + "; ".join(f"{c}: {r.link} {r.chain} {r.reason}" for c, r in est.per_camera.items()))
         if est.link == LINK_UNKNOWN:
             self.counters["no contact found"] += 1
         else:
