@@ -7,7 +7,7 @@ ZetaEstimator (servo model + Kalman filter, corrected by every `plate_pose` thro
 ζ̂ and re-seeded from the camera when they disagree by more than `reseed_distance` (or tracking failed).
 
 Parameters (all declared; the detector and estimator ones are settable at runtime with `ros2 param set`-like calls,
-e.g. `hexa param set /hexa/observer thresholds "[3,3,3,0.3,0.3,0.3]"`):
+e.g. `hexa param set /hexa/observer thresholds "[3.0,3.0,3.0,0.3,0.3,0.3]"`):
   description (str, ""): robot YAML (default packaged hexa.yaml).
   zeta_source ("estimator"): "estimator" (hobby servos: position = commanded angle) or "measured" (position = measured
     angle, velocity used when present: sim/joint_states_truth or servos with feedback).
