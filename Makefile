@@ -6,7 +6,7 @@ export MUJOCO_GL ?= egl
 export PYTHONDONTWRITEBYTECODE := 1
 PYTEST_ARGS ?=
 
-.PHONY: setup test demo bench firmware clean help
+.PHONY: setup test lint demo bench firmware clean help
 
 help:
 	@echo "make demo   - set up, then run the main job on the simulated robot (hexa demo)"
@@ -22,10 +22,15 @@ firmware: setup
 	@if [ -f hexa_driver/firmware/Makefile ]; then $(MAKE) --no-print-directory -C hexa_driver/firmware; \
 	else echo "firmware: hexa_driver/firmware/Makefile not present yet"; fi
 
+# Lint first (pyflakes + pycodestyle, settings in pyproject.toml), then the tests.
 # pytest exit code 5 means "no tests collected": that is a failure here, not a pass.
 test: setup firmware
+	@$(VENV)/bin/ruff check --quiet . || { echo "make test: ruff found problems (see above)" >&2; exit 1; }
 	@set -o pipefail; $(PY) -m pytest test/ -q -p no:cacheprovider $(PYTEST_ARGS); rc=$$?; \
 	if [ $$rc -eq 5 ]; then echo "make test: pytest collected no tests" >&2; exit 1; fi; exit $$rc
+
+lint: setup
+	@$(VENV)/bin/ruff check .
 
 demo: setup firmware
 	@$(VENV)/bin/hexa demo

@@ -94,7 +94,8 @@ def main(argv: list[str] | None = None) -> int:
     err = model.predict(x_te) - y_te
     pos_mm = np.linalg.norm(err[:, :3], axis=1) * 1000
     ang_deg = np.degrees(np.abs(err[:, 3:])).max(1)
-    metrics = {"test_samples": len(x_te), "pos_mean_mm": float(pos_mm.mean()), "pos_p99_mm": float(np.percentile(pos_mm, 99)),
+    metrics = {"test_samples": len(x_te), "pos_mean_mm": float(pos_mm.mean()),
+               "pos_p99_mm": float(np.percentile(pos_mm, 99)),
                "pos_max_mm": float(pos_mm.max()), "ang_mean_deg": float(ang_deg.mean()),
                "ang_p99_deg": float(np.percentile(ang_deg, 99)), "ang_max_deg": float(ang_deg.max())}
     meta["test"] = metrics

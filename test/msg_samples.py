@@ -3,7 +3,7 @@ from __future__ import annotations
 
 from typing import Any
 
-from rosidl_parser.definition import (AbstractNestedType, AbstractSequence, Array, BasicType, BoundedSequence,
+from rosidl_parser.definition import (AbstractNestedType, Array, BasicType, BoundedSequence,
                                       NamespacedType, AbstractString)
 
 _INT_RANGES = {"int8": (-128, 127), "uint8": (0, 255), "byte": (0, 255), "char": (0, 255),

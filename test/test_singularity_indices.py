@@ -91,7 +91,7 @@ def test_upsrpu_ots_respect_locked_actuators_and_rpu_constraints(X):
     J = kin.jacobian_jd(DESC, X)
     Xdot = np.linalg.solve(J, np.eye(4))
     for i in range(4):
-        th, ps = X[2], X[3]
+        th = X[2]
         w = Xdot[2, i] * np.array([0, 1.0, 0]) + Xdot[3, i] * np.array([np.sin(th), 0, np.cos(th)])
         w = w / np.linalg.norm(w)
         assert abs(abs(w @ O[i, :3]) - 1.0) < 1e-7

@@ -48,7 +48,8 @@ after = ind[n_at_enable:]
 print(json.dumps({"service": ok, "bad_variant": [bad.result().success, bad.result().message] if bad.result() else None,
                   "response": [fut.result().success, fut.result().message] if fut.result() else None,
                   "before": before, "after_last": after[-30:], "n_after": len(after),
-                  "cmd_before": cmd_before, "cmd_last": cmd[-1] if cmd else None, "ref_last": ref[-1] if ref else None}))
+                  "cmd_before": cmd_before, "cmd_last": cmd[-1] if cmd else None,
+                  "ref_last": ref[-1] if ref else None}))
 """
 
 

@@ -22,9 +22,11 @@ def main() -> int:
     node = rclpy.create_node("trajectory_peer", namespace="/hexa")
     cmds: list[tuple[float, list[float]]] = []
     states: list[str] = []
-    node.create_subscription(JointState, "joint_commands", lambda m: cmds.append((time.monotonic(), list(m.position))), 10)
+    node.create_subscription(JointState, "joint_commands",
+                             lambda m: cmds.append((time.monotonic(), list(m.position))), 10)
     node.create_subscription(String, "trajectory_state", lambda m: states.append(m.data), 10)
-    pub = node.create_publisher(CollisionEvent, "collision", QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE))
+    pub = node.create_publisher(CollisionEvent, "collision",
+                                QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE))
     cli = node.create_client(Trigger, "/hexa/trajectory/resume")
     out = {}
 

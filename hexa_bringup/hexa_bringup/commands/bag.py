@@ -75,7 +75,8 @@ def run_record(args: argparse.Namespace) -> int:
                 if now >= next_scan:
                     next_scan = now + 0.5
                     for topic, types in node.get_topic_names_and_types():
-                        if topic in subs or (wanted and topic not in wanted) or (not wanted and topic in SKIP_BY_DEFAULT):
+                        skipped = (wanted and topic not in wanted) or (not wanted and topic in SKIP_BY_DEFAULT)
+                        if topic in subs or skipped:
                             continue
                         infos = node.get_publishers_info_by_topic(topic)
                         if not infos:

@@ -1,4 +1,5 @@
-"""`hexa ik --robot R --pose …`: closed-form inverse kinematics → {"joints": [...]} (rad for the Hexa, m for the 3UPS+RPU)."""
+"""`hexa ik --robot R --pose …`: closed-form inverse kinematics → {"joints": [...]}
+(rad for the Hexa, m for the 3UPS+RPU)."""
 from __future__ import annotations
 
 import argparse

@@ -383,7 +383,8 @@ class ResidualObserver:
                 or (pose is not None and (q is None or len(q) != 6))):
             self._reject("bad_shape")
             return None
-        if not (math.isfinite(t) and (z is None or _all_finite(z)) and _all_finite(tq) and (zd is None or _all_finite(zd))
+        if not (math.isfinite(t) and (z is None or _all_finite(z)) and _all_finite(tq)
+                and (zd is None or _all_finite(zd))
                 and (q is None or _all_finite(q))):
             self._reject("non_finite")
             return None

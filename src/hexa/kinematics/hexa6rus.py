@@ -430,7 +430,6 @@ def inverse_kinematics_derivatives(desc: "HexaDescription", pose: np.ndarray, po
     def bc(v: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         return -la2 * (ca * v[..., 0] + sa * v[..., 1]), la2 * v[..., 2]
 
-    a = desc.l_d ** 2 - desc.l_a ** 2 - np.sum(d * d, -1)
     b, c = bc(d)
     a1 = -2.0 * np.sum(d * dd, -1)
     b1, c1 = bc(dd)
@@ -566,7 +565,8 @@ def forward_kinematics(desc: "HexaDescription", zeta: np.ndarray, guess: np.ndar
 
     Iterates Δx = −(∂Φ/∂x)⁻¹Φ with ∂Φ/∂x = J_D(x)·T(x) (rod-length residuals Φ of `loop_closure_residual`),
     halving the step while it does not reduce |Φ|, until a full step is below `tol` (m, rad); |Φ| is then at
-    round-off level (quadratic convergence); it also stops once |Φ| ≤ 1e-13 m. Converges to the assembly mode nearest the guess.
+    round-off level (quadratic convergence); it also stops once |Φ| ≤ 1e-13 m. Converges to the assembly mode
+    nearest the guess.
 
     Args:
         guess: starting pose (default the home pose); pass the last solution to warm-start.

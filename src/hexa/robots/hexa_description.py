@@ -211,7 +211,8 @@ def parse_hexa(data: dict[str, Any], path: str | Path = "<memory>") -> HexaDescr
     p_max = require_float(data, "actuators.pulse_max_us", positive=True)
     if not p_min < p_c < p_max:
         raise RobotDescriptionError(
-            f"key 'actuators.pulse_center_us' must lie between pulse_min_us {p_min} and pulse_max_us {p_max}, got {p_c}")
+            f"key 'actuators.pulse_center_us' must lie between pulse_min_us {p_min} and pulse_max_us {p_max}, "
+            f"got {p_c}")
     direction = _signs(data, "actuators.direction")
     sections = {k: copy.deepcopy(v) for k, v in data.items() if k not in _OWN_SECTIONS}
     return HexaDescription(

@@ -107,7 +107,7 @@ def build_mjcf(desc: Any, pose: np.ndarray | None = None, config: SimConfig | No
     out: list[str] = []
     w = out.append
     w('<mujoco model="hexa">')
-    w(f'<compiler angle="radian" autolimits="true"/>')
+    w('<compiler angle="radian" autolimits="true"/>')
     w(f'<option timestep="{cfg.timestep:.9g}" integrator="Euler" gravity="0 0 -9.81" cone="elliptic">'
       + ('</option>' if physical_contact else '<flag contact="disable"/></option>'))
     w('<visual><global offwidth="640" offheight="480"/><quality shadowsize="0" offsamples="0"/>'

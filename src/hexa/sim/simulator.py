@@ -673,7 +673,7 @@ class Simulator:
         """Set the universal-joint angles of chain i+1 so that its rod points at `target` (kinematics current)."""
         m, d = self.model, self.data
         body = self._rod_body[i]
-        j1, j2 = m.joint(f"u1_{i + 1}").id, m.joint(f"u2_{i + 1}").id
+        j1 = m.joint(f"u1_{i + 1}").id
         a1 = m.jnt_axis[j1] / np.linalg.norm(m.jnt_axis[j1])          # in the rod frame at u = 0 (y-component 0)
         R_ref = d.xmat[body].reshape(3, 3)                             # u = 0 here (set by the caller)
         w = R_ref.T @ (target - d.xpos[body])

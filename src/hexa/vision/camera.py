@@ -137,7 +137,8 @@ class CameraModel:
 
     @classmethod
     def from_any(cls, obj, name: str = "camera") -> CameraModel:
-        """Model from another object with K, width, height and T_base_camera attributes or keys (e.g. the simulator's)."""
+        """Model from another object with K, width, height and T_base_camera attributes or keys (e.g. the
+        simulator's)."""
         if isinstance(obj, CameraModel):
             return obj
         get = (lambda k: obj[k]) if isinstance(obj, dict) else (lambda k: getattr(obj, k))
