@@ -12,7 +12,10 @@ Live timing: the plate pose of a frame comes from the pose node, which lags the 
 load). A frame pair is therefore queued until a `plate_pose` at or after its stamp has arrived and evaluated with the
 pose interpolated at its stamp (`hexa.vision.sync.PoseBuffer`); a stale pose would draw the links where they were
 and leave phantom robot pixels touching a link. After `pose_wait` wall seconds without such a pose the nearest pose
-within `max_pose_age` is used (counted), else the pair is dropped (counted). At most `max_pending` pairs wait; the
+within `max_pose_age` is used (counted); failing that (the object in front of the plate's markers hides two of them,
+as in the demo's rod case), the newest camera pose before the frame is carried forward by the arm angles of
+`joint_states`: pose(t) = pose_cam(t0) + FK(ζ(t)) − FK(ζ(t0)) (the difference cancels the servos' static offset;
+counted as "pose from joint_states"); else the pair is dropped (counted). At most `max_pending` pairs wait; the
 onset pair is never dropped for a newer one.
 Parameters: robot_description, background_delay (s), debug_image (bool), max_pose_age (s), pose_wait (s, wall),
 max_pending.
@@ -29,7 +32,7 @@ from diagnostic_msgs.msg import DiagnosticArray
 from geometry_msgs.msg import PoseStamped
 from hexa_bringup.rosenv import apply_defaults
 from rclpy.node import Node
-from sensor_msgs.msg import CameraInfo, Image
+from sensor_msgs.msg import CameraInfo, Image, JointState
 from std_srvs.srv import Trigger
 
 from hexa.vision.isolation import LINK_UNKNOWN, CollisionIsolator, IsolationError, RobotGeometry, debug_image
@@ -53,6 +56,13 @@ def _rot_from_quat(x: float, y: float, z: float, w: float) -> np.ndarray:
                      [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)]])
 
 
+def _pose6(T: np.ndarray) -> np.ndarray:
+    """[x y z α β γ] (ZYX angles) of a 4x4 pose."""
+    R = T[:3, :3]
+    return np.array([T[0, 3], T[1, 3], T[2, 3], np.arctan2(R[1, 0], R[0, 0]),
+                     np.arcsin(np.clip(-R[2, 0], -1, 1)), np.arctan2(R[2, 1], R[2, 2])])
+
+
 class IsolationNode(Node):
     def __init__(self) -> None:
         super().__init__("hexa_vision_isolation")
@@ -60,7 +70,7 @@ class IsolationNode(Node):
         self.background_delay = float(self.declare_parameter("background_delay", 1.0).value)
         self.want_debug = bool(self.declare_parameter("debug_image", True).value)
         self.max_pose_age = float(self.declare_parameter("max_pose_age", 0.2).value)
-        self.pose_wait = float(self.declare_parameter("pose_wait", 3.0).value)
+        self.pose_wait = float(self.declare_parameter("pose_wait", 0.5).value)
         self.max_pending = int(self.declare_parameter("max_pending", 4).value)
         from hexa.robots.hexa_description import load_hexa
 
@@ -70,6 +80,7 @@ class IsolationNode(Node):
         self.assemblers = {c: FrameAssembler(c, models[c].T_base_camera) for c in CAMERAS}
         self.frames: dict[str, deque[RGBDFrame]] = {c: deque(maxlen=30) for c in CAMERAS}
         self.poses = PoseBuffer(keep=400)
+        self.joints: deque[tuple[float, np.ndarray]] = deque(maxlen=600)
         # (wall time queued, frame pair, is the onset pair, collision id)
         self.pending: list[tuple[float, dict[str, RGBDFrame], bool, int]] = []
         self.counters: Counter[str] = Counter()
@@ -85,6 +96,7 @@ class IsolationNode(Node):
             self.create_subscription(CameraInfo, f"{c}/color/camera_info", lambda m, c=c: self._on_info(c, m),
                                      SENSOR_QOS)
         self.create_subscription(PoseStamped, "plate_pose", self._on_pose, 10)
+        self.create_subscription(JointState, "joint_states", self._on_joints, 50)
         self.create_subscription(CollisionEvent, "collision", self._on_collision, RELIABLE_QOS)
         self.pub_contact = self.create_publisher(Contact, "contact", RELIABLE_QOS)
         self.pub_debug = self.create_publisher(Image, "isolation/debug_image", SENSOR_QOS)
@@ -111,7 +123,41 @@ class IsolationNode(Node):
         T[:3, :3] = _rot_from_quat(q.x, q.y, q.z, q.w)
         T[:3, 3] = [p.x, p.y, p.z]
         self.poses.add(stamp_to_sec(msg.header.stamp), T)
+        self.counters["plate_pose received"] += 1
         self._drain()
+
+    def _on_joints(self, msg: JointState) -> None:
+        if len(msg.position) == 6:
+            self.joints.append((stamp_to_sec(msg.header.stamp), np.asarray(msg.position, float)))
+
+    def _zeta_at(self, stamp: float) -> np.ndarray | None:
+        if not self.joints or self.joints[-1][0] < stamp - 0.02:
+            return None
+        t, z = min(self.joints, key=lambda j: abs(j[0] - stamp))
+        return z if abs(t - stamp) <= 0.02 else None
+
+    def _pose_from_joints(self, stamp: float) -> np.ndarray | None:
+        """The newest camera pose before `stamp` carried forward by FK of the arm angles (module docstring)."""
+        from hexa.kinematics import hexa6rus as kin
+
+        before = [p for p in self.poses._poses if p[0] <= stamp]
+        if not before:
+            return None
+        t0, T0 = before[-1]
+        z0, z1 = self._zeta_at(t0), self._zeta_at(stamp)
+        if z0 is None or z1 is None:
+            return None
+        p0 = _pose6(T0)
+        try:
+            f0 = kin.forward_kinematics(self.desc, z0, guess=p0)
+            f1 = kin.forward_kinematics(self.desc, z1, guess=f0)
+        except Exception:  # noqa: BLE001 - no FK solution: no geometry for this frame
+            return None
+        p = p0 + (np.asarray(f1) - np.asarray(f0))
+        T = np.eye(4)
+        T[:3, :3] = kin.rotation_zyx(*p[3:])
+        T[:3, 3] = p[:3]
+        return T
 
     def _on_capture(self, request: Trigger.Request, response: Trigger.Response) -> Trigger.Response:
         self.want_background = set(CAMERAS)
@@ -130,6 +176,10 @@ class IsolationNode(Node):
                     pair[c] = min(self.frames[c], key=lambda f: abs(f.stamp - onset))
             if pair:
                 self._submit(pair, onset=True)
+            self.get_logger().info(
+                f"collision {msg.id} START, onset {onset:.3f} s: frames {[round(f.stamp, 3) for f in pair.values()]}, "
+                f"newest frames {[round(self.frames[c][-1].stamp, 3) for c in CAMERAS if self.frames[c]]}, "
+                f"newest pose {self.poses.latest}, pending {len(self.pending)}")
         elif msg.event == CollisionEvent.END:
             self.active = None
 
@@ -178,7 +228,12 @@ class IsolationNode(Node):
                 self._evaluate(pair, self.poses.at(stamp, self.max_pose_age), cid)
             elif now - queued > self.pose_wait:
                 self.counters["pose wait expired"] += 1
-                self._evaluate(pair, self.poses.at(stamp, self.max_pose_age), cid)
+                T = self.poses.at(stamp, self.max_pose_age)
+                if T is None:
+                    T = self._pose_from_joints(stamp)
+                    if T is not None:
+                        self.counters["pose from joint_states"] += 1
+                self._evaluate(pair, T, cid)
             else:
                 keep.append((queued, pair, onset, cid))
         self.pending = keep
@@ -187,9 +242,7 @@ class IsolationNode(Node):
         if T is None:
             self.counters["reject: no plate_pose near the frame"] += 1
             return None
-        R = T[:3, :3]
-        pose = np.array([T[0, 3], T[1, 3], T[2, 3], np.arctan2(R[1, 0], R[0, 0]),
-                         np.arcsin(np.clip(-R[2, 0], -1, 1)), np.arctan2(R[2, 1], R[2, 2])])
+        pose = _pose6(T)
         try:
             return RobotGeometry.from_state(self.desc, pose)
         except Exception:  # noqa: BLE001 - unreachable pose from a bad fit
