@@ -20,6 +20,8 @@ e.g. `hexa param set /hexa/observer thresholds "[3.0,3.0,3.0,0.3,0.3,0.3]"`):
   thresholds (double[6], [2,2,2,0.2,0.2,0.2] N, N·m): r_low per axis.
   release_ratio (0.5): an axis releases below release_ratio·r_low.  min_duration (0.01 s): confirmation time.
   max_gap (0.1 s): longer joint_states spacing restarts the integration.
+  pose_delay (0.35 s): camera poses are applied at sample time image stamp + pose_delay, so the output depends on
+    stamps only (deterministic replay); poses later than that are applied on arrival (diagnostics `late_poses`).
   accel_sigma (2), torque_sigma (0.2 N·m), camera_sigma (0.004 rad), bias_walk (0.005 rad/√s),
     saturation (0.97), command_delay (0.0 s): ZetaEstimator settings (see hexa.estimation).
   reseed_distance (0.005 m): camera pose re-seeds the observer's pose tracking when this far from it.
@@ -157,78 +159,89 @@ class BoardClock:
 
 
 class ArmSampleInput:
-    """joint_states / motor_currents → (t, commanded ζ, τ, velocity) samples for `on_sample`.
+    """joint_states / motor_currents / plate_pose → (t, commanded ζ, τ, velocity) samples for `on_sample` and camera
+    poses for `on_pose`, in an order that depends only on the message stamps and contents
+    (hexa.estimation.SampleSequencer): a replayed bag gives the same output whatever DDS's delivery order.
 
-    time_source "auto": once `motor_currents` arrive, each of them is a sample (t from the board clock, τ = K_t·I,
-    the commanded angles from the latest joint_states); until then (bags or peers without motor_currents) each
-    joint_states is a sample at its header stamp with τ = effort. "board" / "stamp" force one of the two."""
+    time_source "auto": when `motor_currents` arrive, each of them (paired with the joint_states of the same driver
+    sample) is a sample: t from the board clock, τ = K_t·I, the commanded angles current at that time; else (bags or
+    peers without motor_currents) each joint_states is a sample at its header stamp with τ = effort. "board" /
+    "stamp" force one of the two. Poses reach `on_pose` at sample time stamp + pose_delay (parameter, 0.35 s: the
+    vision chain's latency), so every run applies each pose between the same two samples."""
 
-    def __init__(self, node: Node, k_t: float, on_sample: Any, rejects: dict[str, int]) -> None:
+    def __init__(self, node: Node, k_t: float, on_sample: Any, rejects: dict[str, int], on_pose: Any = None) -> None:
+        from hexa.estimation import SampleSequencer
         from hexa_msgs.msg import MotorCurrents
 
-        self.node, self.k_t, self.on_sample, self.rejects = node, float(k_t), on_sample, rejects
+        self.node, self.k_t, self.on_sample, self.on_pose, self.rejects = node, float(k_t), on_sample, on_pose, rejects
         self.source = str(node.declare_parameter("time_source", "auto").value)
         if self.source not in ("auto", "board", "stamp"):
             raise ValueError(f"parameter time_source must be 'auto', 'board' or 'stamp', got {self.source!r}")
         mode = str(node.declare_parameter("board_clock", "auto").value)
         if mode not in ("auto", "sim", "track"):
             raise ValueError(f"parameter board_clock must be 'auto', 'sim' or 'track', got {mode!r}")
+        pose_delay = float(node.declare_parameter("pose_delay", 0.35).value)
+        if not (math.isfinite(pose_delay) and 0.0 <= pose_delay <= 0.45):
+            raise ValueError(f"parameter pose_delay must be in [0, 0.45] s (estimator history 0.5 s), got "
+                             f"{pose_delay!r}")
         use_sim = bool(node.get_parameter("use_sim_time").value)
         self.clock = BoardClock(fixed_offset=0.0 if mode == "sim" or (mode == "auto" and use_sim) else None)
-        self.board_seen = False
-        self._cmds: deque[tuple[float, np.ndarray]] = deque()  # (stamp, commanded ζ) from joint_states
-        self._cmd: np.ndarray | None = None
-        self._vel: np.ndarray | None = None
+        self.seq = SampleSequencer(self.source, pose_delay=pose_delay)
         rejects.setdefault("bad_joint_names", 0)
         rejects.setdefault("bad_currents", 0)
         rejects.setdefault("board_time", 0)
         node.create_subscription(JointState, "joint_states", self._on_joint_states, INPUT_QOS)
         if self.source != "stamp":
             node.create_subscription(MotorCurrents, "motor_currents", self._on_currents, INPUT_QOS)
+        if on_pose is not None:
+            node.create_subscription(PoseStamped, "plate_pose", self._on_pose_msg, INPUT_QOS)
+
+    @property
+    def board_seen(self) -> bool:
+        return self.seq.board
+
+    def _dispatch(self, items: list) -> None:
+        for item in items:
+            if item[0] == "sample":
+                self.on_sample(*item[1:])
+            elif self.on_pose is not None:
+                self.on_pose(item[1], item[2])
 
     def _on_joint_states(self, msg: JointState) -> None:
         pos = ordered_joints(msg, "position")
         if pos is None:
             self.rejects["bad_joint_names"] += 1
             return
-        self._cmd = pos
-        self._vel = ordered_joints(msg, "velocity")
-        ts = stamp_seconds(msg.header.stamp)
-        self._cmds.append((ts, pos))
-        while len(self._cmds) > 1 and self._cmds[0][0] < ts - 2.0:
-            self._cmds.popleft()
-        if self.board_seen or self.source == "board":
-            return
+        vel = ordered_joints(msg, "velocity")
         tau = ordered_joints(msg, "effort")
-        if tau is None:
+        if tau is None and not self.seq.board:
             self.rejects["bad_joint_names"] += 1
-            return
-        self.on_sample(stamp_seconds(msg.header.stamp), pos, tau, self._vel)
+        self._dispatch(self.seq.push_states(stamp_seconds(msg.header.stamp), pos, vel, tau))
 
     def _on_currents(self, msg: Any) -> None:
-        self.board_seen = True
-        if self._cmd is None:
-            return
         cur = np.asarray(msg.current, dtype=float)
         if cur.shape != (6,):
             self.rejects["bad_currents"] += 1
             return
-        t = self.clock.time(stamp_seconds(msg.header.stamp), msg.board_time_us)
+        stamp = stamp_seconds(msg.header.stamp)
+        t = self.clock.time(stamp, msg.board_time_us)
         if t is None:
             self.rejects["board_time"] += 1
             return
-        self.on_sample(t, self._command_at(t), self.k_t * cur, self._vel)
+        self._dispatch(self.seq.push_currents(stamp, t, self.k_t * cur))
 
-    def _command_at(self, t: float) -> np.ndarray:
-        """The command that was current at sample time t: current samples can reach the host late (a loaded host,
-        a board's backlog), and pairing an old torque with the newest command would be off by ζ̇ × the delay."""
-        cmds = self._cmds
-        if not cmds or t >= cmds[-1][0]:
-            return self._cmd
-        for ts, pos in reversed(cmds):
-            if ts <= t:
-                return pos
-        return cmds[0][1]
+    def _on_pose_msg(self, msg: PoseStamped) -> None:
+        from hexa_dynamics.conversions import hexa_pose_from_msg
+
+        try:
+            pose = hexa_pose_from_msg(msg.pose)
+        except ValueError:
+            self.rejects["bad_pose"] = self.rejects.get("bad_pose", 0) + 1
+            return
+        if not np.all(np.isfinite(pose)):
+            self.rejects["bad_pose"] = self.rejects.get("bad_pose", 0) + 1
+            return
+        self._dispatch(self.seq.push_pose(stamp_seconds(msg.header.stamp), pose))
 
 
 class ObserverNode(Node):
@@ -277,8 +290,8 @@ class ObserverNode(Node):
         self.pub_zeta = self.create_publisher(JointState, "zeta_estimate", 10)
         self.pub_markers = self.create_publisher(MarkerArray, "markers", 10)
         self.pub_diag = self.create_publisher(DiagnosticArray, "/diagnostics", 10)
-        self.input = ArmSampleInput(self, self.desc.K_t, self._on_sample, self.rejects)
-        self.create_subscription(PoseStamped, "plate_pose", self._on_pose, 10)
+        self._pose_hist: deque[tuple[float, np.ndarray]] = deque()  # (t, tracked plate pose) for the re-seed test
+        self.input = ArmSampleInput(self, self.desc.K_t, self._on_sample, self.rejects, on_pose=self._on_pose)
         self.create_service(ResetObserver, "~/reset", self._on_reset)
         self.add_on_set_parameters_callback(self._on_set_parameters)
         self.create_timer(1.0, self._diagnostics)
@@ -292,7 +305,8 @@ class ObserverNode(Node):
         obs = self.observer
         cfg = obs.config
         est_cfg = self.estimator.config
-        fixed = {"description", "zeta_source", "time_source", "board_clock", "max_gap", "command_delay", "frame_id"}
+        fixed = {"description", "zeta_source", "time_source", "board_clock", "max_gap", "command_delay", "frame_id",
+                 "pose_delay"}
         try:
             for prm in params:
                 name, val = prm.name, prm.value
@@ -326,23 +340,23 @@ class ObserverNode(Node):
         return SetParametersResult(successful=True)
 
     # ------------------------------------------------------------------ inputs
-    def _on_pose(self, msg: PoseStamped) -> None:
-        from hexa_dynamics.conversions import hexa_pose_from_msg
-
-        try:
-            pose = hexa_pose_from_msg(msg.pose)
-        except ValueError:
-            self.rejects["bad_pose"] += 1
-            return
-        t = stamp_seconds(msg.header.stamp)
-        if not np.all(np.isfinite(pose)):
-            self.rejects["bad_pose"] += 1
-            return
+    def _on_pose(self, t: float, pose: np.ndarray) -> None:
+        """A camera pose (image time t), released by the sequencer at sample time t + pose_delay."""
         if self.zeta_source == "estimator":
             self.estimator.update_camera(t, pose)
-        last = self._last_out
-        if last is None or float(np.max(np.abs(last.pose[:3] - pose[:3]))) > self.reseed_distance:
-            self.observer.update_pose(t, pose)
+        tracked = self._tracked_pose_at(t)
+        if tracked is None or float(np.max(np.abs(tracked[:3] - pose[:3]))) > self.reseed_distance:
+            # the observer takes a camera seed only when it is not older than its tracked pose
+            self.observer.update_pose(max(t, self._t), pose)
+
+    def _tracked_pose_at(self, t: float) -> np.ndarray | None:
+        """The observer's tracked plate pose at the sample nearest before t (None when tracking failed since)."""
+        if self._last_out is None:
+            return None
+        for ts, p in reversed(self._pose_hist):
+            if ts <= t:
+                return p
+        return None
 
     def _on_sample(self, t: float, pos: np.ndarray, tau: np.ndarray, vel: np.ndarray | None) -> None:
         if self.zeta_source == "estimator":
@@ -362,6 +376,9 @@ class ObserverNode(Node):
             self.rejects["observer"] += 1
             return
         self._t = t
+        self._pose_hist.append((t, np.asarray(out.pose, dtype=float)))
+        while self._pose_hist and self._pose_hist[0][0] < t - 1.0:
+            self._pose_hist.popleft()
         self._publish(out, stamp_from_seconds(t), zeta, zeta_dot)
         if self._calib_until is not None and t >= self._calib_until:
             self._calib_until = None
@@ -430,6 +447,7 @@ class ObserverNode(Node):
         self.observer.reset()
         self.estimator.reset()
         self._last_out = None
+        self._pose_hist.clear()
         if req.recalibrate:
             self.observer.start_calibration()
             self._calib_until = (self._t if math.isfinite(self._t) else 0.0) + self.calibration_duration
@@ -445,6 +463,7 @@ class ObserverNode(Node):
         values: dict[str, Any] = {"accepted": obs.accepted, "collisions": obs.detector.count,
                                   "in_collision": obs.detector.active, "events_sent": self.events_sent,
                                   "servo_saturated_samples": est.saturated, "camera_accepted": est.camera_accepted,
+                                  "late_poses": self.input.seq.late_poses, "unpaired_samples": self.input.seq.unpaired,
                                   "time_source": "board" if self.input.board_seen else "stamp",
                                   "estimator_settling_samples": self.settling}
         values.update({f"reject_node_{k}": v for k, v in self.rejects.items()})

@@ -24,13 +24,13 @@ from typing import Any
 
 import numpy as np
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
-from geometry_msgs.msg import Point, PoseStamped
+from geometry_msgs.msg import Point
 from hexa_msgs.msg import CollisionEvent, Contact, ContactWrench
 from rclpy.node import Node
 from visualization_msgs.msg import Marker, MarkerArray
 
 from hexa_dynamics.observer_node import (EVENT_QOS, ArmSampleInput, declare_estimator, diagnostic, make_estimator,
-                                         run_node, stamp_from_seconds, stamp_seconds)
+                                         run_node, stamp_from_seconds)
 
 LINK_NAMES = {Contact.PLATE: "plate", Contact.ARM: "arm", Contact.ROD: "rod"}
 REJECT_REASONS = ("non_finite", "unknown_link", "bad_chain", "no_state", "not_in_collision", "identification",
@@ -79,28 +79,29 @@ class RneaNode(Node):
         self.pub_wrench = self.create_publisher(ContactWrench, "contact_wrench", EVENT_QOS)
         self.pub_markers = self.create_publisher(MarkerArray, "contact_markers", 10)
         self.pub_diag = self.create_publisher(DiagnosticArray, "/diagnostics", 10)
-        self.input = ArmSampleInput(self, self.desc.K_t, self._on_sample, self.rejects)
-        self.create_subscription(PoseStamped, "plate_pose", self._on_pose, 10)
+        self.input = ArmSampleInput(self, self.desc.K_t, self._on_sample, self.rejects, on_pose=self._on_pose)
         self.create_subscription(Contact, "contact", self._on_contact, EVENT_QOS)
         self.create_subscription(CollisionEvent, "collision", self._on_collision, EVENT_QOS)
         self.create_timer(1.0, self._diagnostics)
         self.get_logger().info(f"rnea: ζ from {self.zeta_source}, identification at {rate:g} Hz while in collision")
 
     # ------------------------------------------------------------------ state
-    def _on_pose(self, msg: PoseStamped) -> None:
-        from hexa_dynamics.conversions import hexa_pose_from_msg
-
-        try:
-            pose = hexa_pose_from_msg(msg.pose)
-        except ValueError:
-            self.rejects["bad_pose"] += 1
-            return
-        if not np.all(np.isfinite(pose)):
-            self.rejects["bad_pose"] += 1
-            return
+    def _on_pose(self, t: float, pose: np.ndarray) -> None:
+        """A camera pose (image time t), released by the sequencer at sample time t + pose_delay."""
         self._cam_pose = pose
         if self.zeta_source == "estimator":
-            self.estimator.update_camera(stamp_seconds(msg.header.stamp), pose)
+            self.estimator.update_camera(t, pose)
+            z_then = self.estimator.zeta_at(t)
+            if self._pose is not None and z_then is not None:  # tracking on the camera's assembly branch at time t?
+                from hexa.kinematics.hexa6rus import forward_kinematics
+
+                try:
+                    then = np.asarray(forward_kinematics(self.desc, z_then, guess=self._pose), dtype=float)
+                    lost = bool(np.max(np.abs(then[:3] - pose[:3])) > 0.02)
+                except (ValueError, ArithmeticError):
+                    lost = True
+                if lost:
+                    self._pose = None  # the next identification starts again from the camera
 
     def _on_sample(self, t: float, pos: np.ndarray, tau: np.ndarray, vel: np.ndarray | None) -> None:
         if self.zeta_source == "estimator":
@@ -141,11 +142,6 @@ class RneaNode(Node):
             pose = np.asarray(forward_kinematics(self.desc, zeta, guess=guess), dtype=float)
         except (ValueError, ArithmeticError):
             return None
-        if self._cam_pose is not None and np.max(np.abs(pose[:3] - self._cam_pose[:3])) > 0.02:
-            try:  # lost the assembly branch: start again from the camera
-                pose = np.asarray(forward_kinematics(self.desc, zeta, guess=self._cam_pose), dtype=float)
-            except (ValueError, ArithmeticError):
-                return None
         return pose if np.all(np.isfinite(pose)) else None
 
     # ------------------------------------------------------------------ contacts and collisions

@@ -303,6 +303,11 @@ class ZetaEstimator:
         w = (t - t0) / (t1 - t0) if t1 > t0 else 0.0
         return z0 + w * (z1 - z0) + self._corr  # every camera correction so far shifts the past estimate too
 
+    def zeta_at(self, t: float) -> NDArray | None:
+        """ζ̂ at a past time t within `history` (interpolated, with every camera correction so far); None outside."""
+        z = self._filter_at(float(t))
+        return None if z is None else z.copy()
+
     def update_camera(self, t: float, pose: Any) -> bool:
         """A plate pose [x y z α β γ] (m, rad) stamped t (the image time): ζ_IK = IK(pose) (eq 18) is a measurement
         of ζ at t, applied now as ζ_IK + (ζ̂(now) − ζ̂(t)). Returns False when rejected."""
@@ -366,3 +371,125 @@ class ZetaEstimator:
         self.camera_accepted += 1
         self.last = self._estimate()
         return True
+
+
+class SampleSequencer:
+    """Deterministic ordering of the three input streams of the live nodes: the result depends only on message
+    stamps and contents, never on the order in which DDS delivers the topics (issue 8: a replayed bag gives the
+    same events every time).
+
+    Streams: current samples (motor_currents: header stamp, board time t, τ), joint_states (header stamp, commanded
+    angles, velocity, effort) and camera plate poses (image stamp). The driver publishes one motor_currents and one
+    joint_states per sample with the same header stamp, each topic in order, so the k-th of one pairs with the k-th
+    of the other (matched by stamp; a partner lost in transport is dropped and counted). A sample is released only
+    once its pair is complete; it is paired with the command that was current at its board time (a history of
+    joint_states by stamp up to and including its own partner, so the history is the same whatever the delivery).
+
+    Camera poses are released into the same stream at sample time stamp + pose_delay (the vision chain's latency is
+    0.1-0.33 s on this machine); a pose that arrives later than that is released on arrival and counted in
+    `late_poses` (only those can make a run non-deterministic). In `stamp` mode (no motor_currents: a bag or peer
+    without them) each joint_states is a sample at its stamp with τ = effort. In `auto` mode the board mode is
+    chosen when a motor_currents arrives before `auto_wait` joint_states are queued.
+
+    Output items: ("sample", t, commanded ζ, τ, velocity or None) and ("pose", t_image, pose)."""
+
+    def __init__(self, mode: str = "auto", pose_delay: float = 0.35, history: float = 2.0, auto_wait: int = 20,
+                 max_queue: int = 2000) -> None:
+        if mode not in ("auto", "board", "stamp"):
+            raise EstimationError(f"sequencer mode must be 'auto', 'board' or 'stamp', got {mode!r}")
+        if not (math.isfinite(pose_delay) and pose_delay >= 0):
+            raise EstimationError(f"sequencer pose_delay out of range, got {pose_delay!r}")
+        self.mode, self.pose_delay, self.history, self.auto_wait, self.max_queue = (
+            mode, float(pose_delay), float(history), int(auto_wait), int(max_queue))
+        self.board = mode == "board"
+        self._cur: deque[tuple[float, float, NDArray]] = deque()  # (stamp, board t, τ)
+        self._js: deque[tuple[float, NDArray, Any, Any]] = deque()  # (stamp, commanded, velocity, effort)
+        self._cmds: deque[tuple[float, NDArray]] = deque()
+        self._vel: Any = None
+        self._poses: list[tuple[float, int, Any]] = []
+        self._seq = 0
+        self.last_t = -math.inf
+        self.late_poses = 0
+        self.unpaired = 0
+
+    # ------------------------------------------------------------------ inputs
+    def push_currents(self, stamp: float, t: float, tau: NDArray) -> list[tuple]:
+        if self.mode == "stamp":
+            return []
+        if not self.board:
+            self.board = True
+        self._cur.append((float(stamp), float(t), tau))
+        if len(self._cur) > self.max_queue:  # no joint_states at all: nothing to pair with
+            self._cur.popleft()
+            self.unpaired += 1
+        return self._drain()
+
+    def push_states(self, stamp: float, commanded: NDArray, velocity: Any, effort: Any) -> list[tuple]:
+        self._js.append((float(stamp), commanded, velocity, effort))
+        if len(self._js) > self.max_queue:
+            self._remember(*self._js.popleft()[:2])
+            self.unpaired += 1
+        return self._drain()
+
+    def push_pose(self, stamp: float, pose: Any) -> list[tuple]:
+        import heapq
+
+        stamp = float(stamp)
+        if stamp + self.pose_delay < self.last_t:  # later than its slot: released now (counted)
+            self.late_poses += 1
+            return [("pose", stamp, pose)]
+        heapq.heappush(self._poses, (stamp, self._seq, pose))
+        self._seq += 1
+        return []
+
+    # ------------------------------------------------------------------ ordering
+    def _remember(self, stamp: float, commanded: NDArray) -> None:
+        self._cmds.append((stamp, commanded))
+        while len(self._cmds) > 1 and self._cmds[0][0] < stamp - self.history:
+            self._cmds.popleft()
+
+    def _command_at(self, t: float) -> NDArray:
+        """The command current at sample time t (the newest one whose stamp is ≤ t, else the oldest known)."""
+        for ts, pos in reversed(self._cmds):
+            if ts <= t:
+                return pos
+        return self._cmds[0][1]
+
+    def _release_poses(self, t: float, out: list) -> None:
+        import heapq
+
+        while self._poses and self._poses[0][0] + self.pose_delay <= t:
+            tp, _, pose = heapq.heappop(self._poses)
+            out.append(("pose", tp, pose))
+
+    def _sample(self, t: float, cmd: NDArray, tau: NDArray, vel: Any, out: list) -> None:
+        self._release_poses(t, out)
+        out.append(("sample", t, cmd, tau, vel))
+        self.last_t = max(self.last_t, t)
+
+    def _drain(self) -> list[tuple]:
+        out: list[tuple] = []
+        if not self.board:
+            if self.mode == "auto" and len(self._js) < self.auto_wait:
+                return out  # a motor_currents may still come: decide on board mode from the data, not the timing
+            while self._js:
+                s, pos, vel, eff = self._js.popleft()
+                self._remember(s, pos)
+                if eff is not None:
+                    self._sample(s, pos, eff, vel, out)
+            return out
+        while self._cur and self._js:
+            sc, t, tau = self._cur[0]
+            sj, pos, vel, _ = self._js[0]
+            if sc < sj:  # its joint_states was lost
+                self._cur.popleft()
+                self.unpaired += 1
+                continue
+            self._js.popleft()
+            self._remember(sj, pos)
+            if sj < sc:  # a joint_states without its motor_currents: only its command is kept
+                self.unpaired += 1
+                continue
+            self._cur.popleft()
+            self._sample(t, self._command_at(t), tau, vel, out)
+        return out
