@@ -89,9 +89,13 @@ def test_a_lost_partner_drops_only_its_own_sample_and_a_pose_later_than_its_slot
 
 
 def test_without_motor_currents_each_joint_states_is_a_sample_at_its_stamp():
-    _, js, _ = _streams(30)
-    out = _feed(SampleSequencer(mode="auto", auto_wait=5), js)
-    assert [o[1] for o in out] == [j[1] for j in js]
+    _, js, _ = _streams(32)
+    seq = SampleSequencer(mode="auto", auto_wait=5)
+    out = _feed(seq, js[:5])
+    assert [o[1] for o in out] == [j[1] for j in js[:5]]  # decided after auto_wait joint_states
+    for j in js[5:]:  # then every joint_states is a sample at once
+        assert [o[1] for o in _feed(seq, [j])] == [j[1]]
+    assert not seq.board
 
 
 def test_bad_settings_are_refused_naming_them():

@@ -402,6 +402,7 @@ class SampleSequencer:
         self.mode, self.pose_delay, self.history, self.auto_wait, self.max_queue = (
             mode, float(pose_delay), float(history), int(auto_wait), int(max_queue))
         self.board = mode == "board"
+        self._stamp_mode = mode == "stamp"
         self._cur: deque[tuple[float, float, NDArray]] = deque()  # (stamp, board t, τ)
         self._js: deque[tuple[float, NDArray, Any, Any]] = deque()  # (stamp, commanded, velocity, effort)
         self._cmds: deque[tuple[float, NDArray]] = deque()
@@ -416,8 +417,9 @@ class SampleSequencer:
     def push_currents(self, stamp: float, t: float, tau: NDArray) -> list[tuple]:
         if self.mode == "stamp":
             return []
-        if not self.board:
-            self.board = True
+        if self._stamp_mode:  # auto mode already settled on joint_states stamps
+            return []
+        self.board = True
         self._cur.append((float(stamp), float(t), tau))
         if len(self._cur) > self.max_queue:  # no joint_states at all: nothing to pair with
             self._cur.popleft()
@@ -470,8 +472,10 @@ class SampleSequencer:
     def _drain(self) -> list[tuple]:
         out: list[tuple] = []
         if not self.board:
-            if self.mode == "auto" and len(self._js) < self.auto_wait:
-                return out  # a motor_currents may still come: decide on board mode from the data, not the timing
+            if self.mode == "auto" and not self._stamp_mode:
+                if len(self._js) < self.auto_wait:
+                    return out  # a motor_currents may still come: decide on board mode from the data, not the timing
+                self._stamp_mode = True
             while self._js:
                 s, pos, vel, eff = self._js.popleft()
                 self._remember(s, pos)
