@@ -15,13 +15,17 @@ and leave phantom robot pixels touching a link. After `pose_wait` wall seconds w
 within `max_pose_age` is used (counted); failing that (the object in front of the plate's markers hides two of them,
 as in the demo's rod case), the newest camera pose before the frame is carried forward by the arm angles of
 `joint_states`: pose(t) = pose_cam(t0) + FK(ζ(t)) − FK(ζ(t0)) (the difference cancels the servos' static offset;
-counted as "pose from joint_states"); else the pair is dropped (counted). At most `max_pending` pairs wait; the
+counted as "pose from joint_states"; the robot mask then gets a `coarse_margin` of 8 mm); else the pair is dropped
+(counted). At most `max_pending` pairs wait; the
 onset pair is never dropped for a newer one.
+While the collision lasts, complete frame pairs are evaluated every `eval_period` s of frame time (the node must
+keep up on two shared cores; a queue of every frame would only be dropped).
 Parameters: robot_description, background_delay (s), debug_image (bool), max_pose_age (s), pose_wait (s, wall),
-max_pending.
+max_pending, eval_period (s).
 """
 from __future__ import annotations
 
+import dataclasses
 import sys
 import time
 from collections import Counter, deque
@@ -71,7 +75,9 @@ class IsolationNode(Node):
         self.want_debug = bool(self.declare_parameter("debug_image", True).value)
         self.max_pose_age = float(self.declare_parameter("max_pose_age", 0.2).value)
         self.pose_wait = float(self.declare_parameter("pose_wait", 0.5).value)
-        self.max_pending = int(self.declare_parameter("max_pending", 4).value)
+        self.max_pending = int(self.declare_parameter("max_pending", 8).value)
+        self.eval_period = float(self.declare_parameter("eval_period", 0.1).value)
+        self.coarse_margin = float(self.declare_parameter("coarse_margin", 0.008).value)
         from hexa.robots.hexa_description import load_hexa
 
         self.desc = load_hexa(desc_path or None)
@@ -81,6 +87,7 @@ class IsolationNode(Node):
         self.frames: dict[str, deque[RGBDFrame]] = {c: deque(maxlen=30) for c in CAMERAS}
         self.poses = PoseBuffer(keep=400)
         self.joints: deque[tuple[float, np.ndarray]] = deque(maxlen=600)
+        self.ended: dict[int, float] = {}     # collision id -> END stamp: later frames are not that collision's
         # (wall time queued, frame pair, is the onset pair, collision id)
         self.pending: list[tuple[float, dict[str, RGBDFrame], bool, int]] = []
         self.counters: Counter[str] = Counter()
@@ -175,13 +182,24 @@ class IsolationNode(Node):
                 if self.frames[c]:
                     pair[c] = min(self.frames[c], key=lambda f: abs(f.stamp - onset))
             if pair:
+                self.last_eval["t"] = max(f.stamp for f in pair.values())
                 self._submit(pair, onset=True)
+                # the START reaches this node late under load: frames after the onset that are already buffered
+                # are queued too (every eval_period), so the force peak is covered
+                for f in sorted(self.frames[CAMERAS[0]], key=lambda f: f.stamp):
+                    if f.stamp - self.last_eval["t"] < self.eval_period - 1e-6:
+                        continue
+                    other = [g for g in self.frames[CAMERAS[1]] if abs(g.stamp - f.stamp) < 0.005]
+                    if other:
+                        self.last_eval["t"] = f.stamp
+                        self._submit({CAMERAS[0]: f, CAMERAS[1]: other[0]})
             self.get_logger().info(
                 f"collision {msg.id} START, onset {onset:.3f} s: frames {[round(f.stamp, 3) for f in pair.values()]}, "
                 f"newest frames {[round(self.frames[c][-1].stamp, 3) for c in CAMERAS if self.frames[c]]}, "
                 f"newest pose {self.poses.latest}, pending {len(self.pending)}")
         elif msg.event == CollisionEvent.END:
             self.active = None
+            self.ended[int(msg.id)] = stamp_to_sec(msg.header.stamp)
 
     def _on_frame(self, cam: str, frame: RGBDFrame) -> None:
         now = frame.stamp
@@ -202,8 +220,8 @@ class IsolationNode(Node):
                 f = self.frames[c][-1]
                 if abs(f.stamp - now) < 0.05:
                     pair[c] = f
-            t_last, n_last = self.last_eval.get("t", -1.0), self.last_eval.get("n", 0)
-            if now - t_last > 1e-6 or (abs(now - t_last) <= 0.05 and len(pair) > n_last):
+            t_last = self.last_eval.get("t", -1.0)
+            if len(pair) == len(CAMERAS) and now - t_last >= self.eval_period - 1e-6:
                 self.last_eval["t"], self.last_eval["n"] = now, len(pair)
                 self._submit(pair)
 
@@ -224,16 +242,22 @@ class IsolationNode(Node):
         keep = []
         for queued, pair, onset, cid in self.pending:
             stamp = max(f.stamp for f in pair.values())
-            if self.poses.covers(stamp):
+            if cid in self.ended and stamp > self.ended[cid] + 1e-3:
+                self.counters["skipped: frame after END"] += 1
+            elif self.poses.covers(stamp):
                 self._evaluate(pair, self.poses.at(stamp, self.max_pose_age), cid)
             elif now - queued > self.pose_wait:
-                self.counters["pose wait expired"] += 1
                 T = self.poses.at(stamp, self.max_pose_age)
+                from_joints = False
                 if T is None:
                     T = self._pose_from_joints(stamp)
-                    if T is not None:
-                        self.counters["pose from joint_states"] += 1
-                self._evaluate(pair, T, cid)
+                    from_joints = T is not None
+                if T is None and now - queued <= 6 * self.pose_wait:
+                    keep.append((queued, pair, onset, cid))    # joint_states not there yet either: wait on
+                    continue
+                self.counters["pose wait expired"] += 1
+                self.counters["pose from joint_states"] += int(from_joints)
+                self._evaluate(pair, T, cid, coarse=from_joints)
             else:
                 keep.append((queued, pair, onset, cid))
         self.pending = keep
@@ -249,7 +273,8 @@ class IsolationNode(Node):
             self.counters["reject: plate_pose unreachable"] += 1
             return None
 
-    def _evaluate(self, pair: dict[str, RGBDFrame], T_plate: np.ndarray | None, collision_id: int = 0) -> None:
+    def _evaluate(self, pair: dict[str, RGBDFrame], T_plate: np.ndarray | None, collision_id: int = 0,
+                  coarse: bool = False) -> None:
         stamp = max(f.stamp for f in pair.values())
         missing = [c for c in pair if c not in self.isolator.backgrounds]
         for c in missing:
@@ -260,12 +285,17 @@ class IsolationNode(Node):
         geom = self._geometry(T_plate)
         if geom is None:
             return
+        config = self.isolator.config
+        if coarse:   # a pose carried by the commanded angles is good to a few mm: a wider robot mask
+            self.isolator.config = dataclasses.replace(config, robot_margin_m=self.coarse_margin)
         try:
             est = self.isolator.isolate({c: (f.rgb, f.depth) for c, f in pair.items()}, geom, debug=self.want_debug)
         except IsolationError as exc:
             self.counters["isolation error"] += 1
             self.get_logger().debug(str(exc))
             return
+        finally:
+            self.isolator.config = config
         self.counters["evaluations"] += 1
         self.get_logger().info(
             f"isolation at {stamp:.3f} s (pose lag {self.poses.latest - stamp:+.3f} s, cameras {sorted(pair)}): "
