@@ -106,7 +106,7 @@ class EstimatorConfig:
     bias_walk: float = 0.005
     camera_gate: float = 0.15
     max_gap: float = 0.1
-    history: float = 0.5
+    history: float = 1.0
     settle_time: float = 0.03
     command_smoothing: float = 0.0
     gate_reset_frames: int = 5
@@ -386,14 +386,14 @@ class SampleSequencer:
     joint_states by stamp up to and including its own partner, so the history is the same whatever the delivery).
 
     Camera poses are released into the same stream at sample time stamp + pose_delay (the vision chain's latency is
-    0.1-0.33 s on this machine); a pose that arrives later than that is released on arrival and counted in
+    0.1-0.47 s on this loaded machine); a pose that arrives later than that is released on arrival and counted in
     `late_poses` (only those can make a run non-deterministic). In `stamp` mode (no motor_currents: a bag or peer
     without them) each joint_states is a sample at its stamp with τ = effort. In `auto` mode the board mode is
     chosen when a motor_currents arrives before `auto_wait` joint_states are queued.
 
     Output items: ("sample", t, commanded ζ, τ, velocity or None) and ("pose", t_image, pose)."""
 
-    def __init__(self, mode: str = "auto", pose_delay: float = 0.35, history: float = 2.0, auto_wait: int = 20,
+    def __init__(self, mode: str = "auto", pose_delay: float = 0.5, history: float = 2.0, auto_wait: int = 20,
                  max_queue: int = 2000) -> None:
         if mode not in ("auto", "board", "stamp"):
             raise EstimationError(f"sequencer mode must be 'auto', 'board' or 'stamp', got {mode!r}")
