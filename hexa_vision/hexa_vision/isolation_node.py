@@ -20,6 +20,7 @@ counted as "pose from joint_states"; the robot mask then gets a `coarse_margin` 
 onset pair is never dropped for a newer one.
 While the collision lasts, complete frame pairs are evaluated every `eval_period` s of frame time (the node must
 keep up on two shared cores; a queue of every frame would only be dropped).
+The debug image is drawn for the onset pair of each collision only (it costs as much as the isolation itself).
 Parameters: robot_description, background_delay (s), debug_image (bool), max_pose_age (s), pose_wait (s, wall),
 max_pending, eval_period (s).
 """
@@ -245,19 +246,19 @@ class IsolationNode(Node):
             if cid in self.ended and stamp > self.ended[cid] + 1e-3:
                 self.counters["skipped: frame after END"] += 1
             elif self.poses.covers(stamp):
-                self._evaluate(pair, self.poses.at(stamp, self.max_pose_age), cid)
+                self._evaluate(pair, self.poses.at(stamp, self.max_pose_age), cid, debug=onset)
             elif now - queued > self.pose_wait:
                 T = self.poses.at(stamp, self.max_pose_age)
                 from_joints = False
-                if T is None:
-                    T = self._pose_from_joints(stamp)
+                if T is None and self.joints and self.joints[-1][0] >= stamp - 0.02:
+                    T = self._pose_from_joints(stamp)   # FK only once the arm angles of the stamp are here
                     from_joints = T is not None
                 if T is None and now - queued <= 6 * self.pose_wait:
                     keep.append((queued, pair, onset, cid))    # joint_states not there yet either: wait on
                     continue
                 self.counters["pose wait expired"] += 1
                 self.counters["pose from joint_states"] += int(from_joints)
-                self._evaluate(pair, T, cid, coarse=from_joints)
+                self._evaluate(pair, T, cid, coarse=from_joints, debug=onset)
             else:
                 keep.append((queued, pair, onset, cid))
         self.pending = keep
@@ -274,7 +275,8 @@ class IsolationNode(Node):
             return None
 
     def _evaluate(self, pair: dict[str, RGBDFrame], T_plate: np.ndarray | None, collision_id: int = 0,
-                  coarse: bool = False) -> None:
+                  coarse: bool = False, debug: bool = True) -> None:
+        debug = debug and self.want_debug   # the mosaic costs as much as the isolation: onset pairs only
         stamp = max(f.stamp for f in pair.values())
         missing = [c for c in pair if c not in self.isolator.backgrounds]
         for c in missing:
@@ -289,7 +291,7 @@ class IsolationNode(Node):
         if coarse:   # a pose carried by the commanded angles is good to a few mm: a wider robot mask
             self.isolator.config = dataclasses.replace(config, robot_margin_m=self.coarse_margin)
         try:
-            est = self.isolator.isolate({c: (f.rgb, f.depth) for c, f in pair.items()}, geom, debug=self.want_debug)
+            est = self.isolator.isolate({c: (f.rgb, f.depth) for c, f in pair.items()}, geom, debug=debug)
         except IsolationError as exc:
             self.counters["isolation error"] += 1
             self.get_logger().debug(str(exc))
@@ -315,7 +317,7 @@ class IsolationNode(Node):
             msg.camera = est.camera
             msg.confidence = float(est.confidence)
             self.pub_contact.publish(msg)
-        if self.want_debug:
+        if debug:
             res = est.per_camera.get(est.camera) or next(iter(est.per_camera.values()))
             img = debug_image(res, self.isolator, geom)
             st = self.get_clock().now().to_msg()
