@@ -205,6 +205,8 @@ class IsolationConfig:
     smooth_px: int = 7                  # normalised box filter (px) of the object's depth before lifting to 3D
     axis_elongation: float = 2.5        # object point spread ratio above which its axis guides the plate contact
     above_plate: float = 0.010          # m: a coloured pixel this far above the plate's surface is an object
+    axis_contact: bool = True           # arm/rod: the contact lies where the object's axis crosses the link
+    axis_max_shift: float = 0.03        # m: largest move along the link from the nearest points' mean
     tip_length: float = 0.02            # m of the object's ends compared to find its pushing end
     min_confidence: float = 0.5         # a camera earlier in `order` wins unless its confidence is below this
     min_touch_points: int = 12          # fewer candidates → no contact in this camera
@@ -533,6 +535,10 @@ class CollisionIsolator:
             code, chain, seg, radius = links[best]
             res.link, res.chain = code, chain
             s = float(np.clip((wk * S[best][sel]).sum() / wk.sum(), 0.0, 1.0))
+            if cfg.axis_contact:
+                s_axis = self._axis_crossing(pts, cam, seg)
+                if s_axis is not None and abs(s_axis - s) * np.linalg.norm(seg[1] - seg[0]) <= cfg.axis_max_shift:
+                    s = s_axis
             axis_pt = seg[0] + s * (seg[1] - seg[0])
             e = (seg[1] - seg[0]) / np.linalg.norm(seg[1] - seg[0])
             off = mean_pt - axis_pt
@@ -549,6 +555,31 @@ class CollisionIsolator:
         if debug:
             res.layers["selected"] = np.stack([uu[sel], vv[sel]], axis=1)
         return res
+
+    def _axis_crossing(self, pts: np.ndarray, cam: CameraModel, seg: np.ndarray) -> float | None:
+        """Segment parameter where an elongated object's axis (its points' principal direction, moved from the
+        visible near side to the axis) passes closest to the link's axis, or None (object not elongated, lines
+        parallel)."""
+        cfg = self.config
+        c = pts.mean(axis=0)
+        _, sv, vt = np.linalg.svd(pts - c, full_matrices=False)
+        if sv[0] < cfg.axis_elongation * max(sv[1], 1e-12):
+            return None
+        a = vt[0]
+        wv = (cam.position - c) - ((cam.position - c) @ a) * a
+        if np.linalg.norm(wv) > 1e-9:
+            wv /= np.linalg.norm(wv)
+            off = (pts - c) @ np.cross(a, wv)
+            r_est = 0.5 * float(np.percentile(off, 95) - np.percentile(off, 5))
+            c = c - wv * (2.0 / np.pi) * r_est
+        e = seg[1] - seg[0]
+        w0 = seg[0] - c
+        A, B, C = float(e @ e), float(e @ a), float(a @ a)
+        den = A * C - B * B
+        if den <= 1e-12 * A * C:
+            return None
+        s = (B * float(a @ w0) - C * float(e @ w0)) / den
+        return float(np.clip(s, 0.0, 1.0))
 
     # -- both cameras ------------------------------------------------------------------------------------------
     def isolate(self, frames: dict[str, tuple[np.ndarray, np.ndarray]], geom: RobotGeometry, debug: bool = False
