@@ -75,6 +75,8 @@ class RneaNode(Node):
         self._active: int | None = None          # id of the collision in progress
         self._contacts: dict[int, Contact] = {}  # latest contact per collision id
         self._last_ident_t = -math.inf
+        self._started = 0                      # newest collision id seen STARTing
+        self._early_contacts: dict[int, Contact] = {}
 
         self.pub_wrench = self.create_publisher(ContactWrench, "contact_wrench", EVENT_QOS)
         self.pub_markers = self.create_publisher(MarkerArray, "contact_markers", 10)
@@ -148,6 +150,12 @@ class RneaNode(Node):
     def _on_collision(self, msg: CollisionEvent) -> None:
         if msg.event == CollisionEvent.START:
             self._active = int(msg.id)
+            self._started = max(self._started, int(msg.id))
+            early = self._early_contacts.pop(int(msg.id), None)
+            self._early_contacts.clear()
+            if early is not None:  # the contact of this collision arrived before its START (separate topics)
+                self._contacts[int(msg.id)] = early
+                self._identify(early)
         elif self._active == int(msg.id):
             self._active = None
             self._contacts.pop(int(msg.id), None)
@@ -167,6 +175,10 @@ class RneaNode(Node):
             self.rejects["bad_chain"] += 1
             return
         if self.require_collision and (self._active is None or int(msg.collision_id) != self._active):
+            if int(msg.collision_id) > self._started:  # its START is still on its way: kept until it arrives
+                if len(self._early_contacts) < 20:
+                    self._early_contacts[int(msg.collision_id)] = msg
+                return
             self.rejects["not_in_collision"] += 1
             return
         self._contacts[int(msg.collision_id)] = msg
