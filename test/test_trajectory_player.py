@@ -63,3 +63,31 @@ def test_after_the_duration_the_last_pose_is_held_as_finished(desc):
     p = TrajectoryPlayer(desc, TRAJECTORIES["circle"], 2.0)
     c = p.command(5.0)
     assert c.state == "finished" and np.allclose(c.pose, TRAJECTORIES["circle"](2.0)[0])
+
+
+def test_a_late_caller_pauses_the_trajectory_instead_of_commanding_a_jump(desc):
+    traj = TRAJECTORIES["circle"]
+    p = TrajectoryPlayer(desc, traj, DURATIONS["circle"], max_step=0.03)
+    for k in range(101):                      # on time: 100 Hz for 1 s, no lag
+        c = p.command(0.01 * k)
+    assert p.lag_events == 0 and np.allclose(c.pose, traj(1.0)[0])
+    late = p.command(1.25)                    # 0.25 s late: advances only 0.03 s of trajectory
+    assert p.lag_events == 1 and p.lag_time == pytest.approx(0.22)
+    assert np.allclose(late.pose, traj(1.03)[0]) and late.trajectory_time == pytest.approx(1.03)
+    assert np.max(np.abs(late.zeta - c.zeta)) < 0.03  # rad: a small step, not the 0.25 s jump
+    jump = TrajectoryPlayer(desc, traj, DURATIONS["circle"])  # without max_step the old behaviour: a jump
+    jump.command(1.0)
+    assert np.allclose(jump.command(1.25).pose, traj(1.25)[0])
+    with pytest.raises(TrajectoryPlayerError, match="max_step"):
+        TrajectoryPlayer(desc, traj, 10.0, max_step=0.0)
+
+
+def test_max_step_starts_a_late_first_command_at_the_trajectory_start_and_ignores_holds(desc):
+    traj = TRAJECTORIES["helix"]
+    p = TrajectoryPlayer(desc, traj, DURATIONS["helix"], max_step=0.05)
+    assert np.allclose(p.command(5.0).pose, traj(0.05)[0])
+    p.on_collision(5.0)
+    p.command(9.0)                            # a long hold is not lag
+    assert p.lag_events == 1
+    p.resume(9.0)
+    assert p.command(9.01).trajectory_time == pytest.approx(0.06)

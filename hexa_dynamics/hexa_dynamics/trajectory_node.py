@@ -5,10 +5,13 @@ Parameters: `trajectory` ("circle" | "helix" | "ellipse" | "file"), `file` (CSV 
 for trajectory=file), `rate_hz` (100), `start_delay` (s after the first clock reading, 1.0), `start_time`
 (s, clock time of trajectory time 0; −1 = use start_delay; with the simulator's scenarios use 0.0 so that sim time =
 trajectory time), `loop` (false), `collision_policy` ("hold"),
-`retract_distance` (m, 0.02), `retract_time` (s, 0.5), `description` (robot YAML path, default packaged).
+`retract_distance` (m, 0.02), `retract_time` (s, 0.5), `max_step` (s, 0.03: the most trajectory time advances
+between two commands; when the node is late — a stalled host, sim time in bursts — the trajectory pauses instead of
+commanding a jump; 0 = no limit), `description` (robot YAML path, default packaged).
 Topics (relative): pub `joint_commands` (sensor_msgs/JointState, arm_1..arm_6, ζ rad and ζ̇ rad/s),
 `trajectory_state` (std_msgs/String); sub `collision` (hexa_msgs/CollisionEvent, reliable), `residual`
-(hexa_msgs/Residual, for the retract direction). Services: `~/resume`, `~/hold` (std_srvs/Trigger). `/diagnostics`.
+(hexa_msgs/Residual, only with collision_policy "retract", for its direction).
+Services: `~/resume`, `~/hold` (std_srvs/Trigger). `/diagnostics`.
 """
 from __future__ import annotations
 
@@ -71,9 +74,13 @@ class TrajectoryNode(Node):
         policy = str(self.declare_parameter("collision_policy", "hold").value)
         dist = float(self.declare_parameter("retract_distance", 0.02).value)
         rtime = float(self.declare_parameter("retract_time", 0.5).value)
+        max_step = float(self.declare_parameter("max_step", 0.03).value)
         desc_path = str(self.declare_parameter("description", "").value) or None
         if not rate > 0:
             raise ValueError(f"parameter rate_hz must be > 0, got {rate}")
+        if max_step < 0 or (0 < max_step < 1.0 / rate):
+            raise ValueError(f"parameter max_step must be 0 (no limit) or >= 1/rate_hz = {1.0 / rate:g} s, "
+                             f"got {max_step}")
         self.desc = load_hexa(desc_path)
         if name == "file":
             traj, duration = load_pose_file(path)
@@ -82,13 +89,14 @@ class TrajectoryNode(Node):
         else:
             raise ValueError(f"parameter trajectory must be one of {sorted(TRAJECTORIES)} or 'file', got {name!r}")
         self.player = TrajectoryPlayer(self.desc, traj, duration, policy=policy, retract_distance=dist,
-                                       retract_time=rtime, loop=loop)
+                                       retract_time=rtime, loop=loop, max_step=max_step or None)
         self.pub = self.create_publisher(JointState, "joint_commands", 10)
         self.pub_state = self.create_publisher(String, "trajectory_state", 10)
         self.pub_diag = self.create_publisher(DiagnosticArray, "/diagnostics", 10)
         reliable = QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE)
         self.create_subscription(CollisionEvent, "collision", self._on_collision, reliable)
-        self.create_subscription(Residual, "residual", self._on_residual, 10)
+        if policy == "retract":
+            self.create_subscription(Residual, "residual", self._on_residual, 10)
         self.create_service(Trigger, "~/resume", self._on_resume)
         self.create_service(Trigger, "~/hold", self._on_hold)
         self._t0: float | None = None
@@ -165,7 +173,9 @@ class TrajectoryNode(Node):
         st = DiagnosticStatus(level=level, name=self.get_fully_qualified_name(), message=self._state)
         st.values = [KeyValue(key="state", value=self._state),
                      KeyValue(key="collisions", value=str(self.collisions)),
-                     KeyValue(key="ik_failures", value=str(self.player.ik_failures))]
+                     KeyValue(key="ik_failures", value=str(self.player.ik_failures)),
+                     KeyValue(key="lag_events", value=str(self.player.lag_events)),
+                     KeyValue(key="lag_time_s", value=f"{self.player.lag_time:.3f}")]
         arr.status = [st]
         self.pub_diag.publish(arr)
 

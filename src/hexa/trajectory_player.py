@@ -44,13 +44,21 @@ class TrajectoryPlayer:
         retract_distance: how far (m) the plate backs off along the external force in "retract".
         retract_time: seconds the retraction and the return blend take.
         loop: restart the trajectory after `duration`.
+        max_step: the most (s) trajectory time may advance between two successive commands, or None (no limit).
+            When the caller is late (a stalled host, a clock delivered in bursts) the trajectory pauses for the
+            surplus instead of jumping: the servos never receive a step of more than `max_step` of motion, which
+            they could not follow and which the collision observer would see as an unmodelled transient. The
+            surplus is added to the hold offset and counted in `lag_events` / `lag_time`. Trajectory time starts
+            at 0, so a first command at t > max_step also starts from the beginning of the trajectory.
     """
 
     def __init__(self, desc: "HexaDescription", trajectory: Callable[[float], tuple], duration: float,
                  policy: str = "hold", retract_distance: float = 0.02, retract_time: float = 0.5,
-                 loop: bool = False) -> None:
+                 loop: bool = False, max_step: float | None = None) -> None:
         if policy not in POLICIES:
             raise TrajectoryPlayerError(f"unknown collision policy {policy!r}; use one of {POLICIES}")
+        if max_step is not None and not max_step > 0:
+            raise TrajectoryPlayerError(f"max_step must be > 0 or None, got {max_step}")
         if not duration > 0 or not retract_time > 0 or retract_distance < 0:
             raise TrajectoryPlayerError(f"durations must be > 0 and distance >= 0, got duration={duration}, "
                                         f"retract_time={retract_time}, retract_distance={retract_distance}")
@@ -65,6 +73,10 @@ class TrajectoryPlayer:
         self.retract_distance = float(retract_distance)
         self.retract_time = float(retract_time)
         self.loop = loop
+        self.max_step = None if max_step is None else float(max_step)
+        self._last_t = 0.0          # time of the previous command (for max_step)
+        self.lag_events = 0
+        self.lag_time = 0.0
         self._offset = 0.0          # wall/sim time spent held, subtracted from trajectory time
         self._held_since: float | None = None
         self._hold_pose: np.ndarray | None = None
@@ -114,6 +126,12 @@ class TrajectoryPlayer:
             hexa.kinematics.hexa6rus.UnreachablePoseError: the pose cannot be reached (counted in ik_failures;
                 the previous command is then the caller's to keep).
         """
+        gap = t - self._last_t
+        self._last_t = max(self._last_t, t)
+        if self.max_step is not None and gap > self.max_step and self._held_since is None:
+            self._offset += gap - self.max_step   # pause the trajectory for the time the caller was late
+            self.lag_events += 1
+            self.lag_time += gap - self.max_step
         if self._held_since is not None:
             base = self._hold_pose if self._hold_pose is not None else self._trajectory_pose(self._held_since
                                                                                             - self._offset)[0]
