@@ -91,3 +91,26 @@ def test_max_step_starts_a_late_first_command_at_the_trajectory_start_and_ignore
     assert p.lag_events == 1
     p.resume(9.0)
     assert p.command(9.01).trajectory_time == pytest.approx(0.06)
+
+
+def test_start_blend_starts_from_rest_and_joins_the_trajectory_without_a_time_shift(desc):
+    traj = TRAJECTORIES["circle"]
+    p = TrajectoryPlayer(desc, traj, DURATIONS["circle"], start_blend=0.5)  # player time 0..0.5 s: blended
+    c0 = p.command(0.0)
+    assert np.allclose(c0.pose, traj(0.0)[0]) and np.allclose(c0.zeta_dot, 0.0) and c0.state == "running"
+    assert np.abs(traj(0.0)[1]).max() > 0.5          # the paper's trajectory itself starts moving at once
+    prev, h, peak = c0, 0.001, 0.0
+    for k in range(1, 700):                           # commanded rates match the commanded poses (no jumps)
+        c = p.command(k * h)
+        fd = (c.zeta - prev.zeta) / h
+        assert np.allclose(fd, 0.5 * (c.zeta_dot + prev.zeta_dot), atol=2e-2), k
+        peak = max(peak, np.abs(c.zeta_dot).max())
+        prev = c
+    plain = TrajectoryPlayer(desc, traj, DURATIONS["circle"])
+    assert np.allclose(p.command(0.6).pose, traj(0.6)[0]) and np.allclose(p.command(0.6).zeta_dot,
+                                                                           plain.command(0.6).zeta_dot)
+    # catching up with the time-exact trajectory costs at most 1.7x its rate (smoothstep blend: max 1.69)
+    assert peak < 1.75 * max(np.abs(plain.command(k * h).zeta_dot).max() for k in range(700))
+    assert np.abs(p.command(0.6).zeta_dot - plain.command(0.6).zeta_dot).max() < 1e-12
+    with pytest.raises(TrajectoryPlayerError, match="start_blend"):
+        TrajectoryPlayer(desc, traj, 10.0, start_blend=-1.0)

@@ -7,7 +7,9 @@ for trajectory=file), `rate_hz` (100), `start_delay` (s after the first clock re
 trajectory time), `loop` (false), `collision_policy` ("hold"),
 `retract_distance` (m, 0.02), `retract_time` (s, 0.5), `max_step` (s, 0.03: the most trajectory time advances
 between two commands; when the node is late — a stalled host, sim time in bursts — the trajectory pauses instead of
-commanding a jump; 0 = no limit), `description` (robot YAML path, default packaged).
+commanding a jump; 0 = no limit), `start_blend` (s, 1.0: the command blends from rest onto the trajectory, which
+starts moving at once as in the paper; 0 = velocity step at the start), `description` (robot YAML path, default
+packaged).
 Topics (relative): pub `joint_commands` (sensor_msgs/JointState, arm_1..arm_6, ζ rad and ζ̇ rad/s),
 `trajectory_state` (std_msgs/String); sub `collision` (hexa_msgs/CollisionEvent, reliable), `residual`
 (hexa_msgs/Residual, only with collision_policy "retract", for its direction).
@@ -75,9 +77,12 @@ class TrajectoryNode(Node):
         dist = float(self.declare_parameter("retract_distance", 0.02).value)
         rtime = float(self.declare_parameter("retract_time", 0.5).value)
         max_step = float(self.declare_parameter("max_step", 0.03).value)
+        start_blend = float(self.declare_parameter("start_blend", 1.0).value)
         desc_path = str(self.declare_parameter("description", "").value) or None
         if not rate > 0:
             raise ValueError(f"parameter rate_hz must be > 0, got {rate}")
+        if not start_blend >= 0:
+            raise ValueError(f"parameter start_blend must be >= 0 s, got {start_blend}")
         if max_step < 0 or (0 < max_step < 1.0 / rate):
             raise ValueError(f"parameter max_step must be 0 (no limit) or >= 1/rate_hz = {1.0 / rate:g} s, "
                              f"got {max_step}")
@@ -89,7 +94,8 @@ class TrajectoryNode(Node):
         else:
             raise ValueError(f"parameter trajectory must be one of {sorted(TRAJECTORIES)} or 'file', got {name!r}")
         self.player = TrajectoryPlayer(self.desc, traj, duration, policy=policy, retract_distance=dist,
-                                       retract_time=rtime, loop=loop, max_step=max_step or None)
+                                       retract_time=rtime, loop=loop, max_step=max_step or None,
+                                       start_blend=start_blend)
         self.pub = self.create_publisher(JointState, "joint_commands", 10)
         self.pub_state = self.create_publisher(String, "trajectory_state", 10)
         self.pub_diag = self.create_publisher(DiagnosticArray, "/diagnostics", 10)

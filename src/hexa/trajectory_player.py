@@ -50,13 +50,20 @@ class TrajectoryPlayer:
             they could not follow and which the collision observer would see as an unmodelled transient. The
             surplus is added to the hold offset and counted in `lag_events` / `lag_time`. Trajectory time starts
             at 0, so a first command at t > max_step also starts from the beginning of the trajectory.
+        start_blend: seconds (0 = none) over which the command blends from rest at the start pose onto the
+            trajectory, which (as in the paper) starts with non-zero velocity: pose = p0 + s(t)·(p(t) − p0) with a
+            smoothstep s, so the commanded velocity rises from 0 and the trajectory is exact after `start_blend`
+            (no time shift; catching up costs up to 1.69x the trajectory's rate midway, with accelerations
+            ≈ 3.4 v / start_blend). Without it the servos see a velocity step at t = 0.
     """
 
     def __init__(self, desc: "HexaDescription", trajectory: Callable[[float], tuple], duration: float,
                  policy: str = "hold", retract_distance: float = 0.02, retract_time: float = 0.5,
-                 loop: bool = False, max_step: float | None = None) -> None:
+                 loop: bool = False, max_step: float | None = None, start_blend: float = 0.0) -> None:
         if policy not in POLICIES:
             raise TrajectoryPlayerError(f"unknown collision policy {policy!r}; use one of {POLICIES}")
+        if not (start_blend >= 0 and np.isfinite(start_blend)):
+            raise TrajectoryPlayerError(f"start_blend must be >= 0, got {start_blend}")
         if max_step is not None and not max_step > 0:
             raise TrajectoryPlayerError(f"max_step must be > 0 or None, got {max_step}")
         if not duration > 0 or not retract_time > 0 or retract_distance < 0:
@@ -83,6 +90,11 @@ class TrajectoryPlayer:
         self._retract_dir = np.zeros(3)
         self._resume_at: float | None = None
         self._resume_from: np.ndarray | None = None
+        self._blend_time = self.retract_time
+        self._starting = start_blend > 0
+        if start_blend > 0:  # the start is a resume from rest at the start pose
+            self._resume_at, self._blend_time = 0.0, float(start_blend)
+            self._resume_from = self._trajectory_pose(0.0)[0]
         self._last: Command | None = None
         self.ik_failures = 0
 
@@ -105,6 +117,7 @@ class TrajectoryPlayer:
         self._offset += t - self._held_since
         self._resume_from = None if self._last is None else self._last.pose.copy()
         self._resume_at = t
+        self._blend_time, self._starting = self.retract_time, False
         self._held_since = None
         return True
 
@@ -146,12 +159,15 @@ class TrajectoryPlayer:
             pose, pose_dot = self._trajectory_pose(tt)
             state = "finished" if (not self.loop and tt >= self.duration) else "running"
             if self._resume_at is not None and self._resume_from is not None:
-                s = _smoothstep((t - self._resume_at) / self.retract_time)
+                u = (t - self._resume_at) / self._blend_time
+                s = _smoothstep(u)
                 if s < 1.0:
+                    ds = 6.0 * u * (1.0 - u) / self._blend_time if u > 0 else 0.0  # d(smoothstep)/dt
+                    pose_dot = ds * (pose - self._resume_from) + s * pose_dot
                     pose = self._resume_from + (pose - self._resume_from) * s
-                    state = "resuming"
+                    state = "running" if self._starting else "resuming"
                 else:
-                    self._resume_at = None
+                    self._resume_at, self._starting = None, False
         try:
             zeta = np.asarray(self._ik(self.desc, pose), dtype=float)
             zeta_dot = self._ik_rates(self.desc, pose, pose_dot, np.zeros(6), check=False)[1]
