@@ -115,7 +115,7 @@ def main() -> int:
             rclpy.spin_once(node, timeout_sec=0.01)
 
     deadline = time.monotonic() + 20
-    want = 2 if mode == "rnea" else 1
+    want = 2 if mode.startswith("rnea") else 1
     while pub_js.get_subscription_count() < want and time.monotonic() < deadline:
         spin(0.1)
     spin(1.0)
@@ -160,6 +160,13 @@ def main() -> int:
     out: dict = {"mode": mode, "force": FORCE.tolist(), "f_on": F_ON, "f_off": F_OFF}
     T0 = 100.0
     replay(T0)
+    if mode == "rnea_late" and events:  # isolation slower than the collision: its contact arrives after the END
+        c = Contact(collision_id=events[0]["id"], link=Contact.PLATE, chain=0, camera="cam_top", confidence=0.9)
+        c.header.stamp = stamp_from_seconds(T0 + F_ON + 0.1)
+        c.header.frame_id = "base"
+        c.point.x, c.point.y, c.point.z = data["point"]
+        pub_contact.publish(c)
+        spin(2.0)
     out["events"] = [dict(e, t=e["t"] - T0, onset=e["onset"] - T0) for e in events]
     out["residuals"] = len(residuals)
     res = np.array([[r[0] - T0] + r[1] for r in residuals]) if residuals else np.zeros((0, 4))
@@ -167,7 +174,7 @@ def main() -> int:
     out["free_peak"] = np.abs(free[:, 1:]).max(axis=0).tolist() if len(free) else None
     late = res[(res[:, 0] > F_ON + 0.3) & (res[:, 0] < F_OFF)] if len(res) else res
     out["forced_mean"] = late[:, 1:].mean(axis=0).tolist() if len(late) else None
-    if mode == "rnea":
+    if mode.startswith("rnea"):
         w = [x for x in wrenches if F_ON + 0.3 < x["t"] - T0 < F_OFF]
         out["wrenches"] = len(wrenches)
         out["wrench_mean"] = np.mean([x["force"] for x in w], axis=0).tolist() if w else None
@@ -175,6 +182,7 @@ def main() -> int:
                                  if w else None)
         out["wrench_rank"] = sorted({x["rank"] for x in wrenches})
         out["wrench_ids"] = sorted({x["id"] for x in wrenches})
+        out["wrench_t"] = [min(x["t"] for x in wrenches) - T0, max(x["t"] for x in wrenches) - T0] if wrenches else None
         # a bad contact: NaN point, unknown link, chain out of range
         for c in (Contact(link=Contact.PLATE, collision_id=1), Contact(link=7, collision_id=1),
                   Contact(link=Contact.ROD, chain=9, collision_id=1)):

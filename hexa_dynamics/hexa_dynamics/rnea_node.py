@@ -6,10 +6,18 @@ forward kinematics from ζ̂ seeded by `plate_pose`, low-pass differentiates ζ�
 `torque_window`, and calls H5's hexa.dynamics.identification.identify_contact_force on each `contact` of the active
 collision, and again at `rate_hz` (message time) with the latest contact of that collision until its END.
 
+Isolation takes time (two camera frames, the detector, on a loaded host up to ~1 s): the first contact of a collision
+often arrives well after its START, or after its END. The node keeps the last `history` seconds of its states, so
+such a contact is also identified retroactively, at `rate_hz`, from the contact's image time (or the START) up to the
+present or to the END: the contact_wrench series covers the whole contact, stamped with the sample times
+(`backfilled` in diagnostics; a contact of a collision that ended more than `history` ago is rejected as
+`not_in_collision`).
+
 Parameters: description (""), zeta_source ("estimator" | "measured"), accel_sigma, torque_sigma, camera_sigma,
 bias_walk, saturation, command_delay (ZetaEstimator, as the observer), rate_hz (100; 0 = only on contact messages),
 torque_window (0.02 s), accel_tau (0.02 s: time constant of the ζ̈ low-pass derivative), require_collision (true:
-ignore contacts outside a START..END), marker_scale (0.02 m/N), frame_id ("base").
+ignore contacts outside a START..END), marker_scale (0.02 m/N), frame_id ("base"), history (3.0 s of states kept for
+late contacts; 0 = no backfill).
 Topics (relative): sub `joint_states`, `motor_currents` (reliable; time_source as the observer), `plate_pose`,
 `contact` (hexa_msgs/Contact), `collision`
 (reliable); pub `contact_wrench` (hexa_msgs/ContactWrench), `contact_markers` (visualization_msgs/MarkerArray),
@@ -58,6 +66,9 @@ class RneaNode(Node):
         self.require_collision = bool(p("require_collision", True).value)
         self.marker_scale = float(p("marker_scale", 0.02).value)
         self.frame_id = str(p("frame_id", "base").value)
+        self.history = float(p("history", 3.0).value)
+        if not (math.isfinite(self.history) and self.history >= 0):
+            raise ValueError(f"parameter history must be >= 0 s, got {self.history!r}")
         if not (self.torque_window >= 0 and self.accel_tau > 0):
             raise ValueError(f"torque_window {self.torque_window!r} must be >= 0 and accel_tau {self.accel_tau!r} > 0")
         self.desc = load_hexa(desc_path)
@@ -77,6 +88,10 @@ class RneaNode(Node):
         self._last_ident_t = -math.inf
         self._started = 0                      # newest collision id seen STARTing
         self._early_contacts: dict[int, Contact] = {}
+        self._hist: deque[tuple] = deque()      # (t, ζ, ζ̇, ζ̈, mean τ) of the last `history` seconds
+        self._spans: dict[int, list[float]] = {}  # collision id -> [START t, END t or inf], recent collisions
+        self._identified: set[int] = set()       # collisions with at least one contact identified
+        self.backfilled = 0
 
         self.pub_wrench = self.create_publisher(ContactWrench, "contact_wrench", EVENT_QOS)
         self.pub_markers = self.create_publisher(MarkerArray, "contact_markers", 10)
@@ -129,6 +144,10 @@ class RneaNode(Node):
         while self._tau and self._tau[0][0] < t - self.torque_window:
             self._tau.popleft()
         self._state = (t, zeta, zd, self._zdd.copy())
+        if self.history > 0:
+            self._hist.append((t, zeta, zd, self._zdd.copy(), np.mean([v for _, v in self._tau], axis=0)))
+            while self._hist and self._hist[0][0] < t - self.history:
+                self._hist.popleft()
         if self._active is not None and t - self._last_ident_t >= self.period:
             c = self._contacts.get(self._active)
             if c is not None:
@@ -148,7 +167,11 @@ class RneaNode(Node):
 
     # ------------------------------------------------------------------ contacts and collisions
     def _on_collision(self, msg: CollisionEvent) -> None:
+        t_ev = msg.header.stamp.sec + msg.header.stamp.nanosec * 1e-9
         if msg.event == CollisionEvent.START:
+            self._spans[int(msg.id)] = [t_ev, math.inf]
+            for old in sorted(self._spans)[:-10]:
+                self._spans.pop(old)
             self._active = int(msg.id)
             self._started = max(self._started, int(msg.id))
             early = self._early_contacts.pop(int(msg.id), None)
@@ -156,7 +179,9 @@ class RneaNode(Node):
             if early is not None:  # the contact of this collision arrived before its START (separate topics)
                 self._contacts[int(msg.id)] = early
                 self._identify(early)
-        elif self._active == int(msg.id):
+        elif int(msg.id) in self._spans:
+            self._spans[int(msg.id)][1] = t_ev
+        if msg.event != CollisionEvent.START and self._active == int(msg.id):
             self._active = None
             self._contacts.pop(int(msg.id), None)
             m = Marker(action=Marker.DELETEALL)
@@ -174,7 +199,10 @@ class RneaNode(Node):
         if msg.link != Contact.PLATE and not 1 <= msg.chain <= 6:
             self.rejects["bad_chain"] += 1
             return
-        if self.require_collision and (self._active is None or int(msg.collision_id) != self._active):
+        cid = int(msg.collision_id)
+        if self.require_collision and (self._active is None or cid != self._active):
+            if cid in self._spans and cid not in self._identified and self._backfill(msg):
+                return  # a collision that ended before its contact arrived: identified retroactively
             if int(msg.collision_id) > self._started:  # its START is still on its way: kept until it arrives
                 if len(self._early_contacts) < 20:
                     self._early_contacts[int(msg.collision_id)] = msg
@@ -182,23 +210,45 @@ class RneaNode(Node):
             self.rejects["not_in_collision"] += 1
             return
         self._contacts[int(msg.collision_id)] = msg
+        if cid not in self._identified and cid in self._spans:
+            self._backfill(msg)  # the states between the contact's image time and now
         self._identify(msg)
 
-    def _identify(self, c: Contact) -> None:
+    def _backfill(self, c: Contact) -> bool:
+        """Identify `c` on the kept states from its image time (not before its collision's START) to the END or the
+        newest state, every 1/rate_hz; True if any state was in that span."""
+        start, end = self._spans[int(c.collision_id)]
+        t_img = c.header.stamp.sec + c.header.stamp.nanosec * 1e-9
+        t0 = max(start, t_img)
+        span = [h for h in self._hist if t0 <= h[0] <= end and (self._state is None or h[0] < self._state[0])]
+        if not span:
+            return False
+        last = -math.inf
+        for h in span:
+            if h[0] - last >= min(self.period, 0.05):
+                if self._identify(c, h):
+                    self.backfilled += 1
+                last = h[0]
+        return True
+
+    def _identify(self, c: Contact, state: tuple | None = None) -> bool:
         from hexa.dynamics.identification import identify_contact_force
         from hexa.dynamics.lagrange import DynamicsError, motion_from_joint_rates
 
-        if self._state is None:
+        if state is not None:
+            t, zeta, zd, zdd, tau = state
+        elif self._state is None:
             self.rejects["no_state"] += 1
-            return
-        t, zeta, zd, zdd = self._state
+            return False
+        else:
+            t, zeta, zd, zdd = self._state
+            tau = np.mean([v for _, v in self._tau], axis=0)
         stamp = stamp_from_seconds(t)
         pose = self._plate_pose(zeta)
         if pose is None:
             self.rejects["pose_tracking"] += 1
-            return
+            return False
         self._pose = pose
-        tau = np.mean([v for _, v in self._tau], axis=0)
         link = LINK_NAMES[c.link]
         chain = 0 if link == "plate" else int(c.chain)
         point = np.array([c.point.x, c.point.y, c.point.z])
@@ -208,8 +258,10 @@ class RneaNode(Node):
         except (ValueError, DynamicsError, np.linalg.LinAlgError) as exc:
             self.rejects["identification"] += 1
             self.get_logger().warn(f"identification failed: {exc}", throttle_duration_sec=1.0)
-            return
-        self._last_ident_t = t
+            return False
+        self._identified.add(int(c.collision_id))
+        if state is None:
+            self._last_ident_t = t
         w = ContactWrench()
         w.header.stamp = stamp
         w.header.frame_id = self.frame_id
@@ -224,6 +276,7 @@ class RneaNode(Node):
         self.pub_wrench.publish(w)
         self.published += 1
         self.pub_markers.publish(self._markers(point, est.force, stamp, est.observable))
+        return True
 
     def _markers(self, point: np.ndarray, force: np.ndarray, stamp: Any, observable: bool) -> MarkerArray:
         s = Marker()
@@ -245,7 +298,8 @@ class RneaNode(Node):
         return MarkerArray(markers=[s, a])
 
     def _diagnostics(self) -> None:
-        values: dict[str, Any] = {"published": self.published, "active_collision": self._active,
+        values: dict[str, Any] = {"published": self.published, "backfilled": self.backfilled,
+                                  "active_collision": self._active,
                                   "servo_saturated_samples": self.estimator.saturated}
         values.update({f"reject_{k}": v for k, v in self.rejects.items()})
         values.update({f"reject_estimator_{k}": v for k, v in self.estimator.rejected.items()})
