@@ -164,7 +164,9 @@ def test_indices_stay_consistent_approaching_an_exact_singularity():
         fast = sg.upsrpu_indices(DESC, X)
         ref = sg.upsrpu_indices_from_screws(DESC, X)
         np.testing.assert_allclose(fast.omega, ref.omega, atol=1e-8)
-        assert fast.min_pair == "3-4" and fast.min_omega <= prev   # Omega_34 -> 0 with det J_D -> 0
+        assert fast.min_omega <= prev                               # Omega_34 -> 0 with det J_D -> 0
+        if fast.min_omega > 0:  # closer than ~1e-8 rad the pose is numerically exact (rank <= 4): Omega = 0 exactly,
+            assert fast.min_pair == "3-4"  # no pair is singled out (which eps gets there depends on the BLAS)
         prev = fast.min_omega
     assert prev < 1e-7
     # at the singularity itself every limb is in the dependency: all OTS coincide and every Omega vanishes
