@@ -48,3 +48,20 @@ def test_observer_node_rejects_a_bad_parameter_at_start_naming_it(procs, ros_env
     p = procs.start([PY, "-m", "hexa_dynamics.observer_node", "--ros-args", "-p", "zeta_source:=guess"], ros_env)
     _out, err = p.communicate(timeout=60)
     assert p.returncode == 2 and "'guess'" in err
+
+
+@pytest.mark.parametrize("module", ["hexa_dynamics.observer_node", "hexa_dynamics.rnea_node"])
+def test_node_on_sim_time_stops_cleanly_on_sigint_with_no_clock(procs, ros_env, module):
+    """With use_sim_time and no /clock (the simulator already gone) nothing wakes the executor: Ctrl-C must still
+    end the node at once with exit code 0 (it used to wait for the supervisor's 10 s kill)."""
+    import signal
+    import time
+
+    p = procs.start([PY, "-m", module, "--ros-args", "-p", "use_sim_time:=true"], ros_env)
+    time.sleep(4.0)  # initialised and waiting
+    assert p.poll() is None
+    t0 = time.monotonic()
+    p.send_signal(signal.SIGINT)
+    p.wait(timeout=8)
+    assert p.returncode == 0
+    assert time.monotonic() - t0 < 5.0

@@ -506,8 +506,15 @@ def run_node(factory: Any, name: str, argv: list[str] | None) -> int:
         print(f"hexa {name}: {exc}", file=sys.stderr)
         rclpy.shutdown()
         return 2
+    from rclpy.executors import SingleThreadedExecutor
+
+    executor = SingleThreadedExecutor()
+    executor.add_node(node)
     try:
-        rclpy.spin(node)
+        # a bounded wait: with sim time and the simulator gone, nothing wakes an unbounded wait, and a Python signal
+        # handler only runs when the wait returns (SIGINT used to take the supervisor's 10 s kill)
+        while rclpy.ok():
+            executor.spin_once(timeout_sec=0.2)
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
     finally:
