@@ -87,7 +87,7 @@ LEAD_IN = 1.0
 
 
 def run_case(case: str, out_dir: Path, env: dict[str, str], ns: str = "/hexa", seed: int = 0,
-             real_time_factor: float = 0.5, record_images: bool = False, duration: float | None = None,
+             real_time_factor: float = 0.3, record_images: bool = False, duration: float | None = None,
              params: Path = DEFAULT_PARAMS, status_every: float = 5.0) -> CaseRun:
     """Bring up the sim graph for `case`, record a bag until the scenario is over, stop everything."""
     scenario, trajectory, default_duration = CASES[case]

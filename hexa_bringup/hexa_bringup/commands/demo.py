@@ -13,7 +13,8 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--case", choices=["plate", "arm", "rod", "all"], default="all")
     p.add_argument("--out", default="out/demo", help="output directory (bags, logs, report.md, PNGs)")
     p.add_argument("--seed", type=int, default=0, help="scenario seed (timings/positions drawn from it)")
-    p.add_argument("--rtf", type=float, default=0.5, help="simulator real-time factor (the graph must keep up)")
+    p.add_argument("--rtf", type=float, default=0.3,
+                   help="simulator real-time factor (the graph must keep up: 0.5 saturates 2 cores)")
     p.add_argument("--record-images", action="store_true", help="also record the camera topics (large bags)")
     p.add_argument("--ns", default="/hexa")
     p.add_argument("--json", action="store_true", help="print the metrics as JSON")
