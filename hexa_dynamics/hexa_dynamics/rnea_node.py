@@ -275,7 +275,8 @@ class RneaNode(Node):
         w.residual_norm = float(est.residual_norm)
         self.pub_wrench.publish(w)
         self.published += 1
-        self.pub_markers.publish(self._markers(point, est.force, stamp, est.observable))
+        if state is None:  # markers show the present only (a backfilled state is history)
+            self.pub_markers.publish(self._markers(point, est.force, stamp, est.observable))
         return True
 
     def _markers(self, point: np.ndarray, force: np.ndarray, stamp: Any, observable: bool) -> MarkerArray:
