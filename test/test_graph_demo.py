@@ -68,6 +68,14 @@ def test_plate_and_rod_cases_are_detected_after_the_true_contact_onset(demo_run)
         assert math.isfinite(c["detect_time"]), f"{c['case']}: no collision detected"
         assert c["detect_time"] > c["onset_true"], f"{c['case']}: detected before the contact began"
         assert c["delay_ms"] < 250.0, f"{c['case']}: detection {c['delay_ms']:.0f} ms after the force exceeded r_low"
+        assert (c["found_link"], c["found_chain"]) == (c["true_link"], c["true_chain"]), c
+        assert c["point_error_median_mm"] < 10.0, c
+
+
+def test_plate_force_rmse_is_below_the_papers_on_every_axis(demo_run):
+    # the rod's x RMSE (1.4-2.5 N) is not yet below the paper's 1.227 N and the arm is not detected (README, demo)
+    plate = [c for c in demo_run["result"]["cases"] if c["case"] == "plate"][0]
+    assert all(ours < paper for ours, paper in zip(plate["force_rmse"], plate["paper_rmse"])), plate
 
 
 def test_another_ros_process_receives_collision_events_and_contact_wrenches_with_documented_types(demo_run):
