@@ -170,8 +170,9 @@ class RneaNode(Node):
         t_ev = msg.header.stamp.sec + msg.header.stamp.nanosec * 1e-9
         if msg.event == CollisionEvent.START:
             self._spans[int(msg.id)] = [t_ev, math.inf]
-            for old in sorted(self._spans)[:-10]:
+            for old in sorted(self._spans)[:-10]:  # only recent collisions can still get a late contact
                 self._spans.pop(old)
+                self._identified.discard(old)
             self._active = int(msg.id)
             self._started = max(self._started, int(msg.id))
             early = self._early_contacts.pop(int(msg.id), None)
