@@ -15,7 +15,8 @@ pytest.importorskip("rclpy", reason="ROS 2 Jazzy wheels not installed: run `make
 TRAJECTORIES = ("circle", "helix", "ellipse")
 
 
-def free_motion_run(trajectory: str, out_dir, domain: int, duration: float, real_time_factor: float = 0.3) -> dict:
+def free_motion_run(trajectory: str, out_dir, domain: int, duration: float,
+                    real_time_factor: float | None = None) -> dict:
     """Run the simulated graph with no collision scenario on `trajectory` for `duration` sim seconds; the collision
     events and the residual force peak (N) the observer published, read from the recorded bag.
 
@@ -26,6 +27,7 @@ def free_motion_run(trajectory: str, out_dir, domain: int, duration: float, real
     from hexa_bringup.bag import read_bag, typestore
     from hexa_bringup.rosenv import ros_env
 
+    real_time_factor = demo_run.REAL_TIME_FACTOR if real_time_factor is None else real_time_factor
     case = f"free_{trajectory}"
     demo_run.CASES.setdefault(case, ("none", trajectory, duration))  # run_case's table, extended in this process
     run = demo_run.run_case(case, out_dir, ros_env(domain), duration=duration, status_every=1e9,

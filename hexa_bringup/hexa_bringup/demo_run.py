@@ -81,13 +81,15 @@ class _ClockWatcher:
 
 #: wall seconds the simulator holds sim time at 0 while the graph starts (DDS discovery, serial handshakes)
 START_DELAY = 3.0
+#: simulator real-time factor of the demo: the whole graph at 0.5 saturates 2 cores (docs/observer_node.md)
+REAL_TIME_FACTOR = 0.3
 #: sim seconds at rest before the trajectory and the scenario clock start (the estimator and observer settle, the
 #: driver's commands take over from the simulator's own start pose)
 LEAD_IN = 1.0
 
 
 def run_case(case: str, out_dir: Path, env: dict[str, str], ns: str = "/hexa", seed: int = 0,
-             real_time_factor: float = 0.3, record_images: bool = False, duration: float | None = None,
+             real_time_factor: float = REAL_TIME_FACTOR, record_images: bool = False, duration: float | None = None,
              params: Path = DEFAULT_PARAMS, status_every: float = 5.0) -> CaseRun:
     """Bring up the sim graph for `case`, record a bag until the scenario is over, stop everything."""
     scenario, trajectory, default_duration = CASES[case]

@@ -78,7 +78,7 @@ class RneaNode(Node):
         self.rejects = {k: 0 for k in REJECT_REASONS}
         self.published = 0
         self._tau: deque[tuple[float, np.ndarray]] = deque()
-        self._state: tuple | None = None        # (t, ζ, ζ̇, ζ̈)
+        self._state: tuple | None = None        # (t, ζ, ζ̇, ζ̈, τ averaged over torque_window)
         self._zd_prev: tuple[float, np.ndarray] | None = None
         self._zdd = np.zeros(6)
         self._pose: np.ndarray | None = None     # plate pose tracked from ζ̂
@@ -88,7 +88,7 @@ class RneaNode(Node):
         self._last_ident_t = -math.inf
         self._started = 0                      # newest collision id seen STARTing
         self._early_contacts: dict[int, Contact] = {}
-        self._hist: deque[tuple] = deque()      # (t, ζ, ζ̇, ζ̈, mean τ) of the last `history` seconds
+        self._hist: deque[tuple] = deque()      # the states of the last `history` seconds
         self._spans: dict[int, list[float]] = {}  # collision id -> [START t, END t or inf], recent collisions
         self._identified: set[int] = set()       # collisions with at least one contact identified
         self.backfilled = 0
@@ -143,9 +143,9 @@ class RneaNode(Node):
         self._tau.append((t, tau))
         while self._tau and self._tau[0][0] < t - self.torque_window:
             self._tau.popleft()
-        self._state = (t, zeta, zd, self._zdd.copy())
+        self._state = (t, zeta, zd, self._zdd.copy(), np.mean([v for _, v in self._tau], axis=0))
         if self.history > 0:
-            self._hist.append((t, zeta, zd, self._zdd.copy(), np.mean([v for _, v in self._tau], axis=0)))
+            self._hist.append(self._state)
             while self._hist and self._hist[0][0] < t - self.history:
                 self._hist.popleft()
         if self._active is not None and t - self._last_ident_t >= self.period:
@@ -236,14 +236,12 @@ class RneaNode(Node):
         from hexa.dynamics.identification import identify_contact_force
         from hexa.dynamics.lagrange import DynamicsError, motion_from_joint_rates
 
-        if state is not None:
-            t, zeta, zd, zdd, tau = state
-        elif self._state is None:
+        backfill = state is not None
+        state = state if backfill else self._state
+        if state is None:
             self.rejects["no_state"] += 1
             return False
-        else:
-            t, zeta, zd, zdd = self._state
-            tau = np.mean([v for _, v in self._tau], axis=0)
+        t, zeta, zd, zdd, tau = state
         stamp = stamp_from_seconds(t)
         pose = self._plate_pose(zeta)
         if pose is None:
@@ -261,7 +259,7 @@ class RneaNode(Node):
             self.get_logger().warn(f"identification failed: {exc}", throttle_duration_sec=1.0)
             return False
         self._identified.add(int(c.collision_id))
-        if state is None:
+        if not backfill:
             self._last_ident_t = t
         w = ContactWrench()
         w.header.stamp = stamp
@@ -276,7 +274,7 @@ class RneaNode(Node):
         w.residual_norm = float(est.residual_norm)
         self.pub_wrench.publish(w)
         self.published += 1
-        if state is None:  # markers show the present only (a backfilled state is history)
+        if not backfill:  # markers show the present only (a backfilled state is history)
             self.pub_markers.publish(self._markers(point, est.force, stamp, est.observable))
         return True
 

@@ -17,6 +17,7 @@ Services: `~/resume`, `~/hold` (std_srvs/Trigger). `/diagnostics`.
 """
 from __future__ import annotations
 
+import math
 import sys
 
 import numpy as np
@@ -83,7 +84,7 @@ class TrajectoryNode(Node):
             raise ValueError(f"parameter rate_hz must be > 0, got {rate}")
         if not start_blend >= 0:
             raise ValueError(f"parameter start_blend must be >= 0 s, got {start_blend}")
-        if max_step < 0 or (0 < max_step < 1.0 / rate):
+        if not math.isfinite(max_step) or max_step < 0 or (0 < max_step < 1.0 / rate):
             raise ValueError(f"parameter max_step must be 0 (no limit) or >= 1/rate_hz = {1.0 / rate:g} s, "
                              f"got {max_step}")
         self.desc = load_hexa(desc_path)

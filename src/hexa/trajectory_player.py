@@ -88,11 +88,13 @@ class TrajectoryPlayer:
         self._held_since: float | None = None
         self._hold_pose: np.ndarray | None = None
         self._retract_dir = np.zeros(3)
+        # a blend from `_resume_from` onto the trajectory, progressing in trajectory (played) time from
+        # `_resume_at`, so that max_step also limits its steps; the start is a resume from rest at trajectory time 0
         self._resume_at: float | None = None
         self._resume_from: np.ndarray | None = None
         self._blend_time = self.retract_time
         self._starting = start_blend > 0
-        if start_blend > 0:  # the start is a resume from rest at the start pose
+        if start_blend > 0:
             self._resume_at, self._blend_time = 0.0, float(start_blend)
             self._resume_from = self._trajectory_pose(0.0)[0]
         self._last: Command | None = None
@@ -116,7 +118,7 @@ class TrajectoryPlayer:
             return False
         self._offset += t - self._held_since
         self._resume_from = None if self._last is None else self._last.pose.copy()
-        self._resume_at = t
+        self._resume_at = t - self._offset  # trajectory time at which the blend starts
         self._blend_time, self._starting = self.retract_time, False
         self._held_since = None
         return True
@@ -159,7 +161,7 @@ class TrajectoryPlayer:
             pose, pose_dot = self._trajectory_pose(tt)
             state = "finished" if (not self.loop and tt >= self.duration) else "running"
             if self._resume_at is not None and self._resume_from is not None:
-                u = (t - self._resume_at) / self._blend_time
+                u = (tt - self._resume_at) / self._blend_time
                 s = _smoothstep(u)
                 if s < 1.0:
                     ds = 6.0 * u * (1.0 - u) / self._blend_time if u > 0 else 0.0  # d(smoothstep)/dt

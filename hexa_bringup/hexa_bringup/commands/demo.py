@@ -13,8 +13,8 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--case", choices=["plate", "arm", "rod", "all"], default="all")
     p.add_argument("--out", default="out/demo", help="output directory (bags, logs, report.md, PNGs)")
     p.add_argument("--seed", type=int, default=0, help="scenario seed (timings/positions drawn from it)")
-    p.add_argument("--rtf", type=float, default=0.3,
-                   help="simulator real-time factor (the graph must keep up: 0.5 saturates 2 cores)")
+    p.add_argument("--rtf", type=float, default=None,
+                   help="simulator real-time factor (default 0.3; the graph must keep up: 0.5 saturates 2 cores)")
     p.add_argument("--record-images", action="store_true", help="also record the camera topics (large bags)")
     p.add_argument("--ns", default="/hexa")
     p.add_argument("--json", action="store_true", help="print the metrics as JSON")
@@ -23,7 +23,7 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 def run(args: argparse.Namespace) -> int:
     from hexa.report.collision_demo import compute_metrics, markdown_table, plot_case, write_report
-    from hexa_bringup.demo_run import CASES, case_data_from_bag, run_case
+    from hexa_bringup.demo_run import CASES, REAL_TIME_FACTOR, case_data_from_bag, run_case
     from hexa_bringup.rosenv import ros_env
     from hexa_bringup.supervisor import SupervisorError
 
@@ -33,12 +33,13 @@ def run(args: argparse.Namespace) -> int:
     env = ros_env(domain)  # localhost discovery: the demo never talks to other machines
     os.environ.update(env)  # the progress display in this process joins the same graph
     cases = list(CASES) if args.case == "all" else [args.case]
+    rtf = REAL_TIME_FACTOR if args.rtf is None else args.rtf
     metrics, plots, problems = [], {}, []
     for i, case in enumerate(cases, 1):
         print(f"\n=== hexa demo: case {i}/{len(cases)}: {case} (scenario {CASES[case][0]}, trajectory "
-              f"{CASES[case][1]}, {CASES[case][2]:.1f} s of sim time at {args.rtf:g}x real time) ===", flush=True)
+              f"{CASES[case][1]}, {CASES[case][2]:.1f} s of sim time at {rtf:g}x real time) ===", flush=True)
         try:
-            run = run_case(case, out, env, ns=args.ns, seed=args.seed, real_time_factor=args.rtf,
+            run = run_case(case, out, env, ns=args.ns, seed=args.seed, real_time_factor=rtf,
                            record_images=args.record_images)
         except SupervisorError as exc:
             print(f"hexa demo: cannot start the graph: {exc}", file=sys.stderr)
