@@ -144,3 +144,25 @@ def test_driver_reports_stale_telemetry_as_error(tmp_path, procs, ros_env, probe
         n = len(probe.currents)
         time.sleep(0.3)
         assert len(probe.currents) == n  # nothing published while stale
+
+
+def test_a_command_held_by_the_rate_limit_is_sent_on_wall_time_under_sim_time(tmp_path, procs, ros_env, probe):
+    """Two commands closer than 1/command_rate_hz: the second waits for the flush timer, which runs on wall time
+    even under use_sim_time (with a sim-time timer it waited for /clock, and at real-time factor 0.3 the next command
+    replaced it: the servos got double steps). Here no /clock is published at all: sim time stands still."""
+    desc = load_hexa()
+    servos = servo_calibrations_from_config(None, desc)
+    got = []
+    with UnoEmulator(on_targets=got.append, link=tmp_path / "uno") as uno, \
+            MegaEmulator(current_source=lambda t: [0.0] * 6, link=tmp_path / "mega") as mega:
+        procs.start(driver_args(uno.port, mega.port, "use_sim_time:=true", "max_speed:=0.0"), ros_env)
+        assert wait_for(lambda: len(probe.currents) >= 5, 30.0), "no motor_currents from the driver"
+        a = np.full(6, desc.zeta_center)
+        b = a + 0.05
+        pulses_b = tuple(s.pulse_from_angle(z) for s, z in zip(servos, b))
+        for _ in range(3):  # the first command of a pair goes out at once, the second is held by the rate limit
+            probe.command(a)
+            probe.command(b)
+            assert wait_for(lambda: got and got[-1] == pulses_b, 2.0), got[-3:]
+            got.clear()
+        assert mega.rx_crc_errors == 0 and uno.rx_crc_errors == 0

@@ -104,7 +104,7 @@ def run_case(case: str, out_dir: Path, env: dict[str, str], ns: str = "/hexa", s
     node_args = {
         "sim": ["-p", f"scenario:={scenario}", "-p", f"seed:={seed}", "-p", f"real_time_factor:={real_time_factor}",
                 "-p", f"duration:={sim_s}", "-p", "use_sim_time:=false", "-p", f"link_dir:=/tmp/hexa_sim_{os.getpid()}",
-                "-p", f"start_delay:={START_DELAY}", "-p", f"lead_in:={LEAD_IN}"],
+                "-p", f"start_delay:={START_DELAY}", "-p", f"lead_in:={LEAD_IN}", "-p", f"trajectory:={trajectory}"],
         "driver": ["-p", f"uno_port:=/tmp/hexa_sim_{os.getpid()}/uno",
                    "-p", f"mega_port:=/tmp/hexa_sim_{os.getpid()}/mega"],
         "trajectory": ["-p", f"trajectory:={trajectory}", "-p", f"start_time:={LEAD_IN}"],

@@ -6,7 +6,11 @@ handles each /clock message, so 1 kHz costs the whole graph CPU), truth_rate_hz 
 Uno/Mega ptys linked at link_dir, /tmp/hexa_sim/{uno,mega}), duration (0 = run until shut down), start_delay (wall s
 with sim time frozen at 0 before stepping, while the rest of the graph starts), lead_in (sim s at rest before the
 trajectory and the scenario's clock start; the collision happens at lead_in + the scenario's onset), contact_model
-(scripted | physical, see hexa.sim.Simulator).
+(scripted | physical, see hexa.sim.Simulator), trajectory ("" = home; with scenario none the robot starts at rest at
+this trajectory's start pose, as a scenario starts at its own: the trajectory node's first command is its start pose,
+and from home that is a 0.36 rad jump the servos make at their torque limit), max_lag (0.005 wall s: when a camera
+render or a host stall puts the loop further behind the real-time factor, the lost time is dropped instead of caught
+up in a burst — see hexa_bringup.pacing).
 Topics (relative, under the node namespace, e.g. /hexa): cam_{top,side}/color/image_raw (rgb8),
 cam_{top,side}/color/camera_info, cam_{top,side}/aligned_depth_to_color/image_raw (16UC1 mm),
 cam_{top,side}/aligned_depth_to_color/camera_info (sensor-data QoS); sim/wrench_truth (WrenchStamped: force at the
@@ -16,6 +20,7 @@ does not depend on wall time; only the pacing does).
 """
 from __future__ import annotations
 
+import math
 import sys
 import time
 
@@ -34,6 +39,8 @@ def _quat_from_zyx(a: float, b: float, g: float) -> tuple[float, float, float, f
 
 
 def main(argv: list[str] | None = None) -> int:
+    from hexa_bringup.pacing import Pacer
+
     from hexa_bringup.rosenv import apply_defaults
 
     apply_defaults()
@@ -65,6 +72,10 @@ def main(argv: list[str] | None = None) -> int:
             self.seed = int(p("seed", 0).value)
             self.randomize = bool(p("randomize", False).value)
             self.rtf = float(p("real_time_factor", 1.0).value)
+            max_lag = float(p("max_lag", 0.005).value)
+            if not (math.isfinite(max_lag) and max_lag >= 0.0):
+                raise ValueError(f"parameter max_lag must be >= 0 s, got {max_lag!r}")
+            self.pacer = Pacer(self.rtf, max_lag)
             self.cam_rate = float(p("camera_rate_hz", 30.0).value)
             self.use_cams = bool(p("cameras", True).value)
             self.clock_rate = float(p("clock_rate_hz", 250.0).value)
@@ -75,10 +86,11 @@ def main(argv: list[str] | None = None) -> int:
             self.lead_in = float(p("lead_in", 0.0).value)
             self.start_delay = float(p("start_delay", 0.0).value)
             self.contact_model = str(p("contact_model", "scripted").value)
+            trajectory = str(p("trajectory", "").value) or None
             scenario = None if self.scenario in ("", "none") else self.scenario
             self.sim = Simulator(seed=self.seed, scenario=scenario, cameras=self.use_cams,
                                  randomize=self.randomize, lead_in=self.lead_in,
-                                 contact_model=self.contact_model)
+                                 contact_model=self.contact_model, trajectory=trajectory)
             self.boards = VirtualBoards(self.sim, link_dir=self.link_dir).start() if self.use_boards else None
             self.clock_pub = self.create_publisher(Clock, "/clock", 10)
             self.cam_pubs = {}
@@ -166,8 +178,7 @@ def main(argv: list[str] | None = None) -> int:
                     self.publish_cameras()
                 rclpy.spin_once(self, timeout_sec=0.0)
                 time.sleep(min(0.5, max(0.0, hold_until - time.monotonic())))
-            wall0 = time.monotonic()
-            sim_t0 = sim.time
+            self.pacer.start(sim.time)
             while rclpy.ok():
                 sim.step(1)
                 k += 1
@@ -180,14 +191,17 @@ def main(argv: list[str] | None = None) -> int:
                     next_cam += cam_period
                 if self.duration > 0 and sim.time >= self.duration:
                     break
-                if self.rtf > 0 and k % 5 == 0:
-                    ahead = (sim.time - sim_t0) / self.rtf - (time.monotonic() - wall0)
-                    if ahead > 0.002:
-                        time.sleep(ahead)
+                # every step: the virtual boards' threads run while the loop sleeps, so the servos take each command
+                # within 1 ms of sim time (every 5 steps made 8/12 ms commands 5/10/15 ms steps); after a render the
+                # loop does not catch up in a burst (hexa_bringup.pacing)
+                self.pacer.pace(sim.time)
                 if k % 50 == 0:
                     rclpy.spin_once(self, timeout_sec=0.0)
 
         def close(self) -> None:
+            if self.pacer.stalls:
+                self.get_logger().info(f"pacing: {self.pacer.stalls} stalls over max_lag, "
+                                       f"{self.pacer.dropped:.1f} s of wall time dropped (not caught up)")
             if self.boards is not None:
                 self.boards.stop()
             self.sim.close()

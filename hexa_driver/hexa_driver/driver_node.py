@@ -18,6 +18,7 @@ from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from hexa_msgs.msg import MotorCurrents
 from hexa_msgs.srv import CalibrateCurrents
 from rclpy.callback_groups import MutuallyExclusiveCallbackGroup, ReentrantCallbackGroup
+from rclpy.clock import Clock, ClockType
 from rclpy.executors import ExternalShutdownException, MultiThreadedExecutor
 from rclpy.node import Node
 from rclpy.signals import SignalHandlerOptions
@@ -88,7 +89,11 @@ class DriverNode(Node):
         self.mega.start()
         timers = MutuallyExclusiveCallbackGroup()
         self.create_timer(float(cfg["diagnostics_period"]), self._publish_diagnostics, callback_group=timers)
-        self.create_timer(self._min_interval, self._flush_command, callback_group=timers)
+        # the serial link's rate limit is a wall-time matter: under use_sim_time a sim-time timer would hold a pending
+        # command for a whole /clock period (at real-time factor 0.3, 3x longer), and the next command would replace
+        # it (coalesced): the servos then got double steps (docs/driver.md)
+        self.create_timer(self._min_interval, self._flush_command, callback_group=timers,
+                          clock=Clock(clock_type=ClockType.STEADY_TIME))
         self.get_logger().info(f"hexa_driver: uno={cfg['uno_port']} mega={cfg['mega_port']} "
                                f"rate={cfg['stream_rate_hz']} Hz")
 

@@ -16,9 +16,9 @@ e.g. `hexa param set /hexa/observer thresholds "[3.0,3.0,3.0,0.3,0.3,0.3]"`):
   board_clock ("auto"): "sim" = board time is sim time (hexa.sim.boards: the virtual boards run on sim time),
     "track" = follow the mean (stamp − board time); auto = sim when use_sim_time is true. Set "track" to replay a
     bag recorded on the real robot with --clock.
-  gains (double[6], 25 1/s): observer gains K_j per axis [fx fy fz mx my mz].
+  gains (double[6], 100 1/s): observer gains K_j per axis [fx fy fz mx my mz].
   thresholds (double[6], [2,2,2,0.2,0.2,0.2] N, N·m): r_low per axis.
-  release_ratio (0.5): an axis releases below release_ratio·r_low.  min_duration (0.03 s): confirmation time.
+  release_ratio (0.5): an axis releases below release_ratio·r_low.  min_duration (0.01 s): confirmation time.
   max_gap (0.1 s): longer joint_states spacing restarts the integration.
   pose_delay (0.5 s): camera poses are applied at sample time image stamp + pose_delay, so the output depends on
     stamps only (deterministic replay); poses later than that are applied on arrival (diagnostics `late_poses`).
@@ -57,10 +57,10 @@ from visualization_msgs.msg import Marker, MarkerArray
 
 JOINT_NAMES = [f"arm_{i}" for i in range(1, 7)]
 AXIS_NAMES = ("fx", "fy", "fz", "mx", "my", "mz")
-#: confirmation time of a START (s). Not the core's 0.01 s: in the live graph, commands delivered late in bursts by a
-#: loaded host make the simulated servos jerk, the estimator's set-point timing is off by a sample and the residual
-#: spikes over r_low for 10-30 ms (docs/observer_node.md, false alarms); real contacts last far longer.
-MIN_DURATION = 0.03
+#: observer gain K (1/s, every axis): a 10 ms first-order lag. Not the core's 25 1/s: once the simulated graph delivers
+#: commands on time (docs/observer_node.md, "Command timing"), free-motion residual peaks at K = 100 stay below
+#: r_low (1.7 N, 0.19 N·m in 2 × 60 s), and the faster residual detects the arm case, which K = 25 misses.
+GAIN = 100.0
 ESTIMATOR_KEYS = ("accel_sigma", "torque_sigma", "camera_sigma", "bias_walk", "saturation")
 INPUT_QOS = QoSProfile(depth=500, reliability=ReliabilityPolicy.RELIABLE, history=HistoryPolicy.KEEP_LAST)
 EVENT_QOS = QoSProfile(depth=20, reliability=ReliabilityPolicy.RELIABLE, history=HistoryPolicy.KEEP_LAST)
@@ -264,10 +264,10 @@ class ObserverNode(Node):
         self.zeta_source = str(p("zeta_source", "estimator").value)
         if self.zeta_source not in ("estimator", "measured"):
             raise ValueError(f"parameter zeta_source must be 'estimator' or 'measured', got {self.zeta_source!r}")
-        gains = [float(v) for v in p("gains", [float(v) for v in dflt.gains]).value]
+        gains = [float(v) for v in p("gains", [GAIN] * 6).value]
         thresholds = [float(v) for v in p("thresholds", [float(v) for v in dflt.thresholds]).value]
         release = float(p("release_ratio", dflt.release_ratio).value)
-        min_dur = float(p("min_duration", MIN_DURATION).value)
+        min_dur = float(p("min_duration", dflt.min_duration).value)
         max_gap = float(p("max_gap", dflt.max_gap).value)
         est_cfg, delay = declare_estimator(self)
         self.reseed_distance = float(p("reseed_distance", 0.005).value)

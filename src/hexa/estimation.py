@@ -382,8 +382,9 @@ class SampleSequencer:
     angles, velocity, effort) and camera plate poses (image stamp). The driver publishes one motor_currents and one
     joint_states per sample with the same header stamp, each topic in order, so the k-th of one pairs with the k-th
     of the other (matched by stamp; a partner lost in transport is dropped and counted). A sample is released only
-    once its pair is complete; it is paired with the command that was current at its board time (a history of
-    joint_states by stamp up to and including its own partner, so the history is the same whatever the delivery).
+    once its pair is complete, with the command of its own joint_states (the one the driver had sent when it handled
+    the sample) — not the command current at its board time by host stamps: in sim mode those stamps are quantized
+    and lagged by /clock, which misplaced command changes by a few ms (docs/observer_node.md, "Command timing").
 
     Camera poses are released into the same stream at sample time stamp + pose_delay (the vision chain's latency is
     0.1-0.47 s on this loaded machine); a pose that arrives later than that is released on arrival and counted in
@@ -393,19 +394,18 @@ class SampleSequencer:
 
     Output items: ("sample", t, commanded ζ, τ, velocity or None) and ("pose", t_image, pose)."""
 
-    def __init__(self, mode: str = "auto", pose_delay: float = 0.5, history: float = 2.0, auto_wait: int = 20,
+    def __init__(self, mode: str = "auto", pose_delay: float = 0.5, auto_wait: int = 20,
                  max_queue: int = 2000) -> None:
         if mode not in ("auto", "board", "stamp"):
             raise EstimationError(f"sequencer mode must be 'auto', 'board' or 'stamp', got {mode!r}")
         if not (math.isfinite(pose_delay) and pose_delay >= 0):
             raise EstimationError(f"sequencer pose_delay out of range, got {pose_delay!r}")
-        self.mode, self.pose_delay, self.history, self.auto_wait, self.max_queue = (
-            mode, float(pose_delay), float(history), int(auto_wait), int(max_queue))
+        self.mode, self.pose_delay, self.auto_wait, self.max_queue = (
+            mode, float(pose_delay), int(auto_wait), int(max_queue))
         self.board = mode == "board"
         self._stamp_mode = mode == "stamp"
         self._cur: deque[tuple[float, float, NDArray]] = deque()  # (stamp, board t, τ)
         self._js: deque[tuple[float, NDArray, Any, Any]] = deque()  # (stamp, commanded, velocity, effort)
-        self._cmds: deque[tuple[float, NDArray]] = deque()
         self._vel: Any = None
         self._poses: list[tuple[float, int, Any]] = []
         self._seq = 0
@@ -429,7 +429,7 @@ class SampleSequencer:
     def push_states(self, stamp: float, commanded: NDArray, velocity: Any, effort: Any) -> list[tuple]:
         self._js.append((float(stamp), commanded, velocity, effort))
         if len(self._js) > self.max_queue:
-            self._remember(*self._js.popleft()[:2])
+            self._js.popleft()
             self.unpaired += 1
         return self._drain()
 
@@ -445,18 +445,6 @@ class SampleSequencer:
         return []
 
     # ------------------------------------------------------------------ ordering
-    def _remember(self, stamp: float, commanded: NDArray) -> None:
-        self._cmds.append((stamp, commanded))
-        while len(self._cmds) > 1 and self._cmds[0][0] < stamp - self.history:
-            self._cmds.popleft()
-
-    def _command_at(self, t: float) -> NDArray:
-        """The command current at sample time t (the newest one whose stamp is ≤ t, else the oldest known)."""
-        for ts, pos in reversed(self._cmds):
-            if ts <= t:
-                return pos
-        return self._cmds[0][1]
-
     def _release_poses(self, t: float, out: list) -> None:
         import heapq
 
@@ -478,7 +466,6 @@ class SampleSequencer:
                 self._stamp_mode = True
             while self._js:
                 s, pos, vel, eff = self._js.popleft()
-                self._remember(s, pos)
                 if eff is not None:
                     self._sample(s, pos, eff, vel, out)
             return out
@@ -490,10 +477,12 @@ class SampleSequencer:
                 self.unpaired += 1
                 continue
             self._js.popleft()
-            self._remember(sj, pos)
-            if sj < sc:  # a joint_states without its motor_currents: only its command is kept
+            if sj < sc:  # a joint_states without its motor_currents
                 self.unpaired += 1
                 continue
             self._cur.popleft()
-            self._sample(t, self._command_at(t), tau, vel, out)
+            # the command the driver had sent when it handled this sample, on the board's time axis: the host stamp
+            # (in sim mode quantized and lagged by /clock) would misplace command changes by a few ms, and at
+            # K = 100 1/s each misplaced 5 mrad step shows in the residual
+            self._sample(t, pos, tau, vel, out)
         return out

@@ -1,0 +1,83 @@
+"""The simulator's real-time pacing (hexa_bringup.pacing.Pacer) on a fake wall clock: after a stall (a camera render)
+the loop does not catch up in a burst, so sim time never runs faster than the requested real-time factor."""
+from __future__ import annotations
+
+import math
+
+import pytest
+
+from hexa_bringup.pacing import Pacer
+
+
+class FakeWall:
+    def __init__(self) -> None:
+        self.t = 0.0
+
+    def clock(self) -> float:
+        return self.t
+
+    def sleep(self, s: float) -> None:
+        self.t += s
+
+
+def _run(max_lag: float, rtf: float = 0.3, sim_s: float = 1.0, render_every: float = 1 / 30,
+         render_wall: float = 0.044, step_wall: float = 0.0002):
+    """Step 1 ms at a time (each costing step_wall), pace every step as sim_node does, 'render' every render_every
+    sim s.
+    Returns [(wall, sim)] after each pace call and the pacer."""
+    wall = FakeWall()
+    pacer = Pacer(rtf, max_lag, clock=wall.clock, sleep=wall.sleep)
+    pacer.start(0.0)
+    trace, next_render = [], render_every
+    for k in range(1, int(round(sim_s / 0.001)) + 1):
+        sim = k * 0.001
+        wall.t += step_wall
+        if sim + 1e-9 >= next_render:
+            wall.t += render_wall
+            next_render += render_every
+        pacer.pace(sim)
+        trace.append((wall.t, sim))
+    return trace, pacer
+
+
+def _fastest_rate(trace, window: float = 0.005) -> float:
+    """Largest sim-time advance per wall second over any `window` of wall time."""
+    best = 0.0
+    j = 0
+    for i in range(len(trace)):
+        while trace[i][0] - trace[j][0] > window:
+            j += 1
+        if trace[i][0] - trace[j][0] >= window / 2:
+            best = max(best, (trace[i][1] - trace[j][1]) / (trace[i][0] - trace[j][0]))
+    return best
+
+
+def test_after_a_render_the_loop_does_not_catch_up_in_a_burst():
+    burst, _ = _run(max_lag=math.inf)          # the old behaviour: always catch up
+    paced, pacer = _run(max_lag=0.005)
+    assert _fastest_rate(burst) > 2 * 0.3      # catching up runs sim time at several times the factor
+    assert _fastest_rate(paced) < 1.3 * 0.3    # dropped instead: never much faster than requested
+    assert pacer.stalls >= 25                  # one per render (30 per sim second)
+    # each render costs 44 ms of wall time, of which the 3.3 ms pace of its 1 ms step was due anyway
+    assert pacer.dropped == pytest.approx(pacer.stalls * (0.044 + 0.0002 - 0.001 / 0.3), rel=0.05)
+
+
+def test_without_stalls_the_pace_is_the_requested_factor():
+    trace, pacer = _run(max_lag=0.005, render_wall=0.0)
+    (w0, s0), (w1, s1) = trace[0], trace[-1]
+    assert (s1 - s0) / (w1 - w0) == pytest.approx(0.3, rel=0.02)
+    assert pacer.stalls == 0
+
+
+def test_factor_zero_never_sleeps_and_bad_values_are_refused():
+    slept = []
+    pacer = Pacer(0.0, 0.005, clock=lambda: 0.0, sleep=slept.append)
+    pacer.start(0.0)
+    pacer.pace(10.0)
+    assert slept == []
+    with pytest.raises(ValueError, match="max_lag"):
+        Pacer(0.3, -1.0)
+    with pytest.raises(ValueError, match="max_lag"):
+        Pacer(0.3, float("nan"))
+    with pytest.raises(ValueError, match="real_time_factor"):
+        Pacer(float("inf"))
