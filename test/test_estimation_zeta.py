@@ -58,10 +58,23 @@ def test_camera_poses_remove_a_servo_horn_offset():
     assert np.allclose(est.last.bias, 0.03, atol=5e-3)
 
 
-def test_stalled_servos_are_not_used_as_measurements():
+def test_stalled_servos_are_followed_through_the_stall():
     ez, _, est = _run(1.6, force=3.0)   # 3 N on the plate saturates two servos at 0.94 N·m on the circle
     assert est.saturated > 0
     assert np.max(np.abs(ez[-300:])) < 0.01
+
+
+def test_a_stalled_servo_is_a_weak_measurement_so_its_return_does_not_jerk_the_velocity():
+    # a 5 N push held on the plate stalls servos for most of a second; no camera (as during the live nodes' 0.5 s
+    # pose_delay). Skipping the stalled samples let ζ̂̇ coast and then jump by several rad/s in one sample when the
+    # servo measurement came back (an outlier in the identified force); as a weak measurement it does not. Both lose
+    # the angle itself in such a push (hundreds of mrad) until a camera pose arrives.
+    jump = {}
+    for s in (0.0, 0.02):
+        _, ezd, est = _run(1.6, force=5.0, config=EstimatorConfig(camera_sigma=0.0, stall_sigma=s))
+        assert est.saturated > 500
+        jump[s] = np.max(np.abs(np.diff(ezd[1000:], axis=0)))               # largest ζ̇ error change per sample
+    assert jump[0.02] < 0.25 * jump[0.0] and jump[0.02] < 1.0, jump
 
 
 def test_bad_samples_are_counted_and_leave_the_state_alone():

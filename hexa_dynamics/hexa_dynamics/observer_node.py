@@ -23,7 +23,7 @@ e.g. `hexa param set /hexa/observer thresholds "[3.0,3.0,3.0,0.3,0.3,0.3]"`):
   pose_delay (0.5 s): camera poses are applied at sample time image stamp + pose_delay, so the output depends on
     stamps only (deterministic replay); poses later than that are applied on arrival (diagnostics `late_poses`).
   accel_sigma (2), torque_sigma (0.2 N·m), camera_sigma (0.004 rad), bias_walk (0.005 rad/√s),
-    saturation (0.97), command_delay (0.0 s): ZetaEstimator settings (see hexa.estimation).
+    saturation (0.97), stall_sigma (0.02 rad), command_delay (0.0 s): ZetaEstimator settings (see hexa.estimation).
   reseed_distance (0.005 m): camera pose re-seeds the observer's pose tracking when this far from it.
   calibration_duration (1.0 s): averaging time of `~/reset` with recalibrate=true (robot at rest, untouched).
   marker_rate_hz (10), marker_scale (0.02 m/N): residual force arrow at the plate on `markers`.
@@ -61,7 +61,7 @@ AXIS_NAMES = ("fx", "fy", "fz", "mx", "my", "mz")
 #: commands on time (docs/observer_node.md, "Command timing"), free-motion residual peaks at K = 100 stay below
 #: r_low (1.7 N, 0.19 N·m in 2 × 60 s), and the faster residual detects the arm case, which K = 25 misses.
 GAIN = 100.0
-ESTIMATOR_KEYS = ("accel_sigma", "torque_sigma", "camera_sigma", "bias_walk", "saturation")
+ESTIMATOR_KEYS = ("accel_sigma", "torque_sigma", "camera_sigma", "bias_walk", "saturation", "stall_sigma")
 INPUT_QOS = QoSProfile(depth=500, reliability=ReliabilityPolicy.RELIABLE, history=HistoryPolicy.KEEP_LAST)
 EVENT_QOS = QoSProfile(depth=20, reliability=ReliabilityPolicy.RELIABLE, history=HistoryPolicy.KEEP_LAST)
 

@@ -14,10 +14,10 @@ present or to the END: the contact_wrench series covers the whole contact, stamp
 `not_in_collision`).
 
 Parameters: description (""), zeta_source ("estimator" | "measured"), accel_sigma, torque_sigma, camera_sigma,
-bias_walk, saturation, command_delay (ZetaEstimator, as the observer), rate_hz (100; 0 = only on contact messages),
-torque_window (0.02 s), accel_tau (0.02 s: time constant of the ζ̈ low-pass derivative), require_collision (true:
-ignore contacts outside a START..END), marker_scale (0.02 m/N), frame_id ("base"), history (3.0 s of states kept for
-late contacts; 0 = no backfill).
+bias_walk, saturation, stall_sigma, command_delay (ZetaEstimator, as the observer), rate_hz (100; 0 = only on contact
+messages), torque_window (0.02 s), accel_tau (0.02 s: time constant of the ζ̈ low-pass derivative),
+require_collision (true: ignore contacts outside a START..END), marker_scale (0.02 m/N), frame_id ("base"), history
+(3.0 s of states kept for late contacts; 0 = no backfill).
 Topics (relative): sub `joint_states`, `motor_currents` (reliable; time_source as the observer), `plate_pose`,
 `contact` (hexa_msgs/Contact), `collision`
 (reliable); pub `contact_wrench` (hexa_msgs/ContactWrench), `contact_markers` (visualization_msgs/MarkerArray),

@@ -13,8 +13,9 @@ for 10-bit current sensing). Per arm a constant-velocity Kalman filter on x = [�
 spectral density q = accel_sigma²) fuses y_k with H = [1, k_v/k_p, 1], R = (torque_sigma/k_p)²; the six arms are
 filtered together as (6, 3) states and (6, 3, 3) covariances (numpy, ≈ 80 µs per sample).
 
-Stalled servos: when |τ_i| > saturation·τ_max the position loop no longer says where the arm is, so that arm's
-sample is not used and its acceleration density is raised to stall_accel_sigma (the camera carries it).
+Stalled servos: when |τ_i| > saturation·τ_max the position loop no longer says exactly where the arm is (its true
+torque is beyond the clipped one), so that arm's sample is only a weak measurement (stall_sigma) and its acceleration
+density is raised to stall_accel_sigma; the camera corrects it.
 
 Camera correction: each plate pose p(t_c) gives ζ_IK = IK(p) (eq 18), a measurement of ζ at t_c (noise camera_sigma)
 applied now as ζ_IK + (ζ̂(now) − ζ̂(t_c)) (ζ̂(t_c) interpolated from a short history, so camera latency is respected;
@@ -87,8 +88,11 @@ class EstimatorConfig:
     but commands reach the servo with a varying latency (a staircase of 3-6 mrad steps at 100 Hz), so the set-point
     is uncertain by about a step: 0.2 N·m (5 mrad) with accel_sigma 2 halves the residual noise of a 0-40 ms jittered
     command delivery (1.2 instead of 2.3 N peak) and costs nothing without jitter; saturation: a servo whose |τ| exceeds
-    saturation·τ_max is stalled: its sample is not used as a measurement and its acceleration density is
-    stall_accel_sigma (the camera carries it); camera_sigma: noise of ζ from a camera
+    saturation·τ_max is stalled: its acceleration density is stall_accel_sigma, and its sample is only a weak
+    measurement with noise stall_sigma (rad; 0 = not used): the servo pushes at its limit, so the arm is at least
+    that far from the set-point — skipping it let ζ̂ coast at the pre-stall velocity for the 0.5 s until the camera
+    poses arrived (77 mrad off in the rod case), and the return of the servo measurement then made ζ̂̇ jump by 3 rad/s
+    in one sample (an outlier in the identified force); camera_sigma: noise of ζ from a camera
     pose through IK (rad, 1σ; 0 disables the camera); bias_sigma: initial uncertainty of the servo-model offset
     b (rad); bias_walk: its random walk (rad/√s); camera_gate: largest |ζ_IK − ζ̂| accepted (rad); max_gap: longer
     sample spacing restarts the filter (s); history: how far back camera stamps are matched (s); settle_time: after a
@@ -101,6 +105,7 @@ class EstimatorConfig:
     stall_accel_sigma: float = 30.0
     torque_sigma: float = 0.2
     saturation: float = 0.97
+    stall_sigma: float = 0.02
     camera_sigma: float = 0.004
     bias_sigma: float = 0.02
     bias_walk: float = 0.005
@@ -114,7 +119,8 @@ class EstimatorConfig:
     def __post_init__(self) -> None:
         checks = {"accel_sigma": self.accel_sigma > 0, "stall_accel_sigma": self.stall_accel_sigma > 0,
                   "torque_sigma": self.torque_sigma > 0,
-                  "saturation": 0 < self.saturation <= 1.0, "camera_sigma": self.camera_sigma >= 0,
+                  "saturation": 0 < self.saturation <= 1.0, "stall_sigma": self.stall_sigma >= 0,
+                  "camera_sigma": self.camera_sigma >= 0,
                   "bias_sigma": self.bias_sigma > 0, "bias_walk": self.bias_walk >= 0,
                   "camera_gate": self.camera_gate > 0, "max_gap": self.max_gap > 0, "history": self.history > 0,
                   "settle_time": self.settle_time >= 0,
@@ -255,16 +261,18 @@ class ZetaEstimator:
             Q = qa * np.array([[h ** 3 / 3, h ** 2 / 2, 0.0], [h ** 2 / 2, h, 0.0], [0.0, 0.0, 0.0]])
             Q[:, 2, 2] = cfg.bias_walk ** 2 * h
             P = F @ P @ F.T + Q
-            # servo-model update y = c − τ/k_p = ζ + (k_v/k_p) ζ̇ + b, on the arms whose servo is not saturated
-            if free.any():
+            # servo-model update y = c − τ/k_p = ζ + (k_v/k_p) ζ̇ + b; a saturated servo's y is only a weak
+            # measurement (noise stall_sigma): its true torque is larger than the clipped one it reports
+            use = free | (cfg.stall_sigma > 0.0)
+            if use.any():
                 H = np.array([1.0, sv.kv / sv.kp, 1.0])
                 y = c - tq / sv.kp
                 PH = P @ H                                   # (6, 3)
-                S = PH @ H + r_s                             # (6,)
+                S = PH @ H + np.where(free, r_s, cfg.stall_sigma ** 2)   # (6,)
                 K = PH / S[:, None]
-                innov = (y - x @ H) * free
+                innov = (y - x @ H) * use
                 x += K * innov[:, None]
-                P = np.where(free[:, None, None], P - K[:, :, None] * PH[:, None, :], P)
+                P = np.where(use[:, None, None], P - K[:, :, None] * PH[:, None, :], P)
             self._P = 0.5 * (P + np.swapaxes(P, 1, 2))
         self._y = c - tq / sv.kp
         self._c = c
