@@ -62,18 +62,23 @@ def test_demo_writes_the_report_with_a_plot_per_case(demo_run):
 
 
 def test_plate_and_rod_cases_are_detected_after_the_true_contact_onset(demo_run):
-    # The arm case is not asserted: an arm contact reaches the plate residual only through its rod, and with the
-    # scenario's 5-6 N push the plate residual peaks near r_low (README, Status).
+    # The arm case is not asserted: an arm contact reaches the plate residual only in part, and with the scenario's
+    # 5-6 N push the plate residual just touches r_low (detected in every run so far at K = 100 1/s, over r_low for
+    # 3-4 samples only; README, demo).
     for c in [c for c in demo_run["result"]["cases"] if c["case"] != "arm"]:
         assert math.isfinite(c["detect_time"]), f"{c['case']}: no collision detected"
         assert c["detect_time"] > c["onset_true"], f"{c['case']}: detected before the contact began"
         assert c["delay_ms"] < 250.0, f"{c['case']}: detection {c['delay_ms']:.0f} ms after the force exceeded r_low"
         assert (c["found_link"], c["found_chain"]) == (c["true_link"], c["true_chain"]), c
         assert c["point_error_median_mm"] < 10.0, c
+    plate = [c for c in demo_run["result"]["cases"] if c["case"] == "plate"][0]
+    # target ≤ 20 ms; measured 11-26 ms at K = 100 1/s (the old K = 25 1/s with min_duration 0.03 s: 51-56 ms)
+    assert plate["delay_ms"] < 50.0, plate
 
 
 def test_plate_force_rmse_is_below_the_papers_on_every_axis(demo_run):
-    # the rod's x RMSE (1.4-2.5 N) is not yet below the paper's 1.227 N and the arm is not detected (README, demo)
+    # the rod's RMSE was below the paper's in the last runs but one stalled-servo outlier used to double it, too few
+    # runs to assert it; the arm force is observable in one component only (README, demo)
     plate = [c for c in demo_run["result"]["cases"] if c["case"] == "plate"][0]
     assert all(ours < paper for ours, paper in zip(plate["force_rmse"], plate["paper_rmse"])), plate
 

@@ -18,7 +18,7 @@ TRAJECTORIES = ("circle", "helix", "ellipse")
 def free_motion_run(trajectory: str, out_dir, domain: int, duration: float,
                     real_time_factor: float | None = None) -> dict:
     """Run the simulated graph with no collision scenario on `trajectory` for `duration` sim seconds; the collision
-    events and the residual force peak (N) the observer published, read from the recorded bag.
+    events and the residual force (N) and moment (N·m) peaks the observer published, read from the recorded bag.
 
     At real-time factor 0.3 the whole graph (simulator, two rendered cameras, vision, dynamics, recorder) uses about
     60 % of this 2-core machine; at 0.5 it saturates both cores, and a starved driver then forwards commands in bursts
@@ -41,10 +41,12 @@ def free_motion_run(trajectory: str, out_dir, domain: int, duration: float,
                            float(m.peak)))
         elif topic == "/hexa/residual":
             m = store.deserialize_cdr(data, msgtype)
-            f = m.wrench.force
-            res.append((f.x, f.y, f.z))
-    peak = np.abs(np.array(res)).max(axis=0).tolist() if res else None
-    return {"trajectory": trajectory, "events": events, "residuals": len(res), "peak": peak, "rc": run.returncode,
+            f, q = m.wrench.force, m.wrench.torque
+            res.append((f.x, f.y, f.z, q.x, q.y, q.z))
+    peaks = np.abs(np.array(res)).max(axis=0).tolist() if res else None
+    peak, peak_moment = (peaks[:3], peaks[3:]) if peaks else (None, None)
+    return {"trajectory": trajectory, "events": events, "residuals": len(res), "peak": peak,
+            "peak_moment": peak_moment, "rc": run.returncode,
             "real_time_factor": real_time_factor, "wall_s": round(run.wall_s, 1)}
 
 
