@@ -116,3 +116,13 @@ def test_sim_node_publishes_clock_cameras_and_ground_truth(procs, ros_env, tmp_p
 
 if __name__ == "__main__" and len(sys.argv) > 1 and sys.argv[1] == "peer":
     sys.exit(_peer(float(sys.argv[2]), float(sys.argv[3])))
+
+
+@pytest.mark.parametrize("param, words", [("max_lag:=-1.0", "max_lag"), ("trajectory:=square", "unknown trajectory"),
+                                          ("scenario:=bogus", "not found")])
+def test_sim_node_refuses_a_bad_parameter_naming_it(param, words, procs, ros_env):
+    proc = procs.start([PY, "-m", "hexa_bringup.sim_node", "--ros-args", "-p", "scenario:=none", "-p", param,
+                        "-p", "cameras:=false", "-p", "boards:=false"], ros_env)
+    _, err = proc.communicate(timeout=60)
+    assert proc.returncode == 2, err[-2000:]
+    assert words in err and "Traceback" not in err, err[-2000:]

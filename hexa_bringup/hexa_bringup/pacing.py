@@ -19,6 +19,8 @@ from typing import Callable
 #: shortest sleep (s): the loop is paced every step, so the virtual boards' threads (which run while it sleeps) apply a
 #: command within about a step of sim time
 MIN_SLEEP = 0.0005
+#: default wall seconds behind the pace before the lost time is dropped (sim_node's `max_lag`)
+MAX_LAG = 0.005
 
 
 class Pacer:
@@ -30,7 +32,7 @@ class Pacer:
         clock, sleep: wall clock and sleep (replaceable in tests).
     """
 
-    def __init__(self, real_time_factor: float, max_lag: float = 0.005,
+    def __init__(self, real_time_factor: float, max_lag: float = MAX_LAG,
                  clock: Callable[[], float] = time.monotonic, sleep: Callable[[float], None] = time.sleep) -> None:
         if not math.isfinite(real_time_factor):
             raise ValueError(f"real_time_factor must be finite, got {real_time_factor!r}")

@@ -38,7 +38,7 @@ def _quat_from_zyx(a: float, b: float, g: float) -> tuple[float, float, float, f
 
 
 def main(argv: list[str] | None = None) -> int:
-    from hexa_bringup.pacing import Pacer
+    from hexa_bringup.pacing import MAX_LAG, Pacer
 
     from hexa_bringup.rosenv import apply_defaults
 
@@ -71,7 +71,7 @@ def main(argv: list[str] | None = None) -> int:
             self.seed = int(p("seed", 0).value)
             self.randomize = bool(p("randomize", False).value)
             self.rtf = float(p("real_time_factor", 1.0).value)
-            self.pacer = Pacer(self.rtf, float(p("max_lag", 0.005).value))  # ValueError names a bad value
+            self.pacer = Pacer(self.rtf, float(p("max_lag", MAX_LAG).value))  # ValueError names a bad value
             self.cam_rate = float(p("camera_rate_hz", 30.0).value)
             self.use_cams = bool(p("cameras", True).value)
             self.clock_rate = float(p("clock_rate_hz", 250.0).value)
@@ -203,7 +203,14 @@ def main(argv: list[str] | None = None) -> int:
             self.sim.close()
 
     rclpy.init(args=argv if argv is not None else sys.argv)
-    node = SimNode()
+    from hexa.sim.simulator import SimulatorError
+
+    try:
+        node = SimNode()
+    except (ValueError, SimulatorError) as exc:  # a bad parameter (scenario, trajectory, max_lag, ...): named, exit 2
+        print(f"hexa sim: {exc}", file=sys.stderr)
+        rclpy.shutdown()
+        return 2
     try:
         node.run()
     except KeyboardInterrupt:
