@@ -414,7 +414,6 @@ class SampleSequencer:
         self._stamp_mode = mode == "stamp"
         self._cur: deque[tuple[float, float, NDArray]] = deque()  # (stamp, board t, τ)
         self._js: deque[tuple[float, NDArray, Any, Any]] = deque()  # (stamp, commanded, velocity, effort)
-        self._vel: Any = None
         self._poses: list[tuple[float, int, Any]] = []
         self._seq = 0
         self.last_t = -math.inf
@@ -489,8 +488,8 @@ class SampleSequencer:
                 self.unpaired += 1
                 continue
             self._cur.popleft()
-            # the command the driver had sent when it handled this sample, on the board's time axis: the host stamp
-            # (in sim mode quantized and lagged by /clock) would misplace command changes by a few ms, and at
-            # K = 100 1/s each misplaced 5 mrad step shows in the residual
+            # the command the driver had sent when it handled this sample (its own joint_states): placing command
+            # changes by the host stamps (in sim mode quantized and lagged by /clock) misplaced them by a few ms, and
+            # at K = 100 1/s each misplaced 5 mrad step shows in the residual
             self._sample(t, pos, tau, vel, out)
         return out
