@@ -64,7 +64,7 @@ def test_demo_writes_the_report_with_a_plot_per_case(demo_run):
 def test_plate_and_rod_cases_are_detected_after_the_true_contact_onset(demo_run):
     # The arm case is not asserted: an arm contact reaches the plate residual only in part, and with the scenario's
     # 5-6 N push the plate residual just touches r_low (over it for 3-4 samples, min_duration 0.015 s needs 4: detected
-    # in 2 runs of 4; README).
+    # in 3 runs of 5; README).
     for c in [c for c in demo_run["result"]["cases"] if c["case"] != "arm"]:
         assert math.isfinite(c["detect_time"]), f"{c['case']}: no collision detected"
         assert c["detect_time"] > c["onset_true"], f"{c['case']}: detected before the contact began"
