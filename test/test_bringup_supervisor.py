@@ -6,6 +6,7 @@ import subprocess
 import sys
 import time
 
+import pytest
 import yaml
 
 PY = sys.executable
@@ -80,3 +81,24 @@ def test_bringup_without_installed_nodes_or_with_a_bad_graph_file_says_why(tmp_p
     r = subprocess.run([PY, "-m", "hexa_bringup.cli", "bringup", "robot"], capture_output=True, text=True,
                        timeout=60)
     assert r.returncode == 2 and ("--uno" in r.stderr or "not installed" in r.stderr)
+
+
+def test_robot_mode_approaches_the_start_slowly_by_default_and_sim_only_when_asked():
+    import argparse
+
+    from hexa_bringup.commands.bringup import ROBOT_APPROACH_SPEED, mode_node_args
+    from hexa_bringup.supervisor import SupervisorError
+
+    def args(mode, speed=None):
+        return argparse.Namespace(mode=mode, uno="/dev/ttyACM0", mega="/dev/ttyACM1", cameras=["1", "2"],
+                                  approach_speed=speed)
+
+    assert mode_node_args(args("robot"))["trajectory"] == ["-p", f"approach_speed:={ROBOT_APPROACH_SPEED}"]
+    assert ROBOT_APPROACH_SPEED > 0
+    assert mode_node_args(args("robot", 0.0))["trajectory"] == ["-p", "approach_speed:=0.0"]   # operator's choice
+    assert "trajectory" not in mode_node_args(args("sim"))       # the simulator starts at the start pose
+    assert mode_node_args(args("sim", 0.5))["trajectory"] == ["-p", "approach_speed:=0.5"]
+    with pytest.raises(SupervisorError, match="approach-speed"):
+        mode_node_args(args("robot", -1.0))
+    with pytest.raises(SupervisorError, match="approach-speed"):
+        mode_node_args(args("robot", float("nan")))

@@ -114,3 +114,62 @@ def test_start_blend_starts_from_rest_and_joins_the_trajectory_without_a_time_sh
     assert np.abs(p.command(0.6).zeta_dot - plain.command(0.6).zeta_dot).max() < 1e-12
     with pytest.raises(TrajectoryPlayerError, match="start_blend"):
         TrajectoryPlayer(desc, traj, 10.0, start_blend=-1.0)
+
+
+def test_approach_moves_slowly_from_the_measured_pose_then_plays_the_trajectory_shifted(desc):
+    traj = TRAJECTORIES["circle"]
+    start = np.asarray(traj(0.0)[0])
+    here = start + np.array([0.02, -0.015, -0.01, 0.05, 0.0, -0.04])     # where the camera sees the plate
+    speed = 0.5
+    p = TrajectoryPlayer(desc, traj, DURATIONS["circle"], start_blend=0.5)
+    T = p.approach_from(here, speed)
+    gap = np.abs(hexa6rus.inverse_kinematics(desc, start) - hexa6rus.inverse_kinematics(desc, here)).max()
+    assert gap > 0.05 and T == pytest.approx(1.5 * gap / speed)
+    c0 = p.command(0.0)
+    assert c0.state == "approaching" and np.allclose(c0.pose, here) and np.allclose(c0.zeta_dot, 0.0)
+    assert np.allclose(c0.zeta, hexa6rus.inverse_kinematics(desc, here))   # first command: where the arms are
+    h, prev, peak = 0.002, c0, 0.0
+    for k in range(1, int(T / h) + 1):
+        c = p.command(k * h)
+        assert c.state == "approaching", k
+        peak = max(peak, np.abs((c.zeta - prev.zeta) / h).max())
+        assert np.allclose((c.zeta - prev.zeta) / h, 0.5 * (c.zeta_dot + prev.zeta_dot), atol=2e-2), k
+        prev = c
+    assert 0.8 * speed < peak < 1.1 * speed                                # slow: no arm faster than the speed
+    end = p.command(T)
+    assert np.allclose(end.pose, start) and np.allclose(end.zeta_dot, 0.0, atol=1e-9)
+    plain = TrajectoryPlayer(desc, traj, DURATIONS["circle"], start_blend=0.5)
+    for x in (0.0, 0.3, 0.7, 2.0):                                          # then the trajectory, shifted by T
+        a, b = p.command(T + x), plain.command(x)
+        assert a.state == b.state == "running" and np.allclose(a.pose, b.pose) and np.allclose(a.zeta, b.zeta)
+
+
+def test_approach_is_skipped_near_the_start_and_refused_after_the_first_command(desc):
+    traj = TRAJECTORIES["helix"]
+    p = TrajectoryPlayer(desc, traj, DURATIONS["helix"])
+    start = np.asarray(traj(0.0)[0])
+    assert p.approach_from(start + np.array([1e-4, 0, 0, 0, 0, 0]), 0.3) == 0.0
+    assert p.command(0.0).state == "running" and np.allclose(p.command(0.0).pose, start)
+    with pytest.raises(TrajectoryPlayerError, match="before the first command"):
+        p.approach_from(start, 0.3)
+    q = TrajectoryPlayer(desc, traj, DURATIONS["helix"])
+    with pytest.raises(TrajectoryPlayerError, match="speed"):
+        q.approach_from(start, 0.0)
+    with pytest.raises(hexa6rus.UnreachablePoseError):
+        q.approach_from(start + np.array([0, 0, 1.0, 0, 0, 0]), 0.3)        # a pose 1 m away: no IK solution
+
+
+def test_a_collision_during_the_approach_holds_there_and_resume_continues_it(desc):
+    traj = TRAJECTORIES["ellipse"]
+    start = np.asarray(traj(0.0)[0])
+    p = TrajectoryPlayer(desc, traj, DURATIONS["ellipse"], policy="hold")
+    T = p.approach_from(start + np.array([0.0, 0.03, 0.0, 0.0, 0.0, 0.0]), 0.1)
+    assert T > 0.5
+    mid = p.command(T / 2)
+    assert p.on_collision(T / 2) == "held"
+    assert np.allclose(p.command(T / 2 + 1.0).pose, mid.pose)               # held where it was
+    assert p.resume(T / 2 + 1.0)
+    assert np.allclose(p.command(T / 2 + 1.0 + 1e-3).pose, mid.pose, atol=1e-4)   # no jump at the resume
+    assert p.command(T / 2 + 1.0 + 0.2).trajectory_time < 0                    # the approach goes on, ...
+    later = p.command(T + 1.0 + 1.5)                                         # ... then the trajectory, 1 s (held) late
+    assert later.state == "running" and np.allclose(later.pose, traj(1.5)[0])

@@ -8,11 +8,16 @@ trajectory time), `loop` (false), `collision_policy` ("hold"),
 `retract_distance` (m, 0.02), `retract_time` (s, 0.5), `max_step` (s, 0.03: the most trajectory time advances
 between two commands; when the node is late — a stalled host, sim time in bursts — the trajectory pauses instead of
 commanding a jump; 0 = no limit), `start_blend` (s, 1.0: the command blends from rest onto the trajectory, which
-starts moving at once as in the paper; 0 = velocity step at the start), `description` (robot YAML path, default
-packaged).
+starts moving at once as in the paper; 0 = velocity step at the start), `approach_speed` (rad/s, 0 = off: with
+> 0 nothing is commanded until a `plate_pose` arrives; from that measured pose the plate moves slowly — no arm faster
+than this — to the trajectory's start pose, then the trajectory starts; `hexa bringup robot` sets 0.3),
+`approach_tolerance` (rad, 0.02: no approach when every arm is this close), `description` (robot YAML path,
+default packaged).
 Topics (relative): pub `joint_commands` (sensor_msgs/JointState, arm_1..arm_6, ζ rad and ζ̇ rad/s),
-`trajectory_state` (std_msgs/String); sub `collision` (hexa_msgs/CollisionEvent, reliable), `residual`
-(hexa_msgs/Residual, only with collision_policy "retract", for its direction).
+`trajectory_state` (std_msgs/String: waiting | waiting_for_pose | approaching | running | held | retracting |
+resuming | finished); sub `collision` (hexa_msgs/CollisionEvent, reliable), `residual`
+(hexa_msgs/Residual, only with collision_policy "retract", for its direction), `plate_pose`
+(geometry_msgs/PoseStamped, only with approach_speed > 0, until the approach is planned).
 Services: `~/resume`, `~/hold` (std_srvs/Trigger). `/diagnostics`.
 """
 from __future__ import annotations
@@ -23,6 +28,7 @@ import sys
 import numpy as np
 import rclpy
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
+from geometry_msgs.msg import PoseStamped
 from hexa_msgs.msg import CollisionEvent, Residual
 from rclpy.executors import ExternalShutdownException
 from rclpy.node import Node
@@ -79,7 +85,13 @@ class TrajectoryNode(Node):
         rtime = float(self.declare_parameter("retract_time", 0.5).value)
         max_step = float(self.declare_parameter("max_step", 0.03).value)
         start_blend = float(self.declare_parameter("start_blend", 1.0).value)
+        self.approach_speed = float(self.declare_parameter("approach_speed", 0.0).value)
+        self.approach_tolerance = float(self.declare_parameter("approach_tolerance", 0.02).value)
         desc_path = str(self.declare_parameter("description", "").value) or None
+        if not (math.isfinite(self.approach_speed) and self.approach_speed >= 0):
+            raise ValueError(f"parameter approach_speed must be >= 0 rad/s (0 = off), got {self.approach_speed}")
+        if not (math.isfinite(self.approach_tolerance) and self.approach_tolerance >= 0):
+            raise ValueError(f"parameter approach_tolerance must be >= 0 rad, got {self.approach_tolerance}")
         if not rate > 0:
             raise ValueError(f"parameter rate_hz must be > 0, got {rate}")
         if not start_blend >= 0:
@@ -104,6 +116,11 @@ class TrajectoryNode(Node):
         self.create_subscription(CollisionEvent, "collision", self._on_collision, reliable)
         if policy == "retract":
             self.create_subscription(Residual, "residual", self._on_residual, 10)
+        self._pose_now: np.ndarray | None = None
+        self._pose_sub = None
+        self.bad_poses = 0
+        if self.approach_speed > 0:
+            self._pose_sub = self.create_subscription(PoseStamped, "plate_pose", self._on_pose, 10)
         self.create_service(Trigger, "~/resume", self._on_resume)
         self.create_service(Trigger, "~/hold", self._on_hold)
         self._t0: float | None = None
@@ -113,7 +130,9 @@ class TrajectoryNode(Node):
         self.collisions = 0
         self.create_timer(1.0 / rate, self._tick)
         self.create_timer(1.0, self._diagnostics)
-        self.get_logger().info(f"trajectory {name} ({duration:.1f} s) at {rate:g} Hz, collision policy {policy}")
+        self.get_logger().info(f"trajectory {name} ({duration:.1f} s) at {rate:g} Hz, collision policy {policy}"
+                               + (f", approach at {self.approach_speed:g} rad/s from the first plate_pose"
+                                  if self.approach_speed > 0 else ""))
 
     def _now(self) -> float:
         return self.get_clock().now().nanoseconds * 1e-9
@@ -124,11 +143,48 @@ class TrajectoryNode(Node):
             return None
         if self._t0 is None:
             self._t0 = self.start_time if self.start_time >= 0 else now + self.start_delay
+        if self._pose_sub is not None:  # approach: the trajectory clock starts at the first measured pose
+            if self._pose_now is None or now < self._t0:
+                return None
+            self._plan_approach(now)
         return now - self._t0
+
+    def _on_pose(self, msg: PoseStamped) -> None:
+        from hexa_dynamics.conversions import hexa_pose_from_msg
+
+        try:
+            pose = hexa_pose_from_msg(msg.pose)
+            if not np.all(np.isfinite(pose)):
+                raise ValueError(f"non-finite pose {pose.tolist()}")
+        except ValueError as exc:
+            self.bad_poses += 1
+            self.get_logger().warn(f"plate_pose rejected: {exc}", throttle_duration_sec=1.0)
+            return
+        self._pose_now = pose
+
+    def _plan_approach(self, now: float) -> None:
+        """Once: the approach from the latest measured pose; the trajectory clock starts now."""
+        try:
+            T = self.player.approach_from(self._pose_now, self.approach_speed, self.approach_tolerance)
+        except ValueError as exc:  # unreachable measured pose: wait for the next one
+            self.bad_poses += 1
+            self._pose_now = None
+            self.get_logger().error(f"cannot approach from the measured plate pose: {exc}",
+                                    throttle_duration_sec=1.0)
+            return
+        self.destroy_subscription(self._pose_sub)
+        self._pose_sub = None
+        self._t0 = now
+        p = self._pose_now
+        self.get_logger().info(f"approach from plate pose ({p[0]:.3f}, {p[1]:.3f}, {p[2]:.3f}) m: {T:.2f} s"
+                               if T > 0 else "at the start pose: no approach needed")
 
     def _tick(self) -> None:
         t = self._t()
         if t is None:
+            if self._pose_sub is not None:
+                self._state = "waiting_for_pose" if self._pose_now is None else "waiting"
+                self.pub_state.publish(String(data=self._state))
             return
         try:
             cmd = self.player.command(max(0.0, t))
@@ -176,13 +232,16 @@ class TrajectoryNode(Node):
     def _diagnostics(self) -> None:
         arr = DiagnosticArray()
         arr.header.stamp = self.get_clock().now().to_msg()
-        level = DiagnosticStatus.WARN if self._state in ("held", "retracting") else DiagnosticStatus.OK
+        level = (DiagnosticStatus.WARN if self._state in ("held", "retracting", "waiting_for_pose")
+                 else DiagnosticStatus.OK)
         st = DiagnosticStatus(level=level, name=self.get_fully_qualified_name(), message=self._state)
         st.values = [KeyValue(key="state", value=self._state),
                      KeyValue(key="collisions", value=str(self.collisions)),
                      KeyValue(key="ik_failures", value=str(self.player.ik_failures)),
                      KeyValue(key="lag_events", value=str(self.player.lag_events)),
-                     KeyValue(key="lag_time_s", value=f"{self.player.lag_time:.3f}")]
+                     KeyValue(key="lag_time_s", value=f"{self.player.lag_time:.3f}"),
+                     KeyValue(key="approach_time_s", value=f"{self.player.approach_time:.3f}"),
+                     KeyValue(key="rejected_poses", value=str(self.bad_poses))]
         arr.status = [st]
         self.pub_diag.publish(arr)
 

@@ -24,7 +24,7 @@ class Command:
     zeta: np.ndarray
     zeta_dot: np.ndarray
     pose: np.ndarray
-    state: str  # "running" | "held" | "retracting" | "resuming" | "finished"
+    state: str  # "approaching" | "running" | "held" | "retracting" | "resuming" | "finished"
     trajectory_time: float
 
 
@@ -97,8 +97,38 @@ class TrajectoryPlayer:
         if start_blend > 0:
             self._resume_at, self._blend_time = 0.0, float(start_blend)
             self._resume_from = self._trajectory_pose(0.0)[0]
+        self._approach_from: np.ndarray | None = None   # pose the approach starts at (trajectory time −T)
+        self.approach_time = 0.0
         self._last: Command | None = None
         self.ik_failures = 0
+
+    # -- approach ------------------------------------------------------------------------------------------------
+    def approach_from(self, pose_now: np.ndarray, speed: float, tolerance: float = 0.02) -> float:
+        """Start with a slow move from the measured pose `pose_now` to the trajectory's start pose; returns its
+        duration T (s), 0 when the largest arm-angle difference is below `tolerance` (rad).
+
+        The plate pose follows p_now + s(u)·(p_0 − p_now) with a smoothstep s over T = 1.5·max|ζ_0 − ζ_now| / speed,
+        so no arm exceeds `speed` (rad/s) by more than the curvature of the IK along the line (the smoothstep's peak
+        rate is 1.5/T), and starts and ends at rest. Trajectory time 0 is shifted by T: the trajectory (and its
+        `start_blend`) starts when the approach ends. Call it before the first command.
+
+        Raises:
+            TrajectoryPlayerError: called after the first command, or speed not > 0.
+            hexa.kinematics.hexa6rus.UnreachablePoseError: `pose_now` has no IK solution.
+        """
+        if self._last is not None:
+            raise TrajectoryPlayerError("approach_from must come before the first command")
+        if not (speed > 0 and np.isfinite(speed)):
+            raise TrajectoryPlayerError(f"approach speed must be > 0 rad/s, got {speed}")
+        pose_now = np.asarray(pose_now, dtype=float).reshape(6)
+        p0 = self._trajectory_pose(0.0)[0]
+        gap = float(np.max(np.abs(np.asarray(self._ik(self.desc, p0)) - np.asarray(self._ik(self.desc, pose_now)))))
+        if gap < tolerance:
+            return 0.0
+        self.approach_time = 1.5 * gap / float(speed)
+        self._approach_from = pose_now
+        self._offset += self.approach_time
+        return self.approach_time
 
     # -- events --------------------------------------------------------------------------------------------------
     def on_collision(self, t: float, external_force: np.ndarray | None = None) -> str:
@@ -134,6 +164,12 @@ class TrajectoryPlayer:
         pose, pose_dot, _ = self.trajectory(tt)
         return np.asarray(pose, dtype=float), np.asarray(pose_dot, dtype=float)
 
+    def _approach_pose(self, tt: float) -> tuple[np.ndarray, np.ndarray]:
+        T = self.approach_time
+        u = min(1.0, max(0.0, (tt + T) / T))
+        delta = self._trajectory_pose(0.0)[0] - self._approach_from
+        return self._approach_from + _smoothstep(u) * delta, 6.0 * u * (1.0 - u) / T * delta
+
     def command(self, t: float) -> Command:
         """The command at time t (s, sim or wall clock, monotonic).
 
@@ -158,16 +194,20 @@ class TrajectoryPlayer:
             tt = self._held_since - self._offset
         else:
             tt = t - self._offset
-            pose, pose_dot = self._trajectory_pose(tt)
-            state = "finished" if (not self.loop and tt >= self.duration) else "running"
-            if self._resume_at is not None and self._resume_from is not None:
+            if self._approach_from is not None and tt < 0.0:   # approach: trajectory time −T..0
+                pose, pose_dot = self._approach_pose(tt)
+                state = "approaching"
+            else:
+                pose, pose_dot = self._trajectory_pose(tt)
+                state = "finished" if (not self.loop and tt >= self.duration) else "running"
+            if self._resume_at is not None and self._resume_from is not None and tt >= self._resume_at:
                 u = (tt - self._resume_at) / self._blend_time
                 s = _smoothstep(u)
                 if s < 1.0:
                     ds = 6.0 * u * (1.0 - u) / self._blend_time if u > 0 else 0.0  # d(smoothstep)/dt
                     pose_dot = ds * (pose - self._resume_from) + s * pose_dot
                     pose = self._resume_from + (pose - self._resume_from) * s
-                    state = "running" if self._starting else "resuming"
+                    state = state if self._starting else "resuming"
                 else:
                     self._resume_at, self._starting = None, False
         try:

@@ -6,6 +6,10 @@ import sys
 from pathlib import Path
 
 
+#: rad/s: the robot mode's approach from the measured pose to the trajectory's start (hobby servos: ≈ 6 rad/s)
+ROBOT_APPROACH_SPEED = 0.3
+
+
 def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("bringup", help="start and supervise the node graph (sim | robot | replay BAG | upsrpu)")
     p.add_argument("mode", choices=["sim", "robot", "replay", "upsrpu"],
@@ -18,11 +22,44 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--uno", help="robot mode: serial port of the Arduino Uno (servos)")
     p.add_argument("--mega", help="robot mode: serial port of the Arduino Mega (currents)")
     p.add_argument("--cameras", nargs="*", default=[], help="robot mode: camera serial numbers (top side)")
+    p.add_argument("--approach-speed", type=float, default=None, metavar="RAD_S",
+                   help="the trajectory node first moves the arms from the camera's plate pose to the trajectory's "
+                        "start at most this fast (rad/s); 0 = off (first command at full servo speed). "
+                        f"Default {ROBOT_APPROACH_SPEED} in robot mode, 0 in sim (the simulator starts there)")
     p.add_argument("--rate", type=float, default=1.0, help="replay: playback rate")
     p.add_argument("--log-dir", default=None, help="write each node's output to DIR/<node>.log")
     p.add_argument("--duration", type=float, default=0.0, help="stop after this many seconds (0 = until Ctrl-C)")
     p.add_argument("--status-every", type=float, default=5.0, help="seconds between status tables")
     p.set_defaults(func=run)
+
+
+def mode_node_args(args: argparse.Namespace) -> dict[str, list[str]]:
+    """The `-p` overrides each node gets in `args.mode` (ports, cameras, the approach speed, the 3UPS+RPU inputs).
+
+    Raises:
+        hexa_bringup.supervisor.SupervisorError: robot mode without both ports, a negative approach speed.
+    """
+    from hexa_bringup.supervisor import SupervisorError
+
+    node_args: dict[str, list[str]] = {}
+    if args.mode == "robot":
+        if not (args.uno and args.mega):
+            raise SupervisorError("robot mode needs --uno PORT and --mega PORT (e.g. /dev/serial/by-id/...)")
+        node_args["driver"] = ["-p", f"uno_port:={args.uno}", "-p", f"mega_port:={args.mega}"]
+        serials = list(args.cameras) + [""] * (2 - len(args.cameras))
+        for (name, cam), serial in zip((("camera_top", "cam_top"), ("camera_side", "cam_side")), serials):
+            node_args[name] = ["-p", "source:=realsense", "-p", f"camera:={cam}", "-p", f"serial:={serial}"]
+    if args.mode in ("robot", "sim"):
+        speed = args.approach_speed if args.approach_speed is not None else (
+            ROBOT_APPROACH_SPEED if args.mode == "robot" else None)
+        if speed is not None:
+            if not speed >= 0:
+                raise SupervisorError(f"--approach-speed must be >= 0 rad/s, got {speed}")
+            node_args["trajectory"] = ["-p", f"approach_speed:={float(speed)}"]
+    if args.mode == "upsrpu":
+        node_args["singularity"] = ["-p", "robot:=upsrpu", "-p", "input:=markers"]
+        node_args["srm"] = ["-p", "input:=markers"]
+    return node_args
 
 
 def run(args: argparse.Namespace) -> int:
@@ -34,18 +71,8 @@ def run(args: argparse.Namespace) -> int:
         if args.graph:
             specs = load_graph_file(args.graph)
         else:
-            node_args: dict[str, list[str]] = {}
-            if args.mode == "robot":
-                if not (args.uno and args.mega):
-                    raise SupervisorError("robot mode needs --uno PORT and --mega PORT (e.g. /dev/serial/by-id/...)")
-                node_args["driver"] = ["-p", f"uno_port:={args.uno}", "-p", f"mega_port:={args.mega}"]
-                serials = list(args.cameras) + [""] * (2 - len(args.cameras))
-                for (name, cam), serial in zip((("camera_top", "cam_top"), ("camera_side", "cam_side")), serials):
-                    node_args[name] = ["-p", "source:=realsense", "-p", f"camera:={cam}", "-p", f"serial:={serial}"]
+            node_args = mode_node_args(args)
             params = Path(args.params) if args.params else DEFAULT_PARAMS
-            if args.mode == "upsrpu":
-                node_args["singularity"] = ["-p", "robot:=upsrpu", "-p", "input:=markers"]
-                node_args["srm"] = ["-p", "input:=markers"]
             ns = args.ns or ("/upsrpu" if args.mode == "upsrpu" else "/hexa")
             specs = build_graph(args.mode, ns, params, node_args)
             if args.mode == "replay":
