@@ -41,7 +41,6 @@ def test_trajectory_node_approaches_the_start_slowly_from_the_measured_pose(proc
     out, err = peer.communicate(timeout=120)
     assert peer.returncode == 0, err
     r = json.loads(out.strip().splitlines()[-1])
-    print(r)
     assert r["commands_before_pose"] == 0 and r["state_before_pose"] == "waiting_for_pose"
     assert r["commands_after_bad_pose"] == 0
     assert r["first_command_error"] < 1e-6

@@ -124,7 +124,7 @@ def test_approach_moves_slowly_from_the_measured_pose_then_plays_the_trajectory_
     p = TrajectoryPlayer(desc, traj, DURATIONS["circle"], start_blend=0.5)
     T = p.approach_from(here, speed)
     gap = np.abs(hexa6rus.inverse_kinematics(desc, start) - hexa6rus.inverse_kinematics(desc, here)).max()
-    assert gap > 0.05 and T == pytest.approx(1.5 * gap / speed)
+    assert gap > 0.05 and 1.5 * gap / speed <= T < 1.2 * 1.5 * gap / speed   # ≥ the straight-line estimate
     c0 = p.command(0.0)
     assert c0.state == "approaching" and np.allclose(c0.pose, here) and np.allclose(c0.zeta_dot, 0.0)
     assert np.allclose(c0.zeta, hexa6rus.inverse_kinematics(desc, here))   # first command: where the arms are
@@ -135,7 +135,7 @@ def test_approach_moves_slowly_from_the_measured_pose_then_plays_the_trajectory_
         peak = max(peak, np.abs((c.zeta - prev.zeta) / h).max())
         assert np.allclose((c.zeta - prev.zeta) / h, 0.5 * (c.zeta_dot + prev.zeta_dot), atol=2e-2), k
         prev = c
-    assert 0.8 * speed < peak < 1.1 * speed                                # slow: no arm faster than the speed
+    assert 0.8 * speed < peak <= 1.005 * speed                              # slow: no arm faster than the speed
     end = p.command(T)
     assert np.allclose(end.pose, start) and np.allclose(end.zeta_dot, 0.0, atol=1e-9)
     plain = TrajectoryPlayer(desc, traj, DURATIONS["circle"], start_blend=0.5)

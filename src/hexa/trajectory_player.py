@@ -107,9 +107,9 @@ class TrajectoryPlayer:
         """Start with a slow move from the measured pose `pose_now` to the trajectory's start pose; returns its
         duration T (s), 0 when the largest arm-angle difference is below `tolerance` (rad).
 
-        The plate pose follows p_now + s(u)·(p_0 − p_now) with a smoothstep s over T = 1.5·max|ζ_0 − ζ_now| / speed,
-        so no arm exceeds `speed` (rad/s) by more than the curvature of the IK along the line (the smoothstep's peak
-        rate is 1.5/T), and starts and ends at rest. Trajectory time 0 is shifted by T: the trajectory (and its
+        The plate pose follows p_now + s(u)·(p_0 − p_now) with a smoothstep s over T = 1.5·max|dζ/ds| / speed (the
+        smoothstep's peak rate is 1.5/T; the slope dζ/ds of every arm along the line is taken from 64 chords, as IK
+        is not linear), so no arm exceeds `speed` (rad/s), and the move starts and ends at rest. Trajectory time 0 is shifted by T: the trajectory (and its
         `start_blend`) starts when the approach ends. Call it before the first command.
 
         Raises:
@@ -122,10 +122,14 @@ class TrajectoryPlayer:
             raise TrajectoryPlayerError(f"approach speed must be > 0 rad/s, got {speed}")
         pose_now = np.asarray(pose_now, dtype=float).reshape(6)
         p0 = self._trajectory_pose(0.0)[0]
-        gap = float(np.max(np.abs(np.asarray(self._ik(self.desc, p0)) - np.asarray(self._ik(self.desc, pose_now)))))
-        if gap < tolerance:
+        z_now = np.asarray(self._ik(self.desc, pose_now))
+        if float(np.max(np.abs(np.asarray(self._ik(self.desc, p0)) - z_now))) < tolerance:
             return 0.0
-        self.approach_time = 1.5 * gap / float(speed)
+        # the largest arm rate per unit of path along the straight pose line (IK is not linear): 64 chords
+        s = np.linspace(0.0, 1.0, 65)
+        zs = np.array([z_now] + [self._ik(self.desc, pose_now + v * (p0 - pose_now)) for v in s[1:]])
+        slope = float(np.max(np.abs(np.diff(zs, axis=0)))) * (len(s) - 1)
+        self.approach_time = 1.5 * slope / float(speed)
         self._approach_from = pose_now
         self._offset += self.approach_time
         return self.approach_time
