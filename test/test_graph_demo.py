@@ -62,15 +62,18 @@ def test_demo_writes_the_report_with_a_plot_per_case(demo_run):
 
 
 def test_plate_and_rod_cases_are_detected_after_the_true_contact_onset(demo_run):
-    # The arm case is not asserted: an arm contact reaches the plate residual only in part, and with the scenario's
-    # 5-6 N push the plate residual just touches r_low (over it for 3-4 samples, min_duration 0.015 s needs 4: detected
-    # in 3 runs of 5; README).
+    # The arm case is not asserted: an arm contact reaches the plate residual only in part — with the scenario's 5 N
+    # push its plate-equivalent wrench J_Dᵀ F peaks at 1.9 N / 0.15 N·m, below the thresholds, so it is detected only
+    # when model error adds to it (4 runs of 6; README, docs/observer_node.md "Observer lag and observability").
     for c in [c for c in demo_run["result"]["cases"] if c["case"] != "arm"]:
         assert math.isfinite(c["detect_time"]), f"{c['case']}: no collision detected"
         assert c["detect_time"] > c["onset_true"], f"{c['case']}: detected before the contact began"
         assert c["delay_ms"] < 250.0, f"{c['case']}: detection {c['delay_ms']:.0f} ms after the force exceeded r_low"
         assert (c["found_link"], c["found_chain"]) == (c["true_link"], c["true_chain"]), c
         assert c["point_error_median_mm"] < 10.0, c
+        # the observer's own lag, after the force's plate-equivalent wrench crossed the thresholds: plate 11 ms,
+        # rod 21 ms measured (the rod's delay after the force itself, 81-91 ms, is its partial observability)
+        assert c["observer_delay_ms"] < 60.0, f"{c['case']}: observer lag {c['observer_delay_ms']:.0f} ms"
     plate = [c for c in demo_run["result"]["cases"] if c["case"] == "plate"][0]
     # target ≤ 20 ms; measured 11-31 ms at K = 100 1/s (the old K = 25 1/s with min_duration 0.03 s: 51-56 ms)
     assert plate["delay_ms"] < 50.0, plate

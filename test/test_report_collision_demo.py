@@ -63,3 +63,20 @@ def test_report_and_plot_are_written(tmp_path):
     assert png.stat().st_size > 10_000
     text = rep.read_text()
     assert "| plate | plate 0 | plate 0 |" in text and "plate.png" in text
+
+
+def test_observer_lag_is_measured_from_the_plate_equivalent_wrench():
+    """A plate push 0.1 m off the centre: its moment about P (0.1·F) crosses a 0.15 N·m threshold at F = 1.5 N,
+    before the force itself crosses 2 N — the observer lag counts from there; the plot shows W instead of F."""
+    from hexa.trajectories import TRAJECTORIES
+
+    d = _case()
+    pose = np.asarray(TRAJECTORIES["circle"](0.0)[0], dtype=float)
+    d.truth_pose = np.tile(pose, (len(d.truth_t), 1))
+    d.truth_point = np.tile(pose[:3] + np.array([0.0, 0.1, 0.0]), (len(d.truth_t), 1))
+    d.threshold = np.array([2.0, 2.0, 2.0, 0.15, 0.15, 0.15])
+    m = compute_metrics(d)
+    assert m.exceed_time == pytest.approx(1.26) and m.delay_ms == pytest.approx(10.0)
+    assert m.plate_exceed_time == pytest.approx(1.19) and m.observer_delay_ms == pytest.approx(80.0)
+    assert "| 1.190 | 80.0 |" in markdown_table([m])
+    assert math.isnan(compute_metrics(_case()).observer_delay_ms)          # no pose: not measured, not invented

@@ -140,11 +140,14 @@ def case_data_from_bag(case: str, bag: Path, ns: str = "/hexa"):
     from hexa_bringup.bag import read_bag, typestore
 
     store = typestore()
-    rows: dict[str, list] = {k: [] for k in ("truth", "wrench_truth", "res", "ev", "contact", "wrench")}
+    from hexa_dynamics.conversions import hexa_pose_from_msg
+
+    rows: dict[str, list] = {k: [] for k in ("truth", "wrench_truth", "pose_truth", "res", "ev", "contact",
+                                             "wrench")}
     for topic, msgtype, _t, data in read_bag(bag):
         name = topic[len(ns) + 1:] if topic.startswith(ns + "/") else topic
-        if name not in ("sim/contact_truth", "sim/wrench_truth", "residual", "collision", "contact",
-                        "contact_wrench"):
+        if name not in ("sim/contact_truth", "sim/wrench_truth", "sim/plate_pose_truth", "residual", "collision",
+                        "contact", "contact_wrench"):
             continue
         m = store.deserialize_cdr(data, msgtype)
         if name == "sim/contact_truth":
@@ -152,6 +155,8 @@ def case_data_from_bag(case: str, bag: Path, ns: str = "/hexa"):
         elif name == "sim/wrench_truth":
             f = m.wrench.force
             rows["wrench_truth"].append((_stamp(m.header), f.x, f.y, f.z))
+        elif name == "sim/plate_pose_truth":
+            rows["pose_truth"].append((_stamp(m.header), *hexa_pose_from_msg(m.pose)))
         elif name == "residual":
             w = m.wrench
             rows["res"].append((_stamp(m.header), w.force.x, w.force.y, w.force.z, w.torque.x, w.torque.y,
@@ -167,12 +172,17 @@ def case_data_from_bag(case: str, bag: Path, ns: str = "/hexa"):
     truth = np.array(sorted(rows["truth"]), dtype=float)
     wt = np.array(sorted(rows["wrench_truth"]), dtype=float)
     force = np.stack([np.interp(truth[:, 0], wt[:, 0], wt[:, k]) for k in (1, 2, 3)], axis=1)
+    pose = None
+    if rows["pose_truth"]:
+        pt = np.array(sorted(rows["pose_truth"]), dtype=float)
+        pose = np.stack([np.interp(truth[:, 0], pt[:, 0], np.unwrap(pt[:, k]) if k > 3 else pt[:, k])
+                         for k in range(1, 7)], axis=1)
     res = np.array(sorted(rows["res"]), dtype=float) if rows["res"] else np.zeros((0, 13))
     con = np.array(sorted(rows["contact"]), dtype=float) if rows["contact"] else np.zeros((0, 6))
     wr = np.array(sorted(rows["wrench"]), dtype=float) if rows["wrench"] else np.zeros((0, 4))
     return CaseData(
         case=case, truth_t=truth[:, 0], truth_force=force, truth_point=truth[:, 3:6],
-        truth_link=truth[:, 1].astype(int), truth_chain=truth[:, 2].astype(int),
+        truth_link=truth[:, 1].astype(int), truth_chain=truth[:, 2].astype(int), truth_pose=pose,
         residual_t=res[:, 0], residual=res[:, 1:7], threshold=res[0, 7:13] if len(res) else np.full(6, 2.0),
         events=sorted(rows["ev"]), contact_t=con[:, 0], contact_link=con[:, 1].astype(int),
         contact_chain=con[:, 2].astype(int), contact_point=con[:, 3:6], wrench_t=wr[:, 0], wrench_force=wr[:, 1:4])
