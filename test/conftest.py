@@ -1,7 +1,6 @@
 """Shared pytest fixtures: a unique ROS_DOMAIN_ID per test and child-process cleanup."""
 from __future__ import annotations
 
-import fcntl
 import os
 import signal
 import subprocess
@@ -23,22 +22,25 @@ if str(TEST_DIR) not in sys.path:
 @pytest.fixture
 def ros_domain_id() -> Iterator[int]:
     """A ROS_DOMAIN_ID (1..100) no other test on this machine holds right now (flock on /tmp), freed afterwards."""
-    start = (os.getpid() * 7) % 100
-    for k in range(100):
-        domain = (start + k) % 100 + 1
-        fd = os.open(f"/tmp/hexa_ros_domain_{domain}.lock", os.O_CREAT | os.O_RDWR, 0o666)
-        try:
-            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
-        except OSError:
-            os.close(fd)
-            continue
-        try:
+    from rosdomain import NoFreeDomain, held_ros_domain
+
+    try:
+        with held_ros_domain() as domain:
             yield domain
-        finally:
-            fcntl.flock(fd, fcntl.LOCK_UN)
-            os.close(fd)
-        return
-    pytest.fail("no free ROS_DOMAIN_ID in 1..100 (too many ROS tests running at once?)")
+    except NoFreeDomain as exc:
+        pytest.fail(str(exc))
+
+
+@pytest.fixture(scope="module")
+def module_ros_domain_id() -> Iterator[int]:
+    """Like ros_domain_id, held for a whole module (module-scoped graph runs); searched from 100 down."""
+    from rosdomain import NoFreeDomain, held_ros_domain
+
+    try:
+        with held_ros_domain(range(100, 0, -1)) as domain:
+            yield domain
+    except NoFreeDomain as exc:
+        pytest.fail(str(exc))
 
 
 @pytest.fixture

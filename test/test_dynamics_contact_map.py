@@ -59,7 +59,6 @@ def test_a_rod_force_does_the_virtual_work_of_the_rod_point_between_its_joints(d
     D = B + f * (C - B)
     F = np.array([-1.0, 1.5, 2.5])
     W = plate_equivalent_wrench(desc, pose, "rod", i + 1, D, F)
-    R = hexa6rus.rotation_zyx(*pose[3:])
     axis = hexa6rus.arm_rotations(desc, zeta)[i][:, 2]
     for _ in range(5):
         V = rng.normal(size=6) * np.array([0.05, 0.05, 0.05, 0.5, 0.5, 0.5])

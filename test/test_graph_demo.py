@@ -15,26 +15,13 @@ PY = sys.executable
 
 
 @pytest.fixture(scope="module")
-def demo_run(tmp_path_factory):
-    from conftest import ProcessGroup  # noqa: PLC0415 - module-scoped: own process group and domain
-
-    import fcntl
-    import os
+def demo_run(tmp_path_factory, module_ros_domain_id):
+    from conftest import ProcessGroup  # noqa: PLC0415 - module-scoped: own process group
 
     from hexa_bringup.rosenv import ros_env
 
     out = tmp_path_factory.mktemp("demo")
-    domain, fd = None, None
-    for d in range(100, 0, -1):  # a domain no other test holds (same lock files as the ros_domain_id fixture)
-        fd = os.open(f"/tmp/hexa_ros_domain_{d}.lock", os.O_CREAT | os.O_RDWR, 0o666)
-        try:
-            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
-            domain = d
-            break
-        except OSError:
-            os.close(fd)
-    assert domain is not None
-    env = ros_env(domain)
+    env = ros_env(module_ros_domain_id)
     group = ProcessGroup()
     try:
         listener = group.start([PY, "test/graph_listener.py"], env)
@@ -44,8 +31,6 @@ def demo_run(tmp_path_factory):
         heard, _ = listener.communicate(timeout=30)
     finally:
         group.stop_all()
-        fcntl.flock(fd, fcntl.LOCK_UN)
-        os.close(fd)
     result = json.loads(demo_out.strip().splitlines()[-1])
     return {"out": out, "result": result, "stderr": demo_err, "returncode": demo.returncode,
             "heard": [json.loads(line) for line in heard.splitlines() if line.startswith("{")]}

@@ -50,30 +50,9 @@ def free_motion_run(trajectory: str, out_dir, domain: int, duration: float,
             "real_time_factor": real_time_factor, "wall_s": round(run.wall_s, 1)}
 
 
-@pytest.fixture
-def domain():
-    import fcntl
-    import os
-
-    for d in range(98, 0, -1):
-        fd = os.open(f"/tmp/hexa_ros_domain_{d}.lock", os.O_CREAT | os.O_RDWR, 0o666)
-        try:
-            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
-        except OSError:
-            os.close(fd)
-            continue
-        try:
-            yield d
-        finally:
-            fcntl.flock(fd, fcntl.LOCK_UN)
-            os.close(fd)
-        return
-    pytest.fail("no free ROS domain")
-
-
 @pytest.mark.parametrize("trajectory", TRAJECTORIES)
-def test_free_motion_on_each_trajectory_raises_no_collision(trajectory, tmp_path, domain):
-    r = free_motion_run(trajectory, tmp_path, domain, duration=8.0)
+def test_free_motion_on_each_trajectory_raises_no_collision(trajectory, tmp_path, ros_domain_id):
+    r = free_motion_run(trajectory, tmp_path, ros_domain_id, duration=8.0)
     assert r["residuals"] > 1000, r          # the observer ran at the current-sample rate (200 Hz) all along
     assert r["events"] == [], r
     assert r["rc"] == 0, r                   # the supervisor ended the graph normally (the simulator finished)

@@ -20,28 +20,14 @@ INPUTS = ["/hexa/joint_states", "/hexa/motor_currents", "/hexa/plate_pose", "/he
 @pytest.fixture(scope="module")
 def recorded_bag(tmp_path_factory):
     """One short plate-case run of the whole simulated graph, recorded (≈ 30 s wall)."""
-    import fcntl
-    import os
+    from rosdomain import held_ros_domain
 
     from hexa_bringup.demo_run import run_case
     from hexa_bringup.rosenv import ros_env
 
     out = tmp_path_factory.mktemp("replay")
-    domain, fd = None, None
-    for d in range(99, 0, -1):  # a domain no other test holds (same lock files as the ros_domain_id fixture)
-        fd = os.open(f"/tmp/hexa_ros_domain_{d}.lock", os.O_CREAT | os.O_RDWR, 0o666)
-        try:
-            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
-            domain = d
-            break
-        except OSError:
-            os.close(fd)
-    assert domain is not None
-    try:
+    with held_ros_domain(range(99, 0, -1)) as domain:  # held while the graph records
         run = run_case("plate", out, ros_env(domain), duration=4.2, status_every=1e9)
-    finally:
-        fcntl.flock(fd, fcntl.LOCK_UN)
-        os.close(fd)
     assert (run.bag / "metadata.yaml").exists(), f"no bag recorded (rc {run.returncode}, logs {run.log_dir})"
     return run.bag
 

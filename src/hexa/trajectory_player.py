@@ -109,8 +109,9 @@ class TrajectoryPlayer:
 
         The plate pose follows p_now + s(u)·(p_0 − p_now) with a smoothstep s over T = 1.5·max|dζ/ds| / speed (the
         smoothstep's peak rate is 1.5/T; the slope dζ/ds of every arm along the line is taken from 64 chords, as IK
-        is not linear), so no arm exceeds `speed` (rad/s), and the move starts and ends at rest. Trajectory time 0 is shifted by T: the trajectory (and its
-        `start_blend`) starts when the approach ends. Call it before the first command.
+        is not linear), so no arm exceeds `speed` (rad/s), and the move starts and ends at rest. Trajectory time 0
+        is shifted by T: the trajectory (and its `start_blend`) starts when the approach ends. Call it before the
+        first command.
 
         Raises:
             TrajectoryPlayerError: called after the first command, or speed not > 0.
