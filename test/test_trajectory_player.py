@@ -63,6 +63,33 @@ def test_after_the_duration_the_last_pose_is_held_as_finished(desc):
     p = TrajectoryPlayer(desc, TRAJECTORIES["circle"], 2.0)
     c = p.command(5.0)
     assert c.state == "finished" and np.allclose(c.pose, TRAJECTORIES["circle"](2.0)[0])
+    assert np.allclose(c.zeta_dot, 0.0)                   # held at rest, not at the end's velocity
+
+
+def test_loop_restarts_a_non_periodic_trajectory_without_a_jump(desc):
+    """The helix ends 5 cm above its start: looping cross-fades onto the next cycle (C¹), the circle is unchanged."""
+    traj, D = TRAJECTORIES["helix"], DURATIONS["helix"]
+    assert abs(traj(D)[0][2] - traj(0.0)[0][2]) > 0.04
+    p = TrajectoryPlayer(desc, traj, D, loop=True, loop_blend=2.0)
+    h, prev, peak = 0.005, None, 0.0
+    for k in range(int((D - 0.5) / h), int((D + 2.5) / h)):      # across the wrap and the whole blend
+        c = p.command(k * h)
+        assert c.state == "running"
+        if prev is not None:
+            fd = (c.zeta - prev.zeta) / h
+            assert np.allclose(fd, 0.5 * (c.zeta_dot + prev.zeta_dot), atol=2e-2), k   # rates match, no jump
+            assert np.abs(c.zeta - prev.zeta).max() < 0.01, k
+            peak = max(peak, np.abs(c.zeta_dot).max())
+        prev = c
+    plain = max(np.abs(TrajectoryPlayer(desc, traj, D).command(x).zeta_dot).max() for x in np.arange(0, D, 0.05))
+    assert peak < 1.5 * plain                                         # the offset costs little extra speed
+    assert np.allclose(p.command(D + 3.0).pose, traj(3.0)[0])         # after the blend: the next cycle itself
+    assert np.allclose(p.command(2 * D + 4.0).pose, traj(4.0)[0])
+    circle = TrajectoryPlayer(desc, TRAJECTORIES["circle"], D, loop=True)
+    for x in (0.3, 1.0, 1.7):                                         # periodic: the blend changes nothing
+        assert np.allclose(circle.command(D + x).pose, TRAJECTORIES["circle"](x)[0])
+    with pytest.raises(TrajectoryPlayerError, match="loop_blend"):
+        TrajectoryPlayer(desc, traj, D, loop=True, loop_blend=0.0)
 
 
 def test_a_late_caller_pauses_the_trajectory_instead_of_commanding_a_jump(desc):

@@ -4,7 +4,8 @@ collisions (hold | retract along the residual | ignore), resuming on a service c
 Parameters: `trajectory` ("circle" | "helix" | "ellipse" | "file"), `file` (CSV of t x y z alpha beta gamma in SI,
 for trajectory=file), `rate_hz` (100), `start_delay` (s after the first clock reading, 1.0), `start_time`
 (s, clock time of trajectory time 0; −1 = use start_delay; with the simulator's scenarios use 0.0 so that sim time =
-trajectory time), `loop` (false), `collision_policy` ("hold"),
+trajectory time), `loop` (false), `loop_blend` (s, 2.0: with loop, a trajectory that does not end where it starts —
+the helix — cross-fades onto its next cycle over this time instead of jumping), `collision_policy` ("hold"),
 `retract_distance` (m, 0.02), `retract_time` (s, 0.5), `max_step` (s, 0.03: the most trajectory time advances
 between two commands; when the node is late — a stalled host, sim time in bursts — the trajectory pauses instead of
 commanding a jump; 0 = no limit), `start_blend` (s, 1.0: the command blends from rest onto the trajectory, which
@@ -80,6 +81,7 @@ class TrajectoryNode(Node):
         self.start_delay = float(self.declare_parameter("start_delay", 1.0).value)
         self.start_time = float(self.declare_parameter("start_time", -1.0).value)
         loop = bool(self.declare_parameter("loop", False).value)
+        loop_blend = float(self.declare_parameter("loop_blend", 2.0).value)
         policy = str(self.declare_parameter("collision_policy", "hold").value)
         dist = float(self.declare_parameter("retract_distance", 0.02).value)
         rtime = float(self.declare_parameter("retract_time", 0.5).value)
@@ -108,7 +110,7 @@ class TrajectoryNode(Node):
             raise ValueError(f"parameter trajectory must be one of {sorted(TRAJECTORIES)} or 'file', got {name!r}")
         self.player = TrajectoryPlayer(self.desc, traj, duration, policy=policy, retract_distance=dist,
                                        retract_time=rtime, loop=loop, max_step=max_step or None,
-                                       start_blend=start_blend)
+                                       start_blend=start_blend, loop_blend=loop_blend)
         self.pub = self.create_publisher(JointState, "joint_commands", 10)
         self.pub_state = self.create_publisher(String, "trajectory_state", 10)
         self.pub_diag = self.create_publisher(DiagnosticArray, "/diagnostics", 10)

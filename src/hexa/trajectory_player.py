@@ -43,7 +43,12 @@ class TrajectoryPlayer:
         policy: reaction to a collision START: "hold", "retract" or "ignore".
         retract_distance: how far (m) the plate backs off along the external force in "retract".
         retract_time: seconds the retraction and the return blend take.
-        loop: restart the trajectory after `duration`.
+        loop: restart the trajectory after `duration`. A trajectory that does not end where it starts (the helix
+            rises 5 cm in its 10 s) would jump there; instead the first `loop_blend` seconds of each new cycle
+            cross-fade from the old cycle continued (the trajectory function evaluated past `duration`) onto the new
+            one with a smoothstep: position and velocity stay continuous, the offset is taken up at ≤ 1.5·offset /
+            loop_blend extra speed. A periodic trajectory (circle, ellipse) is unchanged by it.
+        loop_blend: seconds of that cross-fade (> 0).
         max_step: the most (s) trajectory time may advance between two successive commands, or None (no limit).
             When the caller is late (a stalled host, a clock delivered in bursts) the trajectory pauses for the
             surplus instead of jumping: the servos never receive a step of more than `max_step` of motion, which
@@ -59,11 +64,14 @@ class TrajectoryPlayer:
 
     def __init__(self, desc: "HexaDescription", trajectory: Callable[[float], tuple], duration: float,
                  policy: str = "hold", retract_distance: float = 0.02, retract_time: float = 0.5,
-                 loop: bool = False, max_step: float | None = None, start_blend: float = 0.0) -> None:
+                 loop: bool = False, max_step: float | None = None, start_blend: float = 0.0,
+                 loop_blend: float = 2.0) -> None:
         if policy not in POLICIES:
             raise TrajectoryPlayerError(f"unknown collision policy {policy!r}; use one of {POLICIES}")
         if not (start_blend >= 0 and np.isfinite(start_blend)):
             raise TrajectoryPlayerError(f"start_blend must be >= 0, got {start_blend}")
+        if not (loop_blend > 0 and np.isfinite(loop_blend)):
+            raise TrajectoryPlayerError(f"loop_blend must be > 0 s, got {loop_blend}")
         if max_step is not None and not max_step > 0:
             raise TrajectoryPlayerError(f"max_step must be > 0 or None, got {max_step}")
         if not duration > 0 or not retract_time > 0 or retract_distance < 0:
@@ -80,6 +88,7 @@ class TrajectoryPlayer:
         self.retract_distance = float(retract_distance)
         self.retract_time = float(retract_time)
         self.loop = loop
+        self.loop_blend = float(loop_blend)
         self.max_step = None if max_step is None else float(max_step)
         self._last_t = 0.0          # time of the previous command (for max_step)
         self.lag_events = 0
@@ -163,9 +172,20 @@ class TrajectoryPlayer:
 
     # -- sampling ------------------------------------------------------------------------------------------------
     def _trajectory_pose(self, tt: float) -> tuple[np.ndarray, np.ndarray]:
-        if self.loop:
-            tt = tt % self.duration
-        tt = min(max(tt, 0.0), self.duration)
+        if self.loop and tt >= self.duration:
+            cycle, x = divmod(tt, self.duration)
+            pose, pose_dot = self._raw_pose(x)
+            if x < self.loop_blend:  # cross-fade from the previous cycle continued past its end
+                old, old_dot = self._raw_pose(x + self.duration)
+                u = x / self.loop_blend
+                s, ds = _smoothstep(u), 6.0 * u * (1.0 - u) / self.loop_blend
+                pose_dot = (1.0 - s) * old_dot + s * pose_dot + ds * (pose - old)
+                pose = (1.0 - s) * old + s * pose
+            return pose, pose_dot
+        pose, pose_dot = self._raw_pose(min(max(tt, 0.0), self.duration))
+        return pose, (pose_dot if tt <= self.duration else np.zeros(6))   # finished: held at rest
+
+    def _raw_pose(self, tt: float) -> tuple[np.ndarray, np.ndarray]:
         pose, pose_dot, _ = self.trajectory(tt)
         return np.asarray(pose, dtype=float), np.asarray(pose_dot, dtype=float)
 
