@@ -75,10 +75,10 @@ def test_runtime_parameters_reach_the_detector_and_the_estimator(rcl):
     rcl.append(node)
     res = node.set_parameters([Parameter("thresholds", value=[3.0, 3.0, 4.0, 0.3, 0.3, 0.5]),
                                Parameter("gains", value=[50.0] * 6), Parameter("camera_sigma", value=0.01),
-                               Parameter("min_duration", value=0.02)])
+                               Parameter("min_duration", value=0.025)])
     assert all(r.successful for r in res)
     assert node.observer.detector.thresholds.tolist() == [3.0, 3.0, 4.0, 0.3, 0.3, 0.5]
-    assert node.observer.detector.config.min_duration == 0.02
+    assert node.observer.detector.config.min_duration == 0.025
     assert node.observer._K.tolist() == [50.0] * 6
     assert node.estimator.config.camera_sigma == 0.01
     bad = node.set_parameters([Parameter("thresholds", value=[3.0, -1.0, 4.0, 0.3, 0.3, 0.5])])

@@ -33,8 +33,9 @@ def test_trajectory_node_rejects_an_unknown_trajectory_with_a_clear_error(procs,
 
 
 def test_trajectory_node_approaches_the_start_slowly_from_the_measured_pose(procs, ros_env):
-    """approach_speed > 0: nothing is commanded before a plate_pose (servos stay limp), a bad pose is refused, then
-    the first command is the measured pose's IK and the arms move no faster than approach_speed to the start."""
+    """approach_speed > 0: nothing is commanded before a plate_pose (servos stay limp), a bad or 2 s old pose is not
+    used, then the first command is the measured pose's IK and the arms move no faster than approach_speed to the
+    start."""
     procs.start([PY, "-m", "hexa_dynamics.trajectory_node", "--ros-args", "-r", "__ns:=/hexa",
                  "-p", "start_delay:=0.0", "-p", "trajectory:=circle", "-p", "approach_speed:=0.3"], ros_env)
     peer = procs.start([PY, "test/trajectory_approach_peer.py"], ros_env)
@@ -43,6 +44,7 @@ def test_trajectory_node_approaches_the_start_slowly_from_the_measured_pose(proc
     r = json.loads(out.strip().splitlines()[-1])
     assert r["commands_before_pose"] == 0 and r["state_before_pose"] == "waiting_for_pose"
     assert r["commands_after_bad_pose"] == 0
+    assert r["commands_after_stale_pose"] == 0 and r["state_after_stale_pose"] == "waiting_for_pose"
     assert r["first_command_error"] < 1e-6
     assert r["saw_approaching"] and r["approach_commands"] > 20       # ≈ 1.5 · 0.08 rad / 0.3 rad/s at 100 Hz
     assert r["gap_first"] > 0.05 and r["gap_last"] < 0.01

@@ -17,6 +17,7 @@ OFFSET = np.array([0.015, -0.02, 0.01, 0.04, 0.0, -0.03])   # the measured pose:
 def main() -> int:
     apply_defaults()
     import rclpy
+    import rclpy.duration
     from geometry_msgs.msg import PoseStamped
     from sensor_msgs.msg import JointState
     from std_msgs.msg import String
@@ -44,10 +45,10 @@ def main() -> int:
         while time.monotonic() < end:
             rclpy.spin_once(node, timeout_sec=0.02)
 
-    def pose_msg(pose: np.ndarray, quat=None) -> PoseStamped:
+    def pose_msg(pose: np.ndarray, quat=None, age: float = 0.0) -> PoseStamped:
         m = PoseStamped()
         m.header.frame_id = "base"
-        m.header.stamp = node.get_clock().now().to_msg()
+        m.header.stamp = (node.get_clock().now() - rclpy.duration.Duration(seconds=age)).to_msg()
         m.pose.position.x, m.pose.position.y, m.pose.position.z = (float(v) for v in pose[:3])
         q = quat or quaternion_from_matrix(hexa6rus.rotation_zyx(*pose[3:]))
         m.pose.orientation.x, m.pose.orientation.y, m.pose.orientation.z, m.pose.orientation.w = q
@@ -65,6 +66,11 @@ def main() -> int:
         pub.publish(pose_msg(np.full(6, math.nan)))
         spin(0.2)
     out["commands_after_bad_pose"] = len(cmds)
+    for _ in range(5):                                         # a good pose, but 2 s old: not used
+        pub.publish(pose_msg(here, age=2.0))
+        spin(0.2)
+    out["commands_after_stale_pose"] = len(cmds)
+    out["state_after_stale_pose"] = states[-1] if states else None
     deadline = time.monotonic() + 20
     while not cmds and time.monotonic() < deadline:
         pub.publish(pose_msg(here))

@@ -10,8 +10,9 @@ the helix — cross-fades onto its next cycle over this time instead of jumping)
 between two commands; when the node is late — a stalled host, sim time in bursts — the trajectory pauses instead of
 commanding a jump; 0 = no limit), `start_blend` (s, 1.0: the command blends from rest onto the trajectory, which
 starts moving at once as in the paper; 0 = velocity step at the start), `approach_speed` (rad/s, 0 = off: with
-> 0 nothing is commanded until a `plate_pose` arrives; from that measured pose the plate moves slowly — no arm faster
-than this — to the trajectory's start pose, then the trajectory starts; `hexa bringup robot` sets 0.3),
+> 0 nothing is commanded until a `plate_pose` arrives (used if ≤ 0.5 s old); from that measured pose the plate
+moves slowly — no arm faster than this — to the trajectory's start pose, then the trajectory starts; `hexa bringup
+robot` sets 0.3),
 `approach_tolerance` (rad, 0.02: no approach when every arm is this close), `description` (robot YAML path,
 default packaged).
 Topics (relative): pub `joint_commands` (sensor_msgs/JointState, arm_1..arm_6, ζ rad and ζ̇ rad/s),
@@ -39,6 +40,9 @@ from std_msgs.msg import String
 from std_srvs.srv import Trigger
 
 JOINT_NAMES = [f"arm_{i}" for i in range(1, 7)]
+#: s: the approach starts only from a plate_pose whose stamp is this recent (limp servos let the plate sag; a stalled
+#: camera lies)
+APPROACH_POSE_MAX_AGE = 0.5
 
 
 def load_pose_file(path: str):
@@ -119,6 +123,7 @@ class TrajectoryNode(Node):
         if policy == "retract":
             self.create_subscription(Residual, "residual", self._on_residual, 10)
         self._pose_now: np.ndarray | None = None
+        self._pose_time = -math.inf
         self._pose_sub = None
         self.bad_poses = 0
         if self.approach_speed > 0:
@@ -146,7 +151,7 @@ class TrajectoryNode(Node):
         if self._t0 is None:
             self._t0 = self.start_time if self.start_time >= 0 else now + self.start_delay
         if self._pose_sub is not None:  # approach: the trajectory clock starts at the first measured pose
-            if self._pose_now is None or now < self._t0:
+            if self._pose_now is None or now < self._t0 or now - self._pose_time > APPROACH_POSE_MAX_AGE:
                 return None
             self._plan_approach(now)
         return now - self._t0
@@ -162,7 +167,8 @@ class TrajectoryNode(Node):
             self.bad_poses += 1
             self.get_logger().warn(f"plate_pose rejected: {exc}", throttle_duration_sec=1.0)
             return
-        self._pose_now = pose
+        stamp = msg.header.stamp.sec + msg.header.stamp.nanosec * 1e-9
+        self._pose_now, self._pose_time = pose, (stamp if stamp > 0 else self._now())   # the image's time
 
     def _plan_approach(self, now: float) -> None:
         """Once: the approach from the latest measured pose; the trajectory clock starts now."""
@@ -185,7 +191,8 @@ class TrajectoryNode(Node):
         t = self._t()
         if t is None:
             if self._pose_sub is not None:
-                self._state = "waiting_for_pose" if self._pose_now is None else "waiting"
+                fresh = self._pose_now is not None and self._now() - self._pose_time <= APPROACH_POSE_MAX_AGE
+                self._state = "waiting" if fresh else "waiting_for_pose"
                 self.pub_state.publish(String(data=self._state))
             return
         try:
