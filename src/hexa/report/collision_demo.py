@@ -207,8 +207,9 @@ def plot_case(d: CaseData, m: CaseMetrics, path: str | Path) -> Path:
         for a in ax:
             a.axvline(t, color="tab:orange" if kind == "START" else "tab:purple", lw=0.8)
     ax[0].set_ylabel("residual / force (N)")
+    found = f"delay {m.delay_ms:.1f} ms" if np.isfinite(m.delay_ms) else "not detected"
     ax[0].set_title(f"case {d.case}: true {m.true_link} chain {m.true_chain}; found {m.found_link} chain "
-                    f"{m.found_chain}; delay {m.delay_ms:.1f} ms")
+                    f"{m.found_chain}; {found}")
     ax[1].set_ylabel("contact force (N)")
     if len(d.contact_t):
         idx = _nearest_index(d.truth_t, d.contact_t)
