@@ -16,6 +16,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from hexa.dynamics._kernel import exp_rotate
 from hexa.kinematics import hexa6rus
 
 if TYPE_CHECKING:
@@ -44,11 +45,9 @@ def _perturbed_pose(pose: NDArray, k: int, h: float) -> NDArray:
     if k < 3:
         out[k] += h
         return out
-    w = np.zeros(3)
+    w = [0.0, 0.0, 0.0]
     w[k - 3] = h
-    c, s = np.cos(h), np.sin(h)
-    K = np.array([[0.0, -w[2], w[1]], [w[2], 0.0, -w[0]], [-w[1], w[0], 0.0]]) / h
-    R = (np.eye(3) + s * K + (1.0 - c) * K @ K) @ hexa6rus.rotation_zyx(*pose[3:])
+    R = np.array(exp_rotate(*w, hexa6rus.rotation_zyx(*pose[3:]).ravel().tolist())).reshape(3, 3)   # exp([w]×)·R
     out[3:] = np.array(hexa6rus.rotation_to_zyx(R), dtype=float)
     return out
 
