@@ -33,6 +33,11 @@ def _smoothstep(s: float) -> float:
     return s * s * (3.0 - 2.0 * s)
 
 
+def _smoothstep_rate(u: float, duration: float) -> float:
+    """d/dt of _smoothstep(t / duration) at u = t / duration (0 outside 0..1)."""
+    return 6.0 * u * (1.0 - u) / duration if 0.0 < u < 1.0 else 0.0
+
+
 class TrajectoryPlayer:
     """Samples `trajectory(t) -> (pose, pose_dot, pose_ddot)` and converts poses to ζ by IK.
 
@@ -107,6 +112,7 @@ class TrajectoryPlayer:
             self._resume_at, self._blend_time = 0.0, float(start_blend)
             self._resume_from = self._trajectory_pose(0.0)[0]
         self._approach_from: np.ndarray | None = None   # pose the approach starts at (trajectory time −T)
+        self._approach_delta = np.zeros(6)               # start pose − _approach_from
         self.approach_time = 0.0
         self._last: Command | None = None
         self.ik_failures = 0
@@ -131,16 +137,15 @@ class TrajectoryPlayer:
         if not (speed > 0 and np.isfinite(speed)):
             raise TrajectoryPlayerError(f"approach speed must be > 0 rad/s, got {speed}")
         pose_now = np.asarray(pose_now, dtype=float).reshape(6)
-        p0 = self._trajectory_pose(0.0)[0]
-        z_now = np.asarray(self._ik(self.desc, pose_now))
-        if float(np.max(np.abs(np.asarray(self._ik(self.desc, p0)) - z_now))) < tolerance:
-            return 0.0
-        # the largest arm rate per unit of path along the straight pose line (IK is not linear): 64 chords
+        delta = self._trajectory_pose(0.0)[0] - pose_now
+        # the arms along the straight pose line, 64 chords (IK is not linear): their largest rate per unit of path
         s = np.linspace(0.0, 1.0, 65)
-        zs = np.array([z_now] + [self._ik(self.desc, pose_now + v * (p0 - pose_now)) for v in s[1:]])
+        zs = np.array([self._ik(self.desc, pose_now + v * delta) for v in s])
+        if float(np.max(np.abs(zs[-1] - zs[0]))) < tolerance:
+            return 0.0
         slope = float(np.max(np.abs(np.diff(zs, axis=0)))) * (len(s) - 1)
         self.approach_time = 1.5 * slope / float(speed)
-        self._approach_from = pose_now
+        self._approach_from, self._approach_delta = pose_now, delta
         self._offset += self.approach_time
         return self.approach_time
 
@@ -173,12 +178,12 @@ class TrajectoryPlayer:
     # -- sampling ------------------------------------------------------------------------------------------------
     def _trajectory_pose(self, tt: float) -> tuple[np.ndarray, np.ndarray]:
         if self.loop and tt >= self.duration:
-            cycle, x = divmod(tt, self.duration)
+            x = tt % self.duration
             pose, pose_dot = self._raw_pose(x)
             if x < self.loop_blend:  # cross-fade from the previous cycle continued past its end
                 old, old_dot = self._raw_pose(x + self.duration)
                 u = x / self.loop_blend
-                s, ds = _smoothstep(u), 6.0 * u * (1.0 - u) / self.loop_blend
+                s, ds = _smoothstep(u), _smoothstep_rate(u, self.loop_blend)
                 pose_dot = (1.0 - s) * old_dot + s * pose_dot + ds * (pose - old)
                 pose = (1.0 - s) * old + s * pose
             return pose, pose_dot
@@ -190,10 +195,9 @@ class TrajectoryPlayer:
         return np.asarray(pose, dtype=float), np.asarray(pose_dot, dtype=float)
 
     def _approach_pose(self, tt: float) -> tuple[np.ndarray, np.ndarray]:
-        T = self.approach_time
-        u = min(1.0, max(0.0, (tt + T) / T))
-        delta = self._trajectory_pose(0.0)[0] - self._approach_from
-        return self._approach_from + _smoothstep(u) * delta, 6.0 * u * (1.0 - u) / T * delta
+        u = (tt + self.approach_time) / self.approach_time
+        return (self._approach_from + _smoothstep(u) * self._approach_delta,
+                _smoothstep_rate(u, self.approach_time) * self._approach_delta)
 
     def command(self, t: float) -> Command:
         """The command at time t (s, sim or wall clock, monotonic).
@@ -229,7 +233,7 @@ class TrajectoryPlayer:
                 u = (tt - self._resume_at) / self._blend_time
                 s = _smoothstep(u)
                 if s < 1.0:
-                    ds = 6.0 * u * (1.0 - u) / self._blend_time if u > 0 else 0.0  # d(smoothstep)/dt
+                    ds = _smoothstep_rate(u, self._blend_time)
                     pose_dot = ds * (pose - self._resume_from) + s * pose_dot
                     pose = self._resume_from + (pose - self._resume_from) * s
                     state = state if self._starting else "resuming"
