@@ -141,10 +141,9 @@ def case_data_from_bag(case: str, bag: Path, ns: str = "/hexa"):
     """
     from hexa.report.collision_demo import CaseData
     from hexa_bringup.bag import read_bag, typestore
-
-    store = typestore()
     from hexa_dynamics.conversions import hexa_pose_from_msg
 
+    store = typestore()
     rows: dict[str, list] = {k: [] for k in ("truth", "wrench_truth", "pose_truth", "res", "ev", "contact",
                                              "wrench")}
     for topic, msgtype, _t, data in read_bag(bag):

@@ -137,9 +137,7 @@ def compute_metrics(d: CaseData, r_low: float = 2.0, desc=None) -> CaseMetrics:
     plate_exceed, observer_delay_ms = float("nan"), float("nan")
     if d.truth_pose is not None:
         W = plate_equivalent_truth(d, desc)
-        th = (np.asarray(d.threshold, dtype=float) if len(d.threshold) == 6
-              else np.array([r_low] * 3 + [0.1 * r_low] * 3))
-        w_over = np.nanmax(np.abs(W) / th, axis=1) > 1.0
+        w_over = np.nanmax(np.abs(W) / np.asarray(d.threshold, dtype=float), axis=1) > 1.0
         w_over &= d.truth_t >= onset
         if w_over.any():
             plate_exceed = float(d.truth_t[int(np.argmax(w_over))])
