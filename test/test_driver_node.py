@@ -166,3 +166,45 @@ def test_a_command_held_by_the_rate_limit_is_sent_on_wall_time_under_sim_time(tm
             assert wait_for(lambda: got and got[-1] == pulses_b, 2.0), got[-3:]
             got.clear()
         assert mega.rx_crc_errors == 0 and uno.rx_crc_errors == 0
+
+
+def test_a_late_burst_of_samples_carries_the_command_in_effect_when_each_was_measured(tmp_path, procs, ros_env,
+                                                                                       probe):
+    """The Mega's samples are held back for 60 ms (its thread blocked) while a new command goes out, then arrive in
+    one burst: the samples measured before the Uno got the command keep the previous command in joint_states, the
+    ones after carry the new one (by the board clock, hexa.protocol.board_clock). Pairing by handling time — what
+    the driver did before — gave the whole burst the new command."""
+    desc = load_hexa()
+    servos = servo_calibrations_from_config(None, desc)
+    zeta0 = np.full(6, desc.zeta_center)
+    zeta1 = zeta0 + 0.05
+    pulses1 = tuple(s.pulse_from_angle(z) for s, z in zip(servos, zeta1))
+    received = {}
+    with MegaEmulator(current_source=lambda t: [0.0] * 6, link=tmp_path / "mega") as mega, \
+            UnoEmulator(on_targets=lambda p: received.setdefault(p, mega.board_time_us()),
+                        link=tmp_path / "uno") as uno:
+        # a board clock that never stops (a real Mega's): extrapolate past the newest sample as far as needed
+        procs.start(driver_args(uno.port, mega.port, "max_speed:=0.0", "stream_rate_hz:=200",
+                                "board_clock_max_extrapolation:=0.1"), ros_env)
+        assert wait_for(lambda: len(probe.currents) >= 20, 30.0), "no motor_currents from the driver"
+        probe.command(zeta0)
+        assert wait_for(lambda: np.allclose(probe.states[-1][1].position, zeta0), 5.0)
+        time.sleep(0.5)                                    # the board clock's rate is fitted over ≥ 0.2 s
+        with mega._lock:                                   # the Mega's thread waits: its samples come late
+            b_hold = mega.board_time_us()
+            time.sleep(0.03)
+            probe.command(zeta1)
+            assert wait_for(lambda: pulses1 in received, 2.0), "the Uno did not get the command"
+            time.sleep(0.03)
+        assert wait_for(lambda: len(probe.currents) > 0 and probe.currents[-1][1].board_time_us
+                        > received[pulses1] + 100_000, 5.0)
+        time.sleep(0.1)
+        by_stamp = {(m.header.stamp.sec, m.header.stamp.nanosec): m.board_time_us for _, m in probe.currents}
+        samples = [(by_stamp[(js.header.stamp.sec, js.header.stamp.nanosec)], np.asarray(js.position))
+                   for _, js in probe.states if (js.header.stamp.sec, js.header.stamp.nanosec) in by_stamp]
+        b_cmd, margin = received[pulses1], 3000            # µs: serial latency to the Uno + the map's error
+        before = [p for b, p in samples if b_hold <= b < b_cmd - margin]
+        after = [p for b, p in samples if b > b_cmd + margin]
+        assert len(before) >= 4, f"only {len(before)} samples held back before the command"
+        assert all(np.allclose(p, zeta0) for p in before), [p[0] for p in before]
+        assert len(after) >= 10 and all(np.allclose(p, zeta1) for p in after)

@@ -2,7 +2,8 @@
 
 Thin ROS wrapper: the protocol, links and conversions live in hexa.protocol (link.py, driver_core.py).
 Topics (relative, run it in /hexa): sub `joint_commands` (sensor_msgs/JointState, rad); pub `joint_states`
-(position = commanded angle, effort = K_t (I - I_0)), `motor_currents` (hexa_msgs/MotorCurrents), `/diagnostics`.
+(position = the command in effect when the current sample was measured, effort = K_t (I - I_0)), `motor_currents`
+(hexa_msgs/MotorCurrents), `/diagnostics`.
 Service `calibrate_currents` (hexa_msgs/CalibrateCurrents). Parameters: config/driver.yaml (docs/driver.md).
 """
 from __future__ import annotations
@@ -26,6 +27,7 @@ from rclpy.qos import QoSProfile, ReliabilityPolicy, HistoryPolicy
 from sensor_msgs.msg import JointState
 
 from hexa.protocol import frames as fr
+from hexa.protocol.board_clock import BoardClockMap, CommandTimeline
 from hexa.protocol.driver_core import (SCALAR_KEYS, CommandRejected, default_driver_config_path,
                                        driver_core_from_config, load_driver_config,
                                        servo_calibrations_from_config)
@@ -70,6 +72,11 @@ class DriverNode(Node):
         self._last_sent = 0.0
         self._min_interval = 1.0 / float(cfg["command_rate_hz"])
         self._calib: list | None = None
+        # each sample is paired with the command in effect when the Mega measured it (by its board clock), not the
+        # one current when this node handled it: samples arrive in bursts (hexa.protocol.board_clock)
+        self.board_clock = BoardClockMap(max_extrapolation=float(cfg["board_clock_max_extrapolation"]))
+        self.timeline = CommandTimeline()
+        self._board_restarts = 0
         self._last_sample_time = 0.0
         self._rate_mark = (time.monotonic(), 0)
         self._rate_hz = 0.0
@@ -105,6 +112,10 @@ class DriverNode(Node):
     def _on_link_state(self, board: str, state: str) -> None:
         if not self.context.ok():
             return
+        if board == "mega" and state == CONNECTED:  # the board may have restarted: its clock with it
+            with self._lock:
+                self.board_clock.reset()
+                self.timeline.rebase()
         # separate call sites: rclpy refuses one call site logging at two severities
         if state == CONNECTED:
             self.get_logger().info(f"{board} link CONNECTED")
@@ -133,6 +144,7 @@ class DriverNode(Node):
             now = time.monotonic()
             zeta = self.core.limit_command(zeta, now)
             pulses = self.core.accept(zeta, now)
+            self.timeline.add(self.board_clock.board_time_at(now), self.core.commanded)
             self._last_sent = now
         if not self.uno.set_targets(pulses):
             self.tx_failures += 1
@@ -154,8 +166,16 @@ class DriverNode(Node):
         js.header.stamp = stamp
         js.header.frame_id = self.frame_id
         js.name = list(self.core.joint_names)
-        if self.uno.connected:
-            js.position = [float(z) for z in self.core.commanded]
+        with self._lock:
+            board_time = self.board_clock.update(sample.board_time_us, t_rx)
+            if self.board_clock.restarts != self._board_restarts:
+                self._board_restarts = self.board_clock.restarts
+                self.timeline.rebase()
+            command = self.timeline.at(board_time)
+        if self.uno.connected and command is not None:
+            js.position = [float(z) for z in command]
+        elif self.uno.connected:  # nothing commanded yet: the firmware keeps the servos limp
+            js.position = [float("nan")] * len(self.core.joint_names)
         else:  # no servo board: the arms are not driven, their angle is unknown
             js.position = [float("nan")] * len(self.core.joint_names)
         js.effort = [float(t) for t in effort]
@@ -232,7 +252,8 @@ class DriverNode(Node):
         uno_status = self.uno.status
         mega_extra = [("sample_rate_hz", f"{self._rate_hz:.1f}"), ("sample_rate_commanded_hz", self.mega.rate_hz),
                       ("samples", self.mega.samples), ("sample_gaps", self.mega.sample_gaps),
-                      ("data_age_s", f"{age:.3f}"),
+                      ("data_age_s", f"{age:.3f}"), ("board_clock_rate", f"{self.board_clock.rate:.4f}"),
+                      ("board_clock_restarts", self.board_clock.restarts),
                       ("board_overruns", self.mega.status.overruns if self.mega.status else "?")]
         uno_extra = [("commands_accepted", c.accepted), ("commands_rejected_nan", c.rejected_nan),
                      ("commands_rejected_names", c.rejected_names), ("commands_clamped", c.clamped),

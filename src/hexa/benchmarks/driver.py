@@ -69,6 +69,27 @@ def _bench_parser(quick: bool) -> list[BenchRow]:
     ]
 
 
+def _bench_board_clock(quick: bool) -> list[BenchRow]:
+    """Per-sample cost of pairing a sample with the command in effect when it was measured (board clock map +
+    command timeline, hexa.protocol.board_clock) at 1 kHz with a command every 10 ms."""
+    from hexa.protocol.board_clock import BoardClockMap, CommandTimeline
+
+    n = 20_000 if quick else 200_000
+    m, tl = BoardClockMap(), CommandTimeline()
+    zeta = np.zeros(6)
+    rng = np.random.default_rng(0)
+    late = rng.uniform(1e-4, 5e-4, n)
+    t0 = time.perf_counter()
+    for k in range(n):
+        t = k * 1e-3
+        if k % 10 == 0:
+            tl.add(m.board_time_at(t), zeta)
+        tl.at(m.update(k * 1000, t + late[k]))
+    us = (time.perf_counter() - t0) / n * 1e6
+    return [BenchRow("sample/command pairing by the board clock, per sample", us, "us", "<= 50 us", us <= 50,
+                     f"{n} samples at 1 kHz, a command every 10 ms; at 1 kHz {us / 10:.1f} % of a core")]
+
+
 def _bench_link_latency(quick: bool) -> list[BenchRow]:
     from hexa.protocol.emulator import MegaEmulator, UnoEmulator
     from hexa.protocol.link import CurrentLink, ServoLink
@@ -263,6 +284,7 @@ def _bench_node_latency(quick: bool) -> list[BenchRow]:
 @register("driver")
 def bench(quick: bool) -> list[BenchRow]:
     rows = _bench_parser(quick)
+    rows += _bench_board_clock(quick)
     rows += _bench_link_latency(quick)
     try:
         rows += _bench_firmware_latency(quick)

@@ -1,0 +1,171 @@
+"""Which joint command was in effect when a current sample was measured.
+
+The current board (Mega) stamps each sample with its own microsecond clock; the host knows only when the sample
+*arrived*, and samples arrive in bursts — a USB-serial latency timer, a busy host, a driver thread that waited for the
+GIL. The driver used to pair each sample with the command it had sent by the time it *handled* the sample, so a burst
+of samples measured before a command went out was paired with that command: the arm-angle estimator then placed the
+set-point step up to a burst early, and the collision observer's residual spiked (docs/observer_node.md, "Command
+timing in the driver").
+
+Here the host keeps a map from its clock to the board's, built from the samples themselves. A sample with board time
+b_k that arrived at host time t_k says that the board clock read *at least* b_k at t_k (it was measured before it
+arrived). With the board clock's rate ρ (board seconds per host second: 1 up to a resonator's tolerance on the robot,
+the real-time factor in simulation), the board time at host time t is the upper envelope of these bounds,
+
+    b(t) = max_k [ b_k + ρ (t − t_k) ]      over the samples of the last `envelope_window` s,
+
+which the least-delayed sample of a burst decides. Each command is stamped with b(t_send) when it is sent, and each
+sample is paired with the latest command whose board stamp is not after the sample's board time
+(`CommandTimeline.at`). The servo's own delay (the Uno's serial latency, the 50 Hz pulse frame) is not part of this:
+it is the estimator's `command_delay` (hexa.estimation.ServoModel).
+"""
+from __future__ import annotations
+
+import itertools
+import math
+from collections import deque
+
+import numpy as np
+
+#: the board's microsecond clock wraps at 2³² µs (71.6 min), like Arduino's micros()
+BOARD_CLOCK_WRAP_S = 2 ** 32 * 1e-6
+#: a board clock that goes back by more than this (µs) was restarted (a board reset); less: a sample out of order
+RESTART_STEP_US = 100_000
+#: the rate is refitted every this many samples
+RATE_EVERY = 10
+
+
+class BoardClockMap:
+    """Host time → board time of one board, from its samples' (board time, arrival time) pairs.
+
+    Args:
+        envelope_window: samples that arrived within this many host seconds of the newest one bound the board clock
+            (s); a longer window makes an error in the rate count more.
+        rate_window: host seconds of samples over which the board clock's rate is fitted (s).
+        rate_bounds: the fitted rate is kept within these (board s per host s); before `min_rate_span` s of samples
+            the rate is `nominal_rate`.
+        nominal_rate: rate used until the fit has enough span (1: the board runs on real time).
+        min_rate_span: host seconds of samples needed before the rate is fitted (s).
+        max_extrapolation: the estimate never runs more than this (board s) past the newest sample: a silence is a
+            starved host thread on the robot (the board clock runs on) but mostly a paused simulator in simulation
+            (the board clock stands still while a camera frame renders); unbounded, the estimate overshot the true
+            set-point time by up to 30 ms there.
+    """
+
+    def __init__(self, envelope_window: float = 0.05, rate_window: float = 1.0,
+                 rate_bounds: tuple[float, float] = (0.02, 5.0), nominal_rate: float = 1.0,
+                 min_rate_span: float = 0.2, max_extrapolation: float = 0.01) -> None:
+        if not (envelope_window > 0 and rate_window >= envelope_window and 0 < rate_bounds[0] <= rate_bounds[1]
+                and rate_bounds[0] <= nominal_rate <= rate_bounds[1] and 0 < min_rate_span <= rate_window
+                and max_extrapolation >= 0):
+            raise ValueError(f"bad BoardClockMap windows/rates: envelope {envelope_window}, rate window {rate_window}"
+                             f", bounds {rate_bounds}, nominal {nominal_rate}, min span {min_rate_span}, "
+                             f"max extrapolation {max_extrapolation}")
+        self.envelope_window = float(envelope_window)
+        self.rate_window = float(rate_window)
+        self.rate_bounds = (float(rate_bounds[0]), float(rate_bounds[1]))
+        self.nominal_rate = float(nominal_rate)
+        self.min_rate_span = float(min_rate_span)
+        self.max_extrapolation = float(max_extrapolation)
+        self.restarts = 0           # board clock went backwards (board reset): the map started over
+        self.reset()
+
+    def reset(self) -> None:
+        """Forget every sample (a new connection: the board clock may have restarted)."""
+        self._pairs: deque[tuple[float, float]] = deque()   # (host time, unwrapped board time), host time ascending
+        self._last_raw: int | None = None
+        self._wraps = 0
+        self._count = 0
+        self.rate = self.nominal_rate
+
+    def update(self, board_time_us: int, t_host: float) -> float:
+        """Record a sample measured at board time `board_time_us` (µs, wrapping at 2³²) that arrived at host time
+        `t_host` (s, monotonic); returns its unwrapped board time (s)."""
+        raw = int(board_time_us) & 0xFFFFFFFF
+        wraps = self._wraps
+        if self._last_raw is not None and raw < self._last_raw:
+            if self._last_raw - raw > 2 ** 31:      # the counter wrapped
+                wraps = self._wraps = self._wraps + 1
+            elif self._last_raw - raw > RESTART_STEP_US:   # the clock went back: the board restarted
+                self.restarts += 1
+                self.reset()
+                wraps = 0
+            else:                                   # a sample out of order (not from a serial link): keep the newest
+                return raw * 1e-6 + wraps * BOARD_CLOCK_WRAP_S
+        self._last_raw = raw
+        b = raw * 1e-6 + wraps * BOARD_CLOCK_WRAP_S
+        t_host = float(t_host)
+        if self._pairs and t_host < self._pairs[-1][0]:  # arrival times never go back: keep the envelope's order
+            t_host = self._pairs[-1][0]
+        self._pairs.append((t_host, b))
+        while self._pairs[0][0] < t_host - self.rate_window:
+            self._pairs.popleft()
+        self._count += 1
+        if self._count % RATE_EVERY == 0 and t_host - self._pairs[0][0] >= self.min_rate_span:
+            self._fit_rate()
+        return b
+
+    def _fit_rate(self) -> None:
+        """Rate between the least-delayed samples at the two ends of the rate window (late samples of a burst
+        would bias a fit through all of them low)."""
+        t_first, t_last = self._pairs[0][0], self._pairs[-1][0]
+        head = [p for p in itertools.takewhile(lambda p: p[0] <= t_first + self.envelope_window, self._pairs)]
+        tail = [p for p in itertools.takewhile(lambda p: p[0] >= t_last - self.envelope_window,
+                                               reversed(self._pairs))]
+        t_a, b_a = max(head, key=lambda p: p[1] - self.rate * p[0])
+        t_b, b_b = max(tail, key=lambda p: p[1] - self.rate * p[0])
+        if t_b - t_a >= self.min_rate_span and b_b > b_a:
+            lo, hi = self.rate_bounds
+            self.rate = min(max((b_b - b_a) / (t_b - t_a), lo), hi)
+
+    def board_time_at(self, t_host: float) -> float | None:
+        """Board time (s, unwrapped) at host time `t_host`: the upper envelope of the recent samples' bounds, at most
+        `max_extrapolation` past the newest sample's board time; None before the first sample."""
+        if not self._pairs:
+            return None
+        t_new, b_new = self._pairs[-1]
+        best = -math.inf
+        for t_k, b_k in reversed(self._pairs):
+            if t_k < t_new - self.envelope_window:
+                break
+            best = max(best, b_k + self.rate * (t_host - t_k))
+        return min(best, b_new + self.max_extrapolation)
+
+
+class CommandTimeline:
+    """Commanded angles, each with the board time from which it was in effect.
+
+    Args:
+        horizon: board seconds of superseded commands kept for samples that arrive late (s).
+    """
+
+    def __init__(self, horizon: float = 2.0) -> None:
+        self.horizon = float(horizon)
+        self._items: deque[tuple[float, np.ndarray]] = deque()
+
+    def rebase(self) -> None:
+        """The board clock started over (a board reset or a new connection): keep only the newest command, in
+        effect from now on whatever the new clock reads."""
+        if self._items:
+            self._items = deque([(-math.inf, self._items[-1][1])])
+
+    def add(self, board_time: float | None, zeta: np.ndarray) -> float:
+        """Record `zeta` as sent at `board_time` (None: before any sample, in effect for every sample); returns the
+        board time used (never before the previous command's)."""
+        b = -math.inf if board_time is None else float(board_time)
+        if self._items and b < self._items[-1][0]:
+            b = self._items[-1][0]
+        self._items.append((b, np.array(zeta, dtype=float)))
+        return b
+
+    def at(self, board_time: float) -> np.ndarray | None:
+        """The command in effect at `board_time` (s): the latest one sent at or before it; None if none was."""
+        found = None
+        for b, zeta in reversed(self._items):
+            if b <= board_time:
+                found = zeta
+                break
+        # commands superseded more than `horizon` before this sample are not needed any more
+        while len(self._items) > 1 and self._items[1][0] <= board_time - self.horizon:
+            self._items.popleft()
+        return found

@@ -1,0 +1,122 @@
+"""The driver's host → board clock map and command timeline (hexa.protocol.board_clock): a burst of late samples
+is paired with the command in effect when each was measured, not the one current when the driver handled it."""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from hexa.protocol.board_clock import BOARD_CLOCK_WRAP_S, BoardClockMap, CommandTimeline
+
+
+def _stream(rate: float, offset: float, period: float, t_end: float, seed: int = 0,
+            bursts: tuple[tuple[float, float], ...] = ()):
+    """(board time µs, arrival host time, true board time) of samples every `period` board seconds; the board clock
+    reads offset + rate·t at host time t; arrivals 0.1-0.5 ms late, and everything measured inside a burst window
+    (host times) arrives together at its end, as from a thread that was starved."""
+    rng = np.random.default_rng(seed)
+    out = []
+    b = offset + 0.001
+    while True:
+        t_meas = (b - offset) / rate
+        if t_meas > t_end:
+            break
+        t_arr = t_meas + rng.uniform(1e-4, 5e-4)
+        for a, e in bursts:
+            if a <= t_meas < e:
+                t_arr = e + 1e-4 + 0.01 * (t_meas - a)   # in order: a serial link keeps it
+        out.append((int(round(b * 1e6)), t_arr, b))
+        b += period
+    return sorted(out, key=lambda s: s[1])
+
+
+@pytest.mark.parametrize("rate", [1.0005, 0.3])
+def test_board_time_recovered_through_bursts(rate):
+    """Board time at a host time is found within 1 ms (board) although a third of the samples arrive late."""
+    bursts = tuple((a, a + 0.02) for a in np.arange(0.5, 3.0, 0.06))
+    m = BoardClockMap(max_extrapolation=0.05)
+    errors, rates = [], []
+    rng = np.random.default_rng(1)
+    for raw, t_arr, _b in _stream(rate, 12.0, 0.005, 3.0, bursts=bursts):
+        m.update(raw, t_arr)
+        if t_arr > 0.5:
+            t_q = t_arr + rng.uniform(0.0, 0.004)   # a command sent between two arrivals
+            errors.append(m.board_time_at(t_q) - (12.0 + rate * t_q))
+            rates.append(m.rate)
+    errors = np.abs(errors)
+    assert errors.max() < 1e-3, errors.max()
+    assert abs(np.median(rates) - rate) < 0.01 * rate
+
+
+def test_late_burst_paired_with_the_command_in_effect_when_measured():
+    """Samples measured before a command was sent but handled after it keep the earlier command."""
+    m, tl = BoardClockMap(max_extrapolation=0.05), CommandTimeline()
+    stream = _stream(1.0, 3.0, 0.005, 1.0, bursts=((0.60, 0.625),))
+    cmd_time = 0.612                     # sent while the samples of 0.600-0.625 wait in the burst
+    old, new = np.zeros(6), np.ones(6)
+    tl.add(None, old)
+    sent = False
+    by_measurement, by_handling = [], []
+    for raw, t_arr, b in stream:
+        if not sent and t_arr > cmd_time:
+            tl.add(m.board_time_at(cmd_time), new)
+            sent = True
+        b_unwrapped = m.update(raw, t_arr)
+        assert b_unwrapped == pytest.approx(b, abs=1e-6)
+        by_measurement.append((b, tl.at(b_unwrapped)[0]))
+        by_handling.append((b, 1.0 if sent else 0.0))
+    truth = [(b, 1.0 if b - 3.0 >= cmd_time else 0.0) for b, _ in by_measurement]
+    assert by_measurement == truth
+    wrong = sum(h != t for (_, h), (_, t) in zip(by_handling, truth))
+    assert wrong == 3                    # pairing by handling time: the burst's 0.600, 0.605, 0.610 get the new one
+
+
+def test_extrapolation_is_capped_past_the_newest_sample():
+    """A silence longer than max_extrapolation: the estimate stops there (in simulation the board clock stood
+    still while a frame rendered)."""
+    m = BoardClockMap(max_extrapolation=0.01)
+    for k in range(100):
+        m.update(k * 5000, 0.005 * k)                      # 200 Hz, on time, rate 1
+    assert m.board_time_at(0.5) == pytest.approx(0.5, abs=1e-9)
+    assert m.board_time_at(0.503) == pytest.approx(0.503, abs=1e-9)   # 0.495 + 8 ms
+    assert m.board_time_at(0.56) == pytest.approx(0.505, abs=1e-9)    # capped: 0.495 + 10 ms
+    with pytest.raises(ValueError, match="max extrapolation"):
+        BoardClockMap(max_extrapolation=-1.0)
+
+
+def test_clock_wrap_and_board_restart():
+    m = BoardClockMap()
+    near_end = 2 ** 32 - 3000            # µs: 3 ms before the counter wraps
+    assert m.update(near_end, 10.0) == pytest.approx(near_end * 1e-6)
+    after = m.update(2000, 10.005)       # wrapped: 5 ms later on the board
+    assert after == pytest.approx(near_end * 1e-6 + 0.005, abs=1e-6)
+    assert after == pytest.approx(BOARD_CLOCK_WRAP_S + 0.002)
+    assert m.restarts == 0
+    m.update(5_000_000, 10.010)          # 5 s: a jump forward is just time
+    restarted = m.update(1000, 10.015)   # back by 5 s: the board was reset, the map starts over
+    assert restarted == pytest.approx(0.001)
+    assert m.restarts == 1
+    assert m.board_time_at(10.015) == pytest.approx(0.001)
+
+
+def test_timeline_before_any_command_and_monotonic_stamps():
+    tl = CommandTimeline(horizon=0.5)
+    assert tl.at(1.0) is None                              # nothing sent yet: the arms are not commanded
+    assert tl.add(None, np.full(6, 0.1)) == -np.inf        # before any sample: in effect for all
+    assert tl.add(2.0, np.full(6, 0.2)) == 2.0
+    assert tl.add(1.5, np.full(6, 0.3)) == 2.0             # never before the previous command
+    assert tl.at(1.99)[0] == pytest.approx(0.1)
+    assert tl.at(2.0)[0] == pytest.approx(0.3)             # the later of two at the same stamp
+    tl.add(3.0, np.full(6, 0.4))
+    assert tl.at(10.0)[0] == pytest.approx(0.4)            # prunes the superseded ones
+    assert tl.at(3.2)[0] == pytest.approx(0.4)
+    tl.rebase()                                            # the board restarted: its clock reads small again
+    assert tl.at(0.001)[0] == pytest.approx(0.4)
+    tl.add(0.01, np.full(6, 0.5))
+    assert tl.at(0.005)[0] == pytest.approx(0.4) and tl.at(0.02)[0] == pytest.approx(0.5)
+
+
+def test_map_before_samples_and_bad_windows():
+    m = BoardClockMap()
+    assert m.board_time_at(1.0) is None
+    with pytest.raises(ValueError, match="envelope"):
+        BoardClockMap(envelope_window=0.0)
