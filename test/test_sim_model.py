@@ -92,6 +92,41 @@ def test_servo_targets_are_reached_at_the_speed_limit(desc):
         sim.set_servo_targets([0.0, np.nan, 0, 0, 0, 0])
 
 
+def test_servos_take_a_new_target_only_at_their_pulse_in_the_boards_frame(desc):
+    """With the servo board's pulse frame simulated (sim.servo.frame_period 0.02; off by default) each servo gets a
+    new set-point only at the end of its pulse, once per 20 ms frame, one servo after the other (firmware
+    uno_servo); a target replaced before the pulse is never seen."""
+    assert Simulator(desc, cameras=False).config.servo.frame_period == 0.0     # default: set-points at once
+    sim = Simulator(desc, cameras=False, seed=4)
+    sim._frame_period = 0.02
+    z0 = sim.state().targets.copy()
+    sim.set_servo_targets(z0 + 0.05)
+    sim.step(1)
+    sim.set_servo_targets(z0 - 0.05)            # replaces it 1 ms later, before any pulse (the seed's phase)
+    first_move = np.full(6, np.nan)
+    t0 = sim.time
+    for _ in range(60):
+        sim.step(1)
+        moved = (np.abs(sim.state().targets - z0) > 1e-12) & np.isnan(first_move)
+        first_move[moved] = sim.time - t0
+    assert np.all(np.isfinite(first_move)) and np.all(first_move <= 0.02 + 0.002), first_move
+    steps = np.diff(first_move)                 # one pulse after the other, 1.5 ms apart (1 ms steps)
+    assert np.all((steps > 0.0) & (steps < 0.0025)), first_move
+    assert np.all(sim.state().targets < z0)     # only the second target ever reached the servos
+    changes = []                                # a new target every 1 ms: servo 1 takes one per frame
+    for k in range(100):
+        sim.set_servo_targets(z0 + 0.0005 * k)
+        before = sim._setpoints[0]
+        sim.step(1)
+        if sim._setpoints[0] != before:
+            changes.append(sim.time)
+    np.testing.assert_allclose(np.diff(changes), 0.02, atol=1e-9)
+    instant = Simulator(desc, cameras=False, seed=4)
+    instant.set_servo_targets(z0 + 0.05)
+    instant.step(1)
+    assert np.all(instant.state().targets > z0)
+
+
 @needs_trajectories
 @pytest.mark.parametrize("name", ["circle", "helix", "ellipse"])
 def test_free_motion_tracks_the_papers_trajectories_within_tolerance(desc, name):

@@ -92,6 +92,8 @@ class ServoConfig:
     kv: float
     armature: float
     damping: float
+    frame_period: float = 0.0        # s: servo-board pulse frame; 0: set-points at once (no frames)
+    pulse_slot: float = 0.0015       # s from one servo's pulse end to the next one's
 
 
 @dataclass(frozen=True)
@@ -199,7 +201,11 @@ def parse_sim_config(sections: Mapping[str, Any]) -> SimConfig:
     servo = ServoConfig(kp=_wrap(require_float, s, "sim.servo.kp", positive=True),
                         kv=_wrap(require_float, s, "sim.servo.kv", nonneg=True),
                         armature=_wrap(require_float, s, "sim.servo.armature", nonneg=True),
-                        damping=_wrap(require_float, s, "sim.servo.damping", nonneg=True))
+                        damping=_wrap(require_float, s, "sim.servo.damping", nonneg=True),
+                        frame_period=(_wrap(require_float, s, "sim.servo.frame_period", nonneg=True, hi=0.1)
+                                      if "frame_period" in sections["sim"].get("servo", {}) else 0.0),
+                        pulse_slot=(_wrap(require_float, s, "sim.servo.pulse_slot", positive=True, hi=0.005)
+                                    if "pulse_slot" in sections["sim"].get("servo", {}) else 0.0015))
     return SimConfig(
         cameras=cameras,
         markers=marker_cfg,

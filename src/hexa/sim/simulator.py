@@ -16,6 +16,7 @@ the integration and q̈ (`qacc`), τ (`actuator_force`) computed in the same cal
 from __future__ import annotations
 
 import dataclasses
+import math
 import threading
 from dataclasses import dataclass, field
 from typing import Any
@@ -236,6 +237,16 @@ class Simulator:
 
         zeta0 = self.data.qpos[self._arm_qpos].copy()
         self._targets = zeta0.copy()          # commanded (before the slew limit)
+        # the servo board's pulse frame (external drive, firmware uno_servo; sim.servo.frame_period, 0 = off): servo
+        # i takes a new set-point only at the end of its pulse, once per frame, the six pulses one after the other
+        # from the frame's start, so a command reaches it 0-20 ms after the board got it; the phase is drawn from the
+        # seed
+        self._frame_period = float(self.config.servo.frame_period)
+        self._pulse_slot = float(self.config.servo.pulse_slot)
+        self._setpoints = zeta0.copy()        # what each servo last received
+        self._frame_phase = float(np.random.default_rng([self.seed, 3]).uniform(0.0, 1.0)) * self._frame_period
+        self._frame_start: float | None = None
+        self._latch_at = np.full(6, math.inf)  # sim time at which each servo's pulse of the current frame ends
         self.data.ctrl[:6] = zeta0
         self._manual: _Contact | None = None
         self._scripted: _Contact | None = None
@@ -256,6 +267,7 @@ class Simulator:
         self._log_enabled = log_was
         self.data.time = 0.0
         self._step_count = 0
+        self._frame_start = None              # the pulse frames start with the clock
         self._tau_hist_t[:] = -np.inf
         self._sample = None
         self._step_once(use_schedule=True, advance=False)
@@ -309,6 +321,23 @@ class Simulator:
         if n > 0:
             self.step(n)
 
+    def _servo_setpoints(self, t: float) -> np.ndarray:
+        """The set-points the servos act on at sim time t: driven through the servo board with a pulse frame
+        (`sim.servo.frame_period` > 0), the targets as each servo's last pulse carried them; else the targets."""
+        if self._frame_period <= 0 or self.drive != "external":
+            self._setpoints = self._targets.copy()
+            self._frame_start = None
+            return self._setpoints
+        if self._frame_start is None:      # the board's frames run since before t, at the seed's phase
+            self._frame_start = t - self._frame_phase
+            self._latch_at = self._frame_start + self._pulse_slot * np.arange(1, 7)
+        due = self._latch_at <= t
+        if due.any():
+            self._setpoints[due] = self._targets[due]
+            frames = np.floor((t - self._latch_at[due]) / self._frame_period) + 1.0
+            self._latch_at[due] += frames * self._frame_period
+        return self._setpoints
+
     def _step_once(self, use_schedule: bool, advance: bool = True) -> None:
         m, d = self.model, self.data
         mujoco.mj_step1(m, d)
@@ -317,7 +346,7 @@ class Simulator:
             k = min(self._step_count, len(self._traj_targets) - 1)
             self._targets = self._traj_targets[k]
         step = self._omega_max * self._dt
-        d.ctrl[:6] = d.ctrl[:6] + np.minimum(np.maximum(self._targets - d.ctrl[:6], -step), step)
+        d.ctrl[:6] = d.ctrl[:6] + np.minimum(np.maximum(self._servo_setpoints(t) - d.ctrl[:6], -step), step)
         if use_schedule and self.collision is not None:
             self._update_scripted(t)
             if self._pusher is not None:
@@ -657,6 +686,7 @@ class Simulator:
             d.qacc_warmstart[:] = 0.0
             d.ctrl[:6] = zeta
             self._targets = zeta.copy()
+            self._setpoints = zeta.copy()
             if self.drive == "trajectory":
                 self.drive = "external"
             self._manual = None
