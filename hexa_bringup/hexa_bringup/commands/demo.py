@@ -22,7 +22,8 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from hexa.report.collision_demo import compute_metrics, markdown_table, plot_case, write_report
+    from hexa.report.collision_demo import (compute_metrics, markdown_table, plate_equivalent_truth, plot_case,
+                                            write_report)
     from hexa_bringup.demo_run import CASES, REAL_TIME_FACTOR, case_data_from_bag, run_case
     from hexa_bringup.rosenv import ros_env
     from hexa_bringup.supervisor import SupervisorError
@@ -48,12 +49,13 @@ def run(args: argparse.Namespace) -> int:
             problems.append(f"{case}: the graph did not run cleanly (see {run.log_dir})")
         try:
             data = case_data_from_bag(case, run.bag, args.ns)
-            m = compute_metrics(data)
+            W = plate_equivalent_truth(data) if data.truth_pose is not None else None   # once: metrics and plot
+            m = compute_metrics(data, plate_equivalent=W)
         except Exception as exc:  # noqa: BLE001 - report the case as failed, go on with the others
             problems.append(f"{case}: no metrics ({exc})")
             continue
         metrics.append(m)
-        plots[case] = plot_case(data, m, out / f"{case}.png")
+        plots[case] = plot_case(data, m, out / f"{case}.png", plate_equivalent=W)
         print(f"case {case} done in {run.wall_s:.0f} s wall", flush=True)
     notes = "\n".join(f"- {p}" for p in problems)
     report = write_report(metrics, plots, out, notes=("Problems:\n" + notes) if problems else "")

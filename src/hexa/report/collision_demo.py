@@ -108,13 +108,15 @@ def plate_equivalent_truth(d: CaseData, desc=None) -> np.ndarray:
     return W
 
 
-def compute_metrics(d: CaseData, r_low: float = 2.0, desc=None) -> CaseMetrics:
+def compute_metrics(d: CaseData, r_low: float = 2.0, desc=None, plate_equivalent: np.ndarray | None = None
+                    ) -> CaseMetrics:
     """Detection delay, link/chain, contact point error and force RMSE of one case against the ground truth.
 
     Two delays: from the first instant a true force component exceeds r_low (the issue's definition), and — with
     truth_pose — from the first instant the true plate-equivalent wrench W = J_Dᵀ F, which the residual estimates,
     exceeds the observer's thresholds on any axis (its own lag; for arm and rod contacts only part of the force
-    reaches the plate coordinates, so W crosses later than F).
+    reaches the plate coordinates, so W crosses later than F). `plate_equivalent`: W from plate_equivalent_truth, if
+    already computed (the plot uses it too).
 
     Raises:
         ValueError: the truth has no contact (nothing to compare with).
@@ -136,7 +138,7 @@ def compute_metrics(d: CaseData, r_low: float = 2.0, desc=None) -> CaseMetrics:
     delay_ms = (detect - exceed) * 1e3 if after and np.isfinite(exceed) else float("nan")
     plate_exceed, observer_delay_ms = float("nan"), float("nan")
     if d.truth_pose is not None:
-        W = plate_equivalent_truth(d, desc)
+        W = plate_equivalent_truth(d, desc) if plate_equivalent is None else plate_equivalent
         w_over = np.nanmax(np.abs(W) / np.asarray(d.threshold, dtype=float), axis=1) > 1.0
         w_over &= d.truth_t >= onset
         if w_over.any():
@@ -176,9 +178,9 @@ def compute_metrics(d: CaseData, r_low: float = 2.0, desc=None) -> CaseMetrics:
         n_contacts=int(in_contact_c.sum()), n_wrenches=n_w)
 
 
-def plot_case(d: CaseData, m: CaseMetrics, path: str | Path) -> Path:
-    """Residual vs threshold and the true plate-equivalent force, identified vs true force, contact point error
-    over time — one PNG."""
+def plot_case(d: CaseData, m: CaseMetrics, path: str | Path, plate_equivalent: np.ndarray | None = None) -> Path:
+    """Residual vs threshold and the true plate-equivalent force (`plate_equivalent`, else computed here),
+    identified vs true force, contact point error over time — one PNG."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -187,7 +189,9 @@ def plot_case(d: CaseData, m: CaseMetrics, path: str | Path) -> Path:
     path = Path(path)
     fig, ax = plt.subplots(3, 1, figsize=(9, 9), sharex=True)
     colours = ("tab:red", "tab:green", "tab:blue")
-    W = plate_equivalent_truth(d) if d.truth_pose is not None else None
+    W = plate_equivalent
+    if W is None and d.truth_pose is not None:
+        W = plate_equivalent_truth(d)
     for k, name in enumerate("xyz"):
         if len(d.residual_t):
             ax[0].plot(d.residual_t, d.residual[:, k], color=colours[k], lw=1, label=f"r_{name} (N)")
