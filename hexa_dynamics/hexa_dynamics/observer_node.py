@@ -57,14 +57,6 @@ from visualization_msgs.msg import Marker, MarkerArray
 
 JOINT_NAMES = [f"arm_{i}" for i in range(1, 7)]
 AXIS_NAMES = ("fx", "fy", "fz", "mx", "my", "mz")
-#: observer gain K (1/s, every axis): a 10 ms first-order lag. Not the core's 25 1/s: once the simulated graph delivers
-#: commands on time (docs/observer_node.md, "Command timing"), free-motion residual peaks at K = 100 reach r_low only
-#: in single samples (≤ 2.4 N, 0.2 N·m in 3 × 60 s), and the plate is detected 35 ms sooner than at K = 25.
-GAIN = 100.0
-#: confirmation time of a START (s): 5 consecutive samples at 200 Hz over r_low. Not the core's 0.01 s (3 samples):
-#: in 3 × 60 s of free motion that really moved (looping) at K = 100, runs of up to 3 samples over r_low occurred
-#: (docs/observer_node.md, "Free motion that moves for 60 s"); it costs the plate case ≈ 5 ms of delay.
-MIN_DURATION = 0.02
 ESTIMATOR_KEYS = ("accel_sigma", "torque_sigma", "camera_sigma", "bias_walk", "saturation", "stall_sigma")
 INPUT_QOS = QoSProfile(depth=500, reliability=ReliabilityPolicy.RELIABLE, history=HistoryPolicy.KEEP_LAST)
 EVENT_QOS = QoSProfile(depth=20, reliability=ReliabilityPolicy.RELIABLE, history=HistoryPolicy.KEEP_LAST)
@@ -268,10 +260,10 @@ class ObserverNode(Node):
         self.zeta_source = str(p("zeta_source", "estimator").value)
         if self.zeta_source not in ("estimator", "measured"):
             raise ValueError(f"parameter zeta_source must be 'estimator' or 'measured', got {self.zeta_source!r}")
-        gains = [float(v) for v in p("gains", [GAIN] * 6).value]
+        gains = [float(v) for v in p("gains", [float(v) for v in dflt.gains]).value]
         thresholds = [float(v) for v in p("thresholds", [float(v) for v in dflt.thresholds]).value]
         release = float(p("release_ratio", dflt.release_ratio).value)
-        min_dur = float(p("min_duration", MIN_DURATION).value)
+        min_dur = float(p("min_duration", dflt.min_duration).value)
         max_gap = float(p("max_gap", dflt.max_gap).value)
         est_cfg, delay = declare_estimator(self)
         self.reseed_distance = float(p("reseed_distance", 0.005).value)

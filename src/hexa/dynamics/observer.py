@@ -67,10 +67,15 @@ class ObserverConfig:
     (currents + plate pose from image processing) and the one for hobby servos, whose angle is not measured.
     """
 
-    gains: tuple[float, ...] = (25.0, 25.0, 25.0, 25.0, 25.0, 25.0)
+    # the live graph's values (the observer node declares these): K = 100 1/s, a 10 ms first-order lag — once the
+    # simulated graph delivers commands on time, free-motion residual peaks reach r_low only in runs of a few samples,
+    # and the plate is detected 35 ms sooner than at 25 1/s; min_duration 0.02 s, 5 consecutive samples at 200 Hz —
+    # 3 × 60 s of looping free motion had runs of up to 3 samples over r_low (docs/observer_node.md, "Command
+    # timing" and "Free motion that moves for 60 s")
+    gains: tuple[float, ...] = (100.0, 100.0, 100.0, 100.0, 100.0, 100.0)
     thresholds: tuple[float, ...] = (2.0, 2.0, 2.0, 0.2, 0.2, 0.2)
     release_ratio: float = 0.5
-    min_duration: float = 0.01
+    min_duration: float = 0.02
     max_gap: float = 0.1
     pose_tolerance: float = 1e-10
     newton_iterations: int = 4
