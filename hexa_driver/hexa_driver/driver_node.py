@@ -174,9 +174,7 @@ class DriverNode(Node):
             command = self.timeline.at(board_time)
         if self.uno.connected and command is not None:
             js.position = [float(z) for z in command]
-        elif self.uno.connected:  # nothing commanded yet: the firmware keeps the servos limp
-            js.position = [float("nan")] * len(self.core.joint_names)
-        else:  # no servo board: the arms are not driven, their angle is unknown
+        else:  # no servo board, or nothing commanded yet (the servos are limp): the arms' angle is unknown
             js.position = [float("nan")] * len(self.core.joint_names)
         js.effort = [float(t) for t in effort]
         if not self.context.ok():  # shutting down: the link thread outlives the context briefly

@@ -16,7 +16,6 @@ the integration and q̈ (`qacc`), τ (`actuator_force`) computed in the same cal
 from __future__ import annotations
 
 import dataclasses
-import math
 import threading
 from dataclasses import dataclass, field
 from typing import Any
@@ -243,10 +242,9 @@ class Simulator:
         # seed
         self._frame_period = float(self.config.servo.frame_period)
         self._pulse_slot = float(self.config.servo.pulse_slot)
-        self._setpoints = zeta0.copy()        # what each servo last received
+        self._setpoints = zeta0.copy()        # what each servo last received (with frames)
         self._frame_phase = float(np.random.default_rng([self.seed, 3]).uniform(0.0, 1.0)) * self._frame_period
-        self._frame_start: float | None = None
-        self._latch_at = np.full(6, math.inf)  # sim time at which each servo's pulse of the current frame ends
+        self._latch_at: np.ndarray | None = None   # sim time of each servo's next pulse end; None: frames not running
         self.data.ctrl[:6] = zeta0
         self._manual: _Contact | None = None
         self._scripted: _Contact | None = None
@@ -267,7 +265,7 @@ class Simulator:
         self._log_enabled = log_was
         self.data.time = 0.0
         self._step_count = 0
-        self._frame_start = None              # the pulse frames start with the clock
+        self._latch_at = None                 # the pulse frames start with the clock
         self._tau_hist_t[:] = -np.inf
         self._sample = None
         self._step_once(use_schedule=True, advance=False)
@@ -325,12 +323,11 @@ class Simulator:
         """The set-points the servos act on at sim time t: driven through the servo board with a pulse frame
         (`sim.servo.frame_period` > 0), the targets as each servo's last pulse carried them; else the targets."""
         if self._frame_period <= 0 or self.drive != "external":
-            self._setpoints = self._targets.copy()
-            self._frame_start = None
-            return self._setpoints
-        if self._frame_start is None:      # the board's frames run since before t, at the seed's phase
-            self._frame_start = t - self._frame_phase
-            self._latch_at = self._frame_start + self._pulse_slot * np.arange(1, 7)
+            self._latch_at = None
+            return self._targets
+        if self._latch_at is None:         # the board's frames run since before t, at the seed's phase; until its
+            self._setpoints = np.array(self.data.ctrl[:6])   # pulse a servo keeps the set-point it has
+            self._latch_at = t - self._frame_phase + self._pulse_slot * np.arange(1, 7)
         due = self._latch_at <= t
         if due.any():
             self._setpoints[due] = self._targets[due]
