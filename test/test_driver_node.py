@@ -12,7 +12,7 @@ from hexa.protocol.driver_core import servo_calibrations_from_config
 from hexa.protocol.emulator import MegaEmulator, UnoEmulator
 from hexa.protocol.sensor_model import DEFAULT_SENSOR
 from hexa.robots.hexa_description import load_hexa
-from test_driver_helpers import RosProbe, driver_args, kv, wait_for
+from test_driver_helpers import DRIVER, RosProbe, driver_args, kv, wait_for
 
 
 @pytest.fixture
@@ -208,3 +208,9 @@ def test_a_late_burst_of_samples_carries_the_command_in_effect_when_each_was_mea
         assert len(before) >= 4, f"only {len(before)} samples held back before the command"
         assert all(np.allclose(p, zeta0) for p in before), [p[0] for p in before]
         assert len(after) >= 10 and all(np.allclose(p, zeta1) for p in after)
+
+
+def test_driver_refuses_a_negative_board_clock_extrapolation(procs, ros_env):
+    p = procs.start([DRIVER, "--ros-args", "-p", "board_clock_max_extrapolation:=-1.0"], ros_env)
+    _out, err = p.communicate(timeout=60)
+    assert p.returncode == 1 and "board_clock_max_extrapolation" in err, err

@@ -74,7 +74,10 @@ class DriverNode(Node):
         self._calib: list | None = None
         # each sample is paired with the command in effect when the Mega measured it (by its board clock), not the
         # one current when this node handled it: samples arrive in bursts (hexa.protocol.board_clock)
-        self.board_clock = BoardClockMap(max_extrapolation=float(cfg["board_clock_max_extrapolation"]))
+        max_extrapolation = float(cfg["board_clock_max_extrapolation"])
+        if not (max_extrapolation >= 0.0 and np.isfinite(max_extrapolation)):
+            raise ValueError(f"parameter board_clock_max_extrapolation must be >= 0 s, got {max_extrapolation}")
+        self.board_clock = BoardClockMap(max_extrapolation=max_extrapolation)
         self.timeline = CommandTimeline()
         self._board_restarts = 0
         self._last_sample_time = 0.0
