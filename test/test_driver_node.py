@@ -214,4 +214,3 @@ def test_driver_refuses_a_negative_board_clock_extrapolation(procs, ros_env):
     p = procs.start([DRIVER, "--ros-args", "-p", "board_clock_max_extrapolation:=-1.0"], ros_env)
     _out, err = p.communicate(timeout=60)
     assert p.returncode == 1 and "board_clock_max_extrapolation" in err, err
-

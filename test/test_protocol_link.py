@@ -118,31 +118,3 @@ def test_servo_link_restores_last_targets_after_the_board_comes_back(tmp_path):
         uno.replug()   # the board restarts with its outputs off
         assert _wait(lambda: len(got) == 2, 3.0)
         assert got[1] == got[0] and uno.outputs_enabled and link.restored == 1
-
-
-def test_samples_behind_counts_what_a_stalled_reader_has_not_handed_over():
-    """The reader thread is held inside on_sample for 0.2 s while the board streams at 500 Hz: samples_behind() counts
-    the samples waiting (read but not dispatched, or still in the port) — the driver uses it to date a command sent
-    meanwhile — and drops back to 0 once the reader catches up."""
-    import tempfile
-    from pathlib import Path
-
-    hold = threading.Event()
-    release = threading.Event()
-
-    def on_sample(sample, t_rx, gap):
-        if hold.is_set() and not release.is_set():
-            release.wait(2.0)
-
-    with tempfile.TemporaryDirectory() as d, \
-            MegaEmulator(current_source=lambda t: [0.0] * 6, link=Path(d) / "mega") as mega, \
-            CurrentLink(mega.port, rate_hz=500, on_sample=on_sample) as link:
-        assert link.wait_connected(3.0)
-        assert _wait(lambda: link.samples >= 50)
-        assert link.samples_behind() <= 2
-        hold.set()
-        time.sleep(0.2)                               # 100 samples at 500 Hz pile up
-        behind = link.samples_behind()
-        release.set()
-        assert 70 <= behind <= 130, behind
-        assert _wait(lambda: link.samples_behind() <= 2, 2.0)

@@ -147,10 +147,7 @@ class DriverNode(Node):
             now = time.monotonic()
             zeta = self.core.limit_command(zeta, now)
             pulses = self.core.accept(zeta, now)
-            # samples that arrived while this process was starved may still wait in the port: they were measured
-            # before this command went out, and say how far the board clock has run
-            board_now = self.board_clock.board_time_at(now, self.mega.samples_behind(), 1.0 / self.mega.rate_hz)
-            self.timeline.add(board_now, self.core.commanded)
+            self.timeline.add(self.board_clock.board_time_at(now), self.core.commanded)
             self._last_sent = now
         if not self.uno.set_targets(pulses):
             self.tx_failures += 1

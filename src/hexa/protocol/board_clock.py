@@ -118,11 +118,9 @@ class BoardClockMap:
             lo, hi = self.rate_bounds
             self.rate = min(max((b_b - b_a) / (t_b - t_a), lo), hi)
 
-    def board_time_at(self, t_host: float, samples_behind: int = 0, period: float = 0.0) -> float | None:
+    def board_time_at(self, t_host: float) -> float | None:
         """Board time (s, unwrapped) at host time `t_host`: the upper envelope of the recent samples' bounds, at most
-        `max_extrapolation` past the newest sample's board time — or, when `samples_behind` samples (of `period`
-        board s) had already arrived but not been handed over yet (a starved reader), at least the newest sample's
-        board time plus theirs; None before the first sample."""
+        `max_extrapolation` past the newest sample's board time; None before the first sample."""
         if not self._pairs:
             return None
         t_new, b_new = self._pairs[-1]
@@ -131,7 +129,7 @@ class BoardClockMap:
             if t_k < t_new - self.envelope_window:
                 break
             best = max(best, b_k + self.rate * (t_host - t_k))
-        return max(min(best, b_new + self.max_extrapolation), b_new + max(int(samples_behind), 0) * float(period))
+        return min(best, b_new + self.max_extrapolation)
 
 
 class CommandTimeline:

@@ -26,8 +26,6 @@ DISCONNECTED = "DISCONNECTED"
 CONNECTING = "CONNECTING"
 CONNECTED = "CONNECTED"
 STALE = "STALE"
-#: bytes of one SAMPLE frame on the wire (header, payload, CRC)
-SAMPLE_FRAME_BYTES = len(fr.encode_frame(fr.SAMPLE, 0, fr.pack_sample(0, 0, (0,) * fr.N_CHANNELS)))
 
 
 class LinkError(RuntimeError):
@@ -99,7 +97,6 @@ class BoardLink:
         self.on_state = on_state
         self.stats = LinkStats()
         self._ser: serial.Serial | None = None
-        self._undispatched = 0          # frames read from the port but not yet handed to on_frame
         self._parser = fr.FrameParser()
         self._parser_base = fr.ParserStats()
         self._thread: threading.Thread | None = None
@@ -339,10 +336,7 @@ class BoardLink:
             return
         t_rx = time.monotonic()
         self.stats.bytes_rx += len(data)
-        frames = self._parser.feed(data)
-        self._undispatched = len(frames)
-        for frame in frames:
-            self._undispatched -= 1
+        for frame in self._parser.feed(data):
             self._dispatch(frame, t_rx)
         ps, base = self._parser.stats, self._parser_base
         self.stats.crc_errors = base.crc_errors + ps.crc_errors
@@ -487,18 +481,6 @@ class CurrentLink(BoardLink):
     def on_connected(self) -> None:
         self._last_sample_seq = None
         self.request(fr.START_STREAM, fr.pack_start_stream(self.rate_hz))
-
-    def samples_behind(self) -> int:
-        """About how many samples have arrived but not reached `on_sample` yet: frames read but not dispatched plus
-        the port's unread bytes in SAMPLE frames (a starved reader thread leaves them in the kernel's buffer)."""
-        ser = self._ser
-        unread = 0
-        if ser is not None:
-            try:
-                unread = int(ser.in_waiting)
-            except (serial.SerialException, OSError, ValueError, TypeError):
-                unread = 0
-        return max(self._undispatched, 0) + unread // SAMPLE_FRAME_BYTES
 
     def stop_stream(self) -> None:
         self.request(fr.STOP_STREAM, b"")
