@@ -4,8 +4,8 @@ The current board (Mega) stamps each sample with its own microsecond clock; the 
 *arrived*, and samples arrive in bursts — a USB-serial latency timer, a busy host, a driver thread that waited for the
 GIL. The driver used to pair each sample with the command it had sent by the time it *handled* the sample, so a burst
 of samples measured before a command went out was paired with that command: the arm-angle estimator then placed the
-set-point step up to a burst early, and the collision observer's residual spiked (docs/observer_node.md, "Command
-timing in the driver").
+set-point step up to a burst early, and the collision observer's residual spiked (docs/driver.md, "Which command a
+sample carries").
 
 Here the host keeps a map from its clock to the board's, built from the samples themselves. A sample with board time
 b_k that arrived at host time t_k says that the board clock read *at least* b_k at t_k (it was measured before it
@@ -109,9 +109,8 @@ class BoardClockMap:
         """Rate between the least-delayed samples at the two ends of the rate window (late samples of a burst
         would bias a fit through all of them low)."""
         t_first, t_last = self._pairs[0][0], self._pairs[-1][0]
-        head = [p for p in itertools.takewhile(lambda p: p[0] <= t_first + self.envelope_window, self._pairs)]
-        tail = [p for p in itertools.takewhile(lambda p: p[0] >= t_last - self.envelope_window,
-                                               reversed(self._pairs))]
+        head = list(itertools.takewhile(lambda p: p[0] <= t_first + self.envelope_window, self._pairs))
+        tail = list(itertools.takewhile(lambda p: p[0] >= t_last - self.envelope_window, reversed(self._pairs)))
         t_a, b_a = max(head, key=lambda p: p[1] - self.rate * p[0])
         t_b, b_b = max(tail, key=lambda p: p[1] - self.rate * p[0])
         if t_b - t_a >= self.min_rate_span and b_b > b_a:
