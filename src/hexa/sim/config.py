@@ -198,14 +198,15 @@ def parse_sim_config(sections: Mapping[str, Any]) -> SimConfig:
     appearance["floor_z"] = _wrap(require_float, ap_root, "appearance.floor_z")
 
     s = {"sim": sections["sim"]}
+    # optional keys: absent, the dataclass default holds
+    optional = {key: _wrap(require_float, s, f"sim.servo.{key}", **limits)
+                for key, limits in (("frame_period", {"nonneg": True, "hi": 0.1}),
+                                    ("pulse_slot", {"positive": True, "hi": 0.005}))
+                if key in sections["sim"].get("servo", {})}
     servo = ServoConfig(kp=_wrap(require_float, s, "sim.servo.kp", positive=True),
                         kv=_wrap(require_float, s, "sim.servo.kv", nonneg=True),
                         armature=_wrap(require_float, s, "sim.servo.armature", nonneg=True),
-                        damping=_wrap(require_float, s, "sim.servo.damping", nonneg=True),
-                        frame_period=(_wrap(require_float, s, "sim.servo.frame_period", nonneg=True, hi=0.1)
-                                      if "frame_period" in sections["sim"].get("servo", {}) else 0.0),
-                        pulse_slot=(_wrap(require_float, s, "sim.servo.pulse_slot", positive=True, hi=0.005)
-                                    if "pulse_slot" in sections["sim"].get("servo", {}) else 0.0015))
+                        damping=_wrap(require_float, s, "sim.servo.damping", nonneg=True), **optional)
     return SimConfig(
         cameras=cameras,
         markers=marker_cfg,
