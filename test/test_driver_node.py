@@ -170,15 +170,13 @@ def test_a_command_held_by_the_rate_limit_is_sent_on_wall_time_under_sim_time(tm
 
 def test_a_late_burst_of_samples_carries_the_command_in_effect_when_each_was_measured(tmp_path, procs, ros_env,
                                                                                        probe):
-    """The Mega's samples are held back for 60 ms (its thread blocked) while a new command goes out, then arrive in
-    one burst: the samples measured before the Uno got the command keep the previous command in joint_states, the
+    """The Mega's samples are held back for 30-80 ms (its thread blocked) while a new command goes out, then arrive
+    in one burst: the samples measured before the Uno got the command keep the previous command in joint_states, the
     ones after carry the new one (by the board clock, hexa.protocol.board_clock). Pairing by handling time — what
     the driver did before — gave the whole burst the new command."""
     desc = load_hexa()
     servos = servo_calibrations_from_config(None, desc)
     zeta0 = np.full(6, desc.zeta_center)
-    zeta1 = zeta0 + 0.05
-    pulses1 = tuple(s.pulse_from_angle(z) for s, z in zip(servos, zeta1))
     received = {}
     with MegaEmulator(current_source=lambda t: [0.0] * 6, link=tmp_path / "mega") as mega, \
             UnoEmulator(on_targets=lambda p: received.setdefault(p, mega.board_time_us()),
@@ -190,12 +188,22 @@ def test_a_late_burst_of_samples_carries_the_command_in_effect_when_each_was_mea
         probe.command(zeta0)
         assert wait_for(lambda: np.allclose(probe.states[-1][1].position, zeta0), 5.0)
         time.sleep(0.5)                                    # the board clock's rate is fitted over ≥ 0.2 s
-        with mega._lock:                                   # the Mega's thread waits: its samples come late
-            b_hold = mega.board_time_us()
-            time.sleep(0.03)
-            probe.command(zeta1)
-            assert wait_for(lambda: pulses1 in received, 2.0), "the Uno did not get the command"
-            time.sleep(0.03)
+        for attempt in range(1, 4):
+            # the emulator skips samples it fell > 0.1 s behind on (as a real board would have sent them, not as
+            # it would lose them): on a loaded machine the Uno may take longer to get the command, so retry
+            zeta1 = zeta0 + 0.05 * attempt
+            pulses1 = tuple(s.pulse_from_angle(z) for s, z in zip(servos, zeta1))
+            with mega._lock:                               # the Mega's thread waits: its samples come late
+                b_hold = mega.board_time_us()
+                time.sleep(0.03)
+                probe.command(zeta1)
+                assert wait_for(lambda: pulses1 in received, 2.0), "the Uno did not get the command"
+                held = (mega.board_time_us() - b_hold) * 1e-6
+            if held < 0.08:
+                break
+            zeta0 = zeta1                                  # too long: the emulator skipped; hold again from here
+            assert wait_for(lambda: np.allclose(probe.states[-1][1].position, zeta0), 5.0)
+            time.sleep(0.3)
         assert wait_for(lambda: len(probe.currents) > 0 and probe.currents[-1][1].board_time_us
                         > received[pulses1] + 100_000, 5.0)
         time.sleep(0.1)
