@@ -70,6 +70,54 @@ def test_late_burst_paired_with_the_command_in_effect_when_measured():
     assert wrong == 3                    # pairing by handling time: the burst's 0.600, 0.605, 0.610 get the new one
 
 
+@pytest.mark.parametrize("read_first", [False, True])
+def test_a_command_sent_before_the_stalled_samples_were_read_is_dated_after_them(read_first):
+    """The driver stops for 0.15 s while the board goes on measuring at 200 Hz; resumed, it sends a command before its
+    link thread has read the samples that waited in the port (read_first: the read starts first but its samples are
+    handled after the send). The estimate at the send (the clock map knows only the samples before the stop, capped
+    10 ms past them) is early by 0.14 s; the read raises it, so every waiting sample keeps the old command."""
+    m, tl = BoardClockMap(max_extrapolation=0.01), CommandTimeline()
+    old, new = np.zeros(6), np.ones(6)
+    tl.add(None, old)
+    for k in range(120):                                   # 0-0.595 s: on time
+        m.update(k * 5000, 0.005 * k + 2e-4)
+        tl.confirm(0.005 * k + 1e-4, k * 0.005, m.rate)
+    t_send = 0.751
+    t_read = 0.7505 if read_first else 0.7512
+    estimate = tl.add(m.board_time_at(t_send), new, sent_at=t_send)
+    assert estimate == pytest.approx(0.605, abs=1e-6)      # 0.595 + the 10 ms cap: 0.145 s early
+    waiting = [(k * 5000, k * 0.005) for k in range(120, 151)]   # measured 0.600-0.750 s, read at t_read
+    board = [m.update(raw, t_read + 1e-3) for raw, _ in waiting]
+    raised = tl.confirm(t_read, max(board), m.rate)
+    assert raised == 1 and tl.redated == 1
+    # measured before the send: the old command (but the newest, measured within the read's 0.2 ms of slack)
+    assert [tl.at(b)[0] for b in board[:-1]] == [0.0] * (len(board) - 1)
+    assert tl.at(0.7515)[0] == 1.0                         # a sample measured after the send: the new one
+    if read_first:                                         # still provisional: the next read confirms it
+        m.update(151 * 5000, 0.7557)
+        tl.confirm(0.7556, 0.755, m.rate)
+        tl.confirm(0.7606, 0.760, m.rate)
+        assert tl.redated in (1, 2)
+        assert tl.at(0.75)[0] == 0.0                       # never past the true send time (0.751)
+    assert tl.at(0.7515)[0] == 1.0
+
+
+def test_confirming_leaves_well_dated_commands_alone():
+    """Streaming on time (200 Hz samples, a command every 10 ms): the map dates each command within 1 ms of its send,
+    and the reads after it never move it."""
+    m, tl = BoardClockMap(max_extrapolation=0.01), CommandTimeline()
+    tl.add(None, np.zeros(6))
+    errors = []
+    for k in range(400):
+        t = 0.005 * k
+        b = m.update(k * 5000, t + 2e-4)
+        if k % 2 == 1:
+            errors.append(tl.add(m.board_time_at(t + 0.001), np.full(6, k), sent_at=t + 0.001) - (t + 0.001))
+        tl.confirm(t + 1e-4, b, m.rate)
+    assert tl.redated == 0
+    assert max(abs(e) for e in errors[20:]) < 1e-3
+
+
 def test_extrapolation_is_capped_past_the_newest_sample():
     """A silence longer than max_extrapolation: the estimate stops there (in simulation the board clock stood
     still while a frame rendered)."""

@@ -218,6 +218,80 @@ def test_a_late_burst_of_samples_carries_the_command_in_effect_when_each_was_mea
         assert len(after) >= 10 and all(np.allclose(p, zeta1) for p in after)
 
 
+def test_a_stopped_driver_dates_its_next_command_after_the_samples_that_waited_in_the_port(tmp_path, procs, ros_env,
+                                                                                         probe):
+    """Commands stream at 100 Hz while the driver process is stopped (SIGSTOP) for 0.15 s and the Mega goes on
+    measuring; resumed, the driver sends the newest command and reads the samples that waited in the port. No sample
+    may carry a command the Uno got only after the sample was measured: a command's board time, estimated when it is
+    sent, is raised by the first read of the port after it (board_clock.CommandTimeline.confirm). Without that, a
+    command sent before that read was dated at most board_clock_max_extrapolation (10 ms) past the last sample read
+    before the stop, and the rest of the stop's samples carried it — in the live graph a false collision START
+    (docs/driver.md)."""
+    import os
+    import signal
+    import threading
+
+    desc = load_hexa()
+    servos = servo_calibrations_from_config(None, desc)
+    zeta0 = np.full(6, desc.zeta_center)
+    received = {}
+    with MegaEmulator(current_source=lambda t: [0.0] * 6, link=tmp_path / "mega") as mega, \
+            UnoEmulator(on_targets=lambda p: received.setdefault(p, mega.board_time_us()),
+                        link=tmp_path / "uno") as uno:
+        driver = procs.start(driver_args(uno.port, mega.port, "max_speed:=0.0", "stream_rate_hz:=200"), ros_env)
+        assert wait_for(lambda: len(probe.currents) >= 20, 30.0), "no motor_currents from the driver"
+        probe.command(zeta0)
+        assert wait_for(lambda: np.allclose(probe.states[-1][1].position, zeta0), 5.0)
+        time.sleep(0.5)                                    # the board clock's rate is fitted over ≥ 0.2 s
+        stop = threading.Event()
+
+        def ramp():                                        # a new command every 10 ms, as from the trajectory node
+            k = 0
+            while not stop.is_set():
+                k += 1
+                probe.command(zeta0 + 0.002 * k)
+                time.sleep(0.01)
+
+        streamer = threading.Thread(target=ramp, daemon=True)
+        streamer.start()
+        try:
+            time.sleep(0.3)
+            b_stop = mega.board_time_us()
+            os.kill(driver.pid, signal.SIGSTOP)
+            try:
+                time.sleep(0.15)
+            finally:
+                b_resume = mega.board_time_us()            # nothing can reach the Uno before this
+                os.kill(driver.pid, signal.SIGCONT)
+            time.sleep(0.3)
+        finally:
+            stop.set()
+            streamer.join()
+        assert wait_for(lambda: len(probe.currents) > 0 and probe.currents[-1][1].board_time_us > b_resume + 400_000,
+                        5.0)
+        time.sleep(0.1)
+        by_stamp = {(m.header.stamp.sec, m.header.stamp.nanosec): m.board_time_us for _, m in probe.currents}
+        samples = [(by_stamp[(js.header.stamp.sec, js.header.stamp.nanosec)], np.asarray(js.position))
+                   for _, js in probe.states if (js.header.stamp.sec, js.header.stamp.nanosec) in by_stamp]
+        samples = [(b, p) for b, p in samples if b_stop - 200_000 <= b <= b_resume + 200_000]
+        assert sum(b_stop <= b < b_resume for b, _ in samples) >= 20, "too few samples measured during the stop"
+        def got(p):                                        # when the Uno got the command a sample carries (µs)
+            return received.get(tuple(s.pulse_from_angle(z) for s, z in zip(servos, p)), 1 << 62)
+
+        # (ms after the resume, ms after the sample that the Uno got the command it carries); the last 10 ms before
+        # the resume are left out: the emulator writes a sample it fell behind on late, with its measurement time
+        early = [(round((b - b_resume) * 1e-3, 1), round((got(p) - b) * 1e-3, 1)) for b, p in samples
+                 if b_stop <= b < b_resume - 10_000 and got(p) >= b_resume]
+        assert not early, early
+        # nor do they lag: after the stop each sample carries a command the Uno got at most 50 ms before it (the
+        # emulators share this test's process, so single commands reach the virtual Uno up to ~20 ms late)
+        stale = [(round((b - b_resume) * 1e-3, 1), round((b - got(p)) * 1e-3, 1)) for b, p in samples
+                 if b > b_resume + 50_000 and b - got(p) > 50_000]
+        assert not stale, stale
+        moved = {round(float(p[0] - zeta0[0]), 3) for b, p in samples if b > b_resume}
+        assert len(moved) >= 10, moved                     # the ramp went on after the stop
+
+
 def test_driver_refuses_a_negative_board_clock_extrapolation(procs, ros_env):
     p = procs.start([DRIVER, "--ros-args", "-p", "board_clock_max_extrapolation:=-1.0"], ros_env)
     _out, err = p.communicate(timeout=60)

@@ -93,7 +93,7 @@ class DriverNode(Node):
                              max_us=[s.max_us for s in servos], watchdog_ms=int(cfg["watchdog_ms"]),
                              on_state=lambda s: self._on_link_state("uno", s), **common)
         self.mega = CurrentLink(str(cfg["mega_port"]), rate_hz=int(cfg["stream_rate_hz"]),
-                                on_sample=self._on_sample, on_state=lambda s: self._on_link_state("mega", s),
+                                on_samples=self._on_samples, on_state=lambda s: self._on_link_state("mega", s),
                                 **common)
         self.uno.start()
         self.mega.start()
@@ -147,13 +147,29 @@ class DriverNode(Node):
             now = time.monotonic()
             zeta = self.core.limit_command(zeta, now)
             pulses = self.core.accept(zeta, now)
-            self.timeline.add(self.board_clock.board_time_at(now), self.core.commanded)
+            # provisional: samples still waiting in the Mega's port are not in the clock map yet (_on_samples)
+            self.timeline.add(self.board_clock.board_time_at(now), self.core.commanded, sent_at=now)
             self._last_sent = now
         if not self.uno.set_targets(pulses):
             self.tx_failures += 1
 
     # ------------------------------------------------------------------------------------------ telemetry
-    def _on_sample(self, sample: fr.Sample, t_rx: float, gap: int) -> None:
+    def _on_samples(self, batch: list[tuple[fr.Sample, int]], t_read: float, t_rx: float) -> None:
+        """One read of the Mega's port: its samples in order; the read started at host time t_read (s)."""
+        with self._lock:
+            board_times = []
+            for sample, _gap in batch:
+                board_times.append(self.board_clock.update(sample.board_time_us, t_rx))
+                if self.board_clock.restarts != self._board_restarts:
+                    self._board_restarts = self.board_clock.restarts
+                    self.timeline.rebase()
+            # a command sent before this read is dated no earlier than its samples prove (board_clock.CommandTimeline)
+            self.timeline.confirm(t_read, max(board_times), self.board_clock.rate)
+            commands = [self.timeline.at(b) for b in board_times]
+        for (sample, _gap), command in zip(batch, commands):
+            self._publish_sample(sample, command, t_rx)
+
+    def _publish_sample(self, sample: fr.Sample, command: np.ndarray | None, t_rx: float) -> None:
         currents = self.core.currents_from_counts(sample.counts)
         effort = self.core.torques_from_currents(currents)
         stamp = self.get_clock().now().to_msg()
@@ -169,12 +185,6 @@ class DriverNode(Node):
         js.header.stamp = stamp
         js.header.frame_id = self.frame_id
         js.name = list(self.core.joint_names)
-        with self._lock:
-            board_time = self.board_clock.update(sample.board_time_us, t_rx)
-            if self.board_clock.restarts != self._board_restarts:
-                self._board_restarts = self.board_clock.restarts
-                self.timeline.rebase()
-            command = self.timeline.at(board_time)
         if self.uno.connected and command is not None:
             js.position = [float(z) for z in command]
         else:  # no servo board, or nothing commanded yet (the servos are limp): the arms' angle is unknown
@@ -255,6 +265,7 @@ class DriverNode(Node):
                       ("samples", self.mega.samples), ("sample_gaps", self.mega.sample_gaps),
                       ("data_age_s", f"{age:.3f}"), ("board_clock_rate", f"{self.board_clock.rate:.4f}"),
                       ("board_clock_restarts", self.board_clock.restarts),
+                      ("commands_redated", self.timeline.redated),
                       ("board_overruns", self.mega.status.overruns if self.mega.status else "?")]
         uno_extra = [("commands_accepted", c.accepted), ("commands_rejected_nan", c.rejected_nan),
                      ("commands_rejected_names", c.rejected_names), ("commands_clamped", c.clamped),

@@ -14,10 +14,12 @@ the real-time factor in simulation), the board time at host time t is the upper 
 
     b(t) = max_k [ b_k + ρ (t − t_k) ]      over the samples of the last `envelope_window` s,
 
-which the least-delayed sample of a burst decides. Each command is stamped with b(t_send) when it is sent, and each
-sample is paired with the latest command whose board stamp is not after the sample's board time
-(`CommandTimeline.at`). The servo's own delay (the Uno's serial latency, the 50 Hz pulse frame) is not part of this:
-it is the estimator's `command_delay` (hexa.estimation.ServoModel).
+which the least-delayed sample of a burst decides. Each command is stamped with b(t_send) when it is sent —
+provisionally: the samples still waiting in the port at that moment are not in the map yet, and the next read of the
+port raises the stamp to what they prove (`CommandTimeline.confirm`) — and each sample is paired with the latest
+command whose board stamp is not after the sample's board time (`CommandTimeline.at`). The servo's own delay (the
+Uno's serial latency, the 50 Hz pulse frame) is not part of this: it is the estimator's `command_delay`
+(hexa.estimation.ServoModel).
 """
 from __future__ import annotations
 
@@ -33,6 +35,9 @@ BOARD_CLOCK_WRAP_S = 2 ** 32 * 1e-6
 RESTART_STEP_US = 100_000
 #: the rate is refitted every this many samples
 RATE_EVERY = 10
+#: a command's board time raised by more than this (s) by a later read is counted (`CommandTimeline.redated`): the
+#: read's bound is sharper than the map's by the samples' arrival delay, so small raises are routine
+REDATE_COUNTED = 0.001
 
 
 class BoardClockMap:
@@ -134,33 +139,76 @@ class BoardClockMap:
 class CommandTimeline:
     """Commanded angles, each with the board time from which it was in effect.
 
+    A command's board time is first estimated when it is sent (`add` with `sent_at`, from the clock map), and is
+    *provisional* until a read of the board's port that started after the send (`confirm`): samples that were
+    already waiting in the port when the command went out — a driver that was stopped or starved while the board
+    went on measuring — are not in the map yet, so the estimate can be early by the whole wait, and every sample of
+    that wait would carry a command the servos did not have yet (seen as a false collision START after a 45 ms driver
+    stall, docs/driver.md). Each such read raises the estimate to what its samples prove: they had all been measured
+    when the read started.
+
     Args:
         horizon: board seconds of superseded commands kept for samples that arrive late (s).
     """
 
     def __init__(self, horizon: float = 2.0) -> None:
         self.horizon = float(horizon)
-        self._items: deque[tuple[float, np.ndarray]] = deque()
+        self._items: deque[list] = deque()   # [board time, zeta, host send time (None: confirmed)], in send order
+        self.redated = 0                     # board times raised by more than REDATE_COUNTED (diagnostics)
 
     def rebase(self) -> None:
         """The board clock started over (a board reset or a new connection): keep only the newest command, in
         effect from now on whatever the new clock reads."""
         if self._items:
-            self._items = deque([(-math.inf, self._items[-1][1])])
+            self._items = deque([[-math.inf, self._items[-1][1], None]])
 
-    def add(self, board_time: float | None, zeta: np.ndarray) -> float:
+    def add(self, board_time: float | None, zeta: np.ndarray, sent_at: float | None = None) -> float:
         """Record `zeta` as sent at `board_time` (None: before any sample, in effect for every sample); returns the
-        board time used (never before the previous command's)."""
+        board time used (never before the previous command's). With `sent_at` (host time of the send, s) the board
+        time is provisional until `confirm`."""
         b = -math.inf if board_time is None else float(board_time)
         if self._items and b < self._items[-1][0]:
             b = self._items[-1][0]
-        self._items.append((b, np.array(zeta, dtype=float)))
+        self._items.append([b, np.array(zeta, dtype=float), None if sent_at is None else float(sent_at)])
         return b
+
+    def confirm(self, read_started: float, newest_board_time: float, rate: float) -> int:
+        """A read of the board's port that started at host time `read_started` (s) returned samples measured up to
+        board time `newest_board_time` (s): the board clock read at least that when the read started. A command sent
+        at host time t_s before the read was therefore sent no earlier than newest − rate·(read_started − t_s) (rate:
+        board s per host s, the clock map's; a clock that paused in between only makes the bound looser), and is
+        confirmed; one sent after the read started — the samples are handled after it went out — no earlier than
+        just after `newest`, and stays provisional for the next read. Each provisional command gets the later of its
+        estimate and its bound; commands keep their send order. Returns how many board times were raised by more
+        than REDATE_COUNTED."""
+        items = self._items
+        first = len(items)                  # provisional commands are the newest ones (confirmed in send order)
+        while first > 0 and items[first - 1][2] is not None:
+            first -= 1
+        raised = 0
+        floor = items[first - 1][0] if first > 0 else -math.inf
+        for k in range(first, len(items)):
+            item = items[k]
+            sent_at = item[2]
+            if sent_at is not None:
+                if sent_at <= read_started:
+                    bound = newest_board_time - rate * (read_started - sent_at)
+                    item[2] = None
+                else:
+                    bound = newest_board_time + 1e-6
+                if bound > item[0]:
+                    raised += bound - item[0] > REDATE_COUNTED
+                    item[0] = bound
+            if item[0] < floor:      # a command is never in effect before one sent earlier
+                item[0] = floor
+            floor = item[0]
+        self.redated += raised
+        return raised
 
     def at(self, board_time: float) -> np.ndarray | None:
         """The command in effect at `board_time` (s): the latest one sent at or before it; None if none was."""
         found = None
-        for b, zeta in reversed(self._items):
+        for b, zeta, _ in reversed(self._items):
             if b <= board_time:
                 found = zeta
                 break

@@ -326,6 +326,7 @@ class BoardLink:
             readable, _, _ = select.select([fd], [], [], timeout)
             if not readable:
                 return
+            t_read = time.monotonic()   # every byte that had arrived by now is in this read
             data = os.read(fd, 65536)
             if not data:
                 raise OSError(errno.EIO, "port readable but returned no data (device disconnected?)")
@@ -338,11 +339,16 @@ class BoardLink:
         self.stats.bytes_rx += len(data)
         for frame in self._parser.feed(data):
             self._dispatch(frame, t_rx)
+        self.end_of_read(t_read, t_rx)
         ps, base = self._parser.stats, self._parser_base
         self.stats.crc_errors = base.crc_errors + ps.crc_errors
         self.stats.bad_length = base.bad_length + ps.bad_length
         self.stats.resyncs = base.resyncs + ps.resyncs
         self.stats.discarded_bytes = base.discarded + ps.discarded
+
+    def end_of_read(self, t_read: float, t_rx: float) -> None:
+        """Called after the frames of one read of the port were dispatched: the read started at host time `t_read`
+        and returned at `t_rx` (s, monotonic). Subclasses that batch frames per read override it."""
 
     def _dispatch(self, frame: fr.Frame, t_rx: float) -> None:
         st = self.stats
@@ -458,7 +464,9 @@ class ServoLink(BoardLink):
 
 
 class CurrentLink(BoardLink):
-    """The Mega current board: streams samples at `rate_hz`; `on_sample(sample, t_rx, gap)` per sample.
+    """The Mega current board: streams samples at `rate_hz`; `on_sample(sample, t_rx, gap)` per sample, or, with
+    `on_samples`, `on_samples([(sample, gap), ...], t_read, t_rx)` once per read of the port with its samples in
+    order (t_read: when the read started — every sample in it had been measured by then).
 
     `gap` is the number of samples missing before this one (sequence gap); `stats.extra["sample_gaps"]` sums them.
     """
@@ -466,13 +474,17 @@ class CurrentLink(BoardLink):
     kind = fr.BOARD_CURRENT
 
     def __init__(self, port: str, rate_hz: int = 1000,
-                 on_sample: Callable[[fr.Sample, float, int], None] | None = None, **kw) -> None:
+                 on_sample: Callable[[fr.Sample, float, int], None] | None = None,
+                 on_samples: Callable[[list[tuple[fr.Sample, int]], float, float], None] | None = None,
+                 **kw) -> None:
         kw.setdefault("poll_period", 1.0)
         super().__init__(port, **kw)
         if not fr.MIN_RATE_HZ <= rate_hz <= fr.MAX_RATE_HZ:
             raise LinkError(f"rate_hz {rate_hz} outside {fr.MIN_RATE_HZ}..{fr.MAX_RATE_HZ}")
         self.rate_hz = int(rate_hz)
         self.on_sample = on_sample
+        self.on_samples = on_samples
+        self._batch: list[tuple[fr.Sample, int]] = []
         self.status: fr.CurrentStatus | None = None
         self.samples = 0
         self.sample_gaps = 0
@@ -481,6 +493,15 @@ class CurrentLink(BoardLink):
     def on_connected(self) -> None:
         self._last_sample_seq = None
         self.request(fr.START_STREAM, fr.pack_start_stream(self.rate_hz))
+
+    def end_of_read(self, t_read: float, t_rx: float) -> None:
+        if self._batch:
+            batch, self._batch = self._batch, []
+            try:
+                self.on_samples(batch, t_read, t_rx)
+            except Exception as exc:  # a consumer callback failed: keep the link alive, say so
+                self.stats.callback_errors += 1
+                self.stats.last_error = f"callback failed: {type(exc).__name__}: {exc}"
 
     def stop_stream(self) -> None:
         self.request(fr.STOP_STREAM, b"")
@@ -497,7 +518,9 @@ class CurrentLink(BoardLink):
             self.samples += 1
             self.sample_gaps += gap
             self.stats.extra["sample_gaps"] = self.sample_gaps
-            if self.on_sample is not None:
+            if self.on_samples is not None:
+                self._batch.append((sample, gap))
+            elif self.on_sample is not None:
                 self.on_sample(sample, t_rx, gap)
         elif frame.type == fr.STATUS:
             self.status = fr.unpack_current_status(frame.payload)
