@@ -5,8 +5,8 @@ import numpy as np
 import pytest
 from hypothesis import given, strategies as st
 
-from hexa.protocol.driver_core import (CommandRejected, DriverConfigError, ServoCalibration, driver_core_from_config,
-                                       load_driver_config, servo_calibrations_from_config)
+from hexa.protocol.driver_core import (CommandRejected, DriverConfigError, DriverCore, ServoCalibration,
+                                       driver_core_from_config, load_driver_config, servo_calibrations_from_config)
 from hexa.protocol.sensor_model import CurrentSensorModel, SensorModelError
 from hexa.robots.hexa_description import load_hexa
 
@@ -20,7 +20,7 @@ def desc():
 def core(desc):
     cfg = load_driver_config()
     c = driver_core_from_config(cfg, desc.zeta_min, desc.zeta_max, desc.K_t)
-    c.max_speed = 0.0
+    c.max_speed, c.slew_period = 0.0, 0.0
     return c
 
 
@@ -71,6 +71,27 @@ def test_limit_command_clamps_to_joint_limits_and_slew(core, desc):
     core.max_speed = 2.0
     z = core.limit_command(np.full(6, desc.zeta_center + 1.0), now=10.1)
     assert np.allclose(z, desc.zeta_center + 0.2) and core.counters.slew_limited == 1
+
+
+def test_the_slew_allowance_builds_up_over_one_command_period_at_most(core, desc):
+    """After a stall the newest command can lie far ahead; the time since the last command would allow the whole
+    jump, but the allowance stops at slew_period: the servos catch up at max_speed, on the clock given as slew_now
+    (robot time), whatever the host's monotonic clock says."""
+    assert driver_core_from_config(load_driver_config(), desc.zeta_min, desc.zeta_max, desc.K_t).slew_period == \
+        pytest.approx(0.01)                                # 1 / command_rate_hz
+    core.max_speed, core.slew_period = 1.5, 0.01
+    core.accept(np.full(6, desc.zeta_center), now=500.0, slew_now=10.0)
+    far = np.full(6, desc.zeta_center) + np.array([0.05, -0.05, 0.01, 0.0, 0.02, -0.1])
+    z = core.limit_command(far, now=11.0)                  # a second later: 1.5 rad/s · 0.01 s, not · 1 s
+    assert np.allclose(z - desc.zeta_center, [0.015, -0.015, 0.01, 0.0, 0.015, -0.015])
+    assert core.counters.slew_limited == 1
+    core.accept(z, now=500.5, slew_now=11.0)
+    z = core.limit_command(far, now=11.004)                # 4 ms later: 6 mrad more
+    assert np.allclose(z - desc.zeta_center, [0.021, -0.021, 0.01, 0.0, 0.02, -0.021])
+    assert core.last_command_time == 500.5                 # rest detection stays on the host clock
+    with pytest.raises(DriverConfigError, match="slew_period"):
+        DriverCore(servos=core.servos, zeta_min=desc.zeta_min, zeta_max=desc.zeta_max, k_t=desc.K_t,
+                   slew_period=-0.01)
 
 
 def test_currents_torques_and_zero_current_calibration(core, desc):

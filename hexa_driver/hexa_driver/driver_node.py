@@ -145,8 +145,11 @@ class DriverNode(Node):
             if zeta is None:
                 return
             now = time.monotonic()
-            zeta = self.core.limit_command(zeta, now)
-            pulses = self.core.accept(zeta, now)
+            # the slew limit runs on robot time (sim time in simulation), its allowance never more than one command
+            # period: after a stall the servos catch up at max_speed instead of jumping (docs/driver.md)
+            robot_now = self.get_clock().now().nanoseconds * 1e-9
+            zeta = self.core.limit_command(zeta, robot_now)
+            pulses = self.core.accept(zeta, now, slew_now=robot_now)
             # provisional: samples still waiting in the Mega's port are not in the clock map yet (_on_samples)
             self.timeline.add(self.board_clock.board_time_at(now), self.core.commanded, sent_at=now)
             self._last_sent = now

@@ -106,7 +106,12 @@ class DriverCore:
         zeta_min, zeta_max: joint limits (rad, scalar or six), from the robot description.
         k_t: torque constant(s) at the horn (N·m/A), from the robot description.
         sensor: current-sensor model.
-        max_speed: slew limit (rad/s) between consecutive commands; 0 = none.
+        max_speed: slew limit (rad/s, robot time) between consecutive commands; 0 = none.
+        slew_period: the longest time (s) the slew allowance builds up over between two commands; 0 = no bound.
+            After the driver stalled (a starved or paused host) the newest trajectory point can lie far ahead of the
+            last one sent, and the time since it would allow the whole jump: the servos jumped there at their full
+            speed, a real jerk that the collision observer saw as a collision. With one command period here they
+            catch up at max_speed instead (docs/driver.md, "Catching up after a stall").
         joint_names: names expected in joint_commands / used in joint_states.
     """
 
@@ -116,6 +121,7 @@ class DriverCore:
     k_t: np.ndarray
     sensor: CurrentSensorModel = field(default_factory=CurrentSensorModel)
     max_speed: float = 0.0
+    slew_period: float = 0.0
     joint_names: tuple[str, ...] = JOINT_NAMES
     offsets: np.ndarray = field(default_factory=lambda: np.zeros(N_JOINTS))
 
@@ -126,9 +132,12 @@ class DriverCore:
         self.offsets = np.broadcast_to(np.asarray(self.offsets, float), (N_JOINTS,)).copy()
         if np.any(self.zeta_min > self.zeta_max):
             raise DriverConfigError(f"joint limits zeta_min {self.zeta_min} above zeta_max {self.zeta_max}")
+        if not (math.isfinite(self.slew_period) and self.slew_period >= 0):
+            raise DriverConfigError(f"slew_period must be >= 0 s (0 = no bound), got {self.slew_period}")
         self.counters = CommandCounters()
         self.commanded = np.full(N_JOINTS, np.nan)   # last commanded angles (rad), NaN before the first
-        self._last_cmd_time: float | None = None
+        self._last_cmd_time: float | None = None     # host monotonic time of the last command (rest detection)
+        self._slew_time: float | None = None         # its time on the slew limit's clock (robot time)
 
     # ------------------------------------------------------------------------------------------ commands
     def order_command(self, names: Sequence[str], positions: Sequence[float]) -> np.ndarray:
@@ -159,13 +168,18 @@ class DriverCore:
         return ordered
 
     def limit_command(self, zeta: np.ndarray, now: float | None = None) -> np.ndarray:
-        """Clamp to the joint limits and (if max_speed > 0) to the slew limit from the last command."""
+        """Clamp to the joint limits and (if max_speed > 0) to the slew limit from the last command: at most
+        max_speed·min(now − then, slew_period) per angle, `now` on the clock `accept` got as `slew_now` (robot time:
+        sim time in simulation; default host monotonic)."""
         now = time.monotonic() if now is None else now
         z = np.clip(zeta, self.zeta_min, self.zeta_max)
         if np.any(z != zeta):
             self.counters.clamped += 1
-        if self.max_speed > 0 and self._last_cmd_time is not None and np.all(np.isfinite(self.commanded)):
-            step = self.max_speed * max(now - self._last_cmd_time, 1e-3)
+        if self.max_speed > 0 and self._slew_time is not None and np.all(np.isfinite(self.commanded)):
+            dt = max(now - self._slew_time, 1e-3)
+            if self.slew_period > 0:
+                dt = min(dt, self.slew_period)
+            step = self.max_speed * dt
             zs = np.clip(z, self.commanded - step, self.commanded + step)
             if np.any(zs != z):
                 self.counters.slew_limited += 1
@@ -176,10 +190,12 @@ class DriverCore:
         """Pulse widths (us) for six arm angles (rad)."""
         return [s.pulse_from_angle(float(a)) for s, a in zip(self.servos, zeta)]
 
-    def accept(self, zeta: np.ndarray, now: float | None = None) -> list[int]:
-        """Record `zeta` as the commanded position and return its pulse widths (us)."""
+    def accept(self, zeta: np.ndarray, now: float | None = None, slew_now: float | None = None) -> list[int]:
+        """Record `zeta` as the commanded position at host time `now` (monotonic) and, for the slew limit, at
+        `slew_now` (default `now`); return its pulse widths (us)."""
         self.commanded = np.asarray(zeta, float).copy()
         self._last_cmd_time = time.monotonic() if now is None else now
+        self._slew_time = self._last_cmd_time if slew_now is None else float(slew_now)
         self.counters.accepted += 1
         return self.pulses_from_angles(self.commanded)
 
@@ -207,8 +223,9 @@ class DriverCore:
 
 # ---------------------------------------------------------------------------------------------- configuration
 SCALAR_KEYS = ("uno_port", "mega_port", "baud", "stream_rate_hz", "stale_timeout", "drop_after", "reconnect_period",
-               "hello_timeout", "boot_delay", "command_rate_hz", "max_speed", "board_clock_max_extrapolation",
-               "watchdog_ms", "diagnostics_period", "calibration_duration", "rest_quiet_time", "frame_id")
+               "hello_timeout", "boot_delay", "command_rate_hz", "max_speed",
+               "board_clock_max_extrapolation", "watchdog_ms", "diagnostics_period", "calibration_duration",
+               "rest_quiet_time", "frame_id")
 REQUIRED_KEYS = SCALAR_KEYS + ("joint_names", "sensor", "current_offsets", "servos")
 
 
@@ -282,5 +299,6 @@ def driver_core_from_config(cfg: dict, zeta_min, zeta_max, k_t,
         raise DriverConfigError("driver config `servos` is null and no calibration from the description was given")
     return DriverCore(servos=servos, zeta_min=zeta_min, zeta_max=zeta_max,
                       k_t=k_t, sensor=CurrentSensorModel.from_dict(cfg["sensor"]),
-                      max_speed=float(cfg["max_speed"]), joint_names=tuple(cfg["joint_names"]),
+                      max_speed=float(cfg["max_speed"]), slew_period=1.0 / float(cfg["command_rate_hz"]),
+                      joint_names=tuple(cfg["joint_names"]),
                       offsets=np.asarray(cfg["current_offsets"], dtype=float))
