@@ -15,7 +15,8 @@ quantization and noise go to the ζ estimator (hexa.estimation) and its ζ̂, ζ
   set-point each servo really acts on (what a board reporting its latch times would give).
 
 With --gaps: no frame, commands on time, but every 0.5 s the host sends nothing for 90 ms (a stalled driver), then
-the current trajectory point — the residual's peak during each gap and in the 0.15 s after it (docs/driver.md).
+catches up with the trajectory — at once (a jump) or at 1.5 or 1 rad/s (the driver's `max_speed` over one 10 ms
+command period); the residual's peak during each gap and in the 0.15 s after it (docs/driver.md).
 
 Printed per row: the estimator's ζ̇ error RMS (rad/s), the residual force RMS and peak per axis (N) after the first
 second, samples with a force component over r_low = 2 N, and the residual from the true ζ, ζ̇ (the observer itself).
@@ -33,7 +34,7 @@ TAU_COUNT = 0.0119      # N·m per ADC count (the Mega's current sensing, H3's s
 
 def run(frame: float, jitter: float, sample: float, setpoint: str, duration: float, seed: int = 0,
         torque_sigma: float | None = None, accel_sigma: float | None = None,
-        gaps: tuple[tuple[float, float], ...] = (), step_cap: float = 0.0) -> dict:
+        gaps: tuple[tuple[float, float], ...] = (), catch_up: float = 0.0) -> dict:
     from hexa import trajectories
     from hexa.dynamics.lagrange import HexaDynamicParameters
     from hexa.dynamics.observer import ObserverConfig, ResidualObserver
@@ -57,7 +58,8 @@ def run(frame: float, jitter: float, sample: float, setpoint: str, duration: flo
     while sim.time < duration:
         if k % n_cmd == 0 and not any(a <= sim.time < b for a, b in gaps):
             target = kin.inverse_kinematics(desc, path(sim.time)[0])
-            u = target if (u is None or step_cap <= 0) else u + np.clip(target - u, -step_cap, step_cap)
+            step = catch_up * 0.01                       # rad per 10 ms command; 0: no limit
+            u = target if (u is None or step <= 0) else u + np.clip(target - u, -step, step)
             pending.append((sim.time + rng.uniform(0.0, jitter), u))
         for item in [p for p in pending if p[0] <= sim.time]:
             sim.set_servo_targets(item[1])
@@ -108,14 +110,19 @@ def main() -> None:
     args = ap.parse_args()
     if args.gaps:
         gaps = tuple((a, a + 0.09) for a in np.arange(1.5, args.duration - 0.3, 0.5))
-        r = run(0.0, 0.0, 0.005, "command", args.duration, gaps=gaps)
+        runs = {speed: run(0.0, 0.0, 0.005, "command", args.duration, gaps=gaps, catch_up=speed)
+                for speed in (0.0, 1.5, 1.0)}
         if args.json:
-            print(json.dumps(r, indent=1))
+            print(json.dumps({f"catch_up_{k}": v for k, v in runs.items()}, indent=1))
             return
-        print("| gap at (s) | peak \\|F\\| during the gap (N) | peak in the 0.15 s after it (N) |")
-        print("|---|---|---|")
-        for (a, _), (during, after) in zip(gaps, r["gap_peaks"]):
-            print(f"| {a:.1f} | {during:.2f} | {after:.2f} |")
+        print("| catch-up | peak \\|F\\| during each gap (N) | peak in the 0.15 s after each gap (N) "
+              "| peak x y z (N) |")
+        print("|---|---|---|---|")
+        for speed, r in runs.items():
+            name = f"{speed} rad/s" if speed else "a jump"
+            during = ', '.join(f'{d:.2f}' for d, _ in r['gap_peaks'])
+            after = ', '.join(f'{a:.2f}' for _, a in r['gap_peaks'])
+            print(f"| {name} | {during} | {after} | {' '.join(f'{v:.2f}' for v in r['force_peak'])} |")
         return
     rows = []
     for frame, jitter, sample, setpoint in ROWS:
