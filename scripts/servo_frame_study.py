@@ -15,7 +15,7 @@ quantization and noise go to the ζ estimator (hexa.estimation) and its ζ̂, ζ
   set-point each servo really acts on (what a board reporting its latch times would give).
 
 With --gaps: no frame, commands on time, but every 0.5 s the host sends nothing for 90 ms (a stalled driver), then
-catches up with the trajectory — at once (a jump) or at 1.5 or 1 rad/s (the driver's `max_speed` over one 10 ms
+catches up with the trajectory — at once (a jump) or at 1.5 or 1 rad/s (the driver's `max_speed`, 1.5, over one 10 ms
 command period); the residual's peak during each gap and in the 0.15 s after it (docs/driver.md).
 
 Printed per row: the estimator's ζ̇ error RMS (rad/s), the residual force RMS and peak per axis (N) after the first

@@ -145,13 +145,15 @@ class DriverNode(Node):
             if zeta is None:
                 return
             now = time.monotonic()
-            # the slew limit runs on robot time (sim time in simulation), its allowance never more than one command
-            # period: after a stall the servos catch up at max_speed instead of jumping (docs/driver.md)
-            robot_now = self.get_clock().now().nanoseconds * 1e-9
+            # the slew limit runs on the robot's time — the Mega's clock, sim time in simulation, where the ROS clock
+            # moves in 4 ms /clock steps — its allowance never more than one command period: after a stall the
+            # servos catch up at max_speed instead of jumping (docs/driver.md, "Catching up after a stall")
+            board_now = self.board_clock.board_time_at(now)
+            robot_now = now if board_now is None else board_now
             zeta = self.core.limit_command(zeta, robot_now)
             pulses = self.core.accept(zeta, now, slew_now=robot_now)
             # provisional: samples still waiting in the Mega's port are not in the clock map yet (_on_samples)
-            self.timeline.add(self.board_clock.board_time_at(now), self.core.commanded, sent_at=now)
+            self.timeline.add(board_now, self.core.commanded, sent_at=now)
             self._last_sent = now
         if not self.uno.set_targets(pulses):
             self.tx_failures += 1

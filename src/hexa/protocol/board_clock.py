@@ -35,9 +35,10 @@ BOARD_CLOCK_WRAP_S = 2 ** 32 * 1e-6
 RESTART_STEP_US = 100_000
 #: the rate is refitted every this many samples
 RATE_EVERY = 10
-#: a command's board time raised by more than this (s) by a later read is counted (`CommandTimeline.redated`): the
-#: read's bound is sharper than the map's by the samples' arrival delay, so small raises are routine
-REDATE_COUNTED = 0.001
+#: a command's board time raised by more than this (s) by a later read is counted (`CommandTimeline.redated`): a
+#: stalled driver. Small raises are routine: the read's bound is sharper than the map's by the samples' arrival
+#: delay, and in simulation the board clock (sim time) runs in bursts between camera renders
+REDATE_COUNTED = 0.01
 
 
 class BoardClockMap:
