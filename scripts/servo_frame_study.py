@@ -29,8 +29,6 @@ import json
 
 import numpy as np
 
-TAU_COUNT = 0.0119      # N·m per ADC count (the Mega's current sensing, H3's sensor model)
-
 
 def run(frame: float, jitter: float, sample: float, setpoint: str, duration: float, seed: int = 0,
         torque_sigma: float | None = None, accel_sigma: float | None = None,
@@ -40,11 +38,13 @@ def run(frame: float, jitter: float, sample: float, setpoint: str, duration: flo
     from hexa.dynamics.observer import ObserverConfig, ResidualObserver
     from hexa.estimation import EstimatorConfig, ZetaEstimator
     from hexa.kinematics import hexa6rus as kin
+    from hexa.protocol.sensor_model import DEFAULT_SENSOR
     from hexa.sim import Simulator
 
     sim = Simulator(cameras=False, trajectory="circle", drive="external", seed=seed)
     sim._frame_period = frame                 # sim.servo.frame_period without writing a description file
     desc = sim.desc
+    tau_count = DEFAULT_SENSOR.amps_per_count * float(desc.K_t)   # N·m per ADC count of the Mega's current sensing
     cfg = EstimatorConfig(**{k: v for k, v in (("torque_sigma", torque_sigma), ("accel_sigma", accel_sigma))
                              if v is not None})
     est = ZetaEstimator(desc, config=cfg)
@@ -69,7 +69,7 @@ def run(frame: float, jitter: float, sample: float, setpoint: str, duration: flo
         if k % n_sample:
             continue
         s = sim.state()
-        tau = np.round((s.tau + rng.normal(0.0, 0.008, 6)) / TAU_COUNT) * TAU_COUNT
+        tau = np.round((s.tau + rng.normal(0.0, 0.008, 6)) / tau_count) * tau_count
         c = (sim._setpoints if frame > 0 else sim._targets).copy() if setpoint == "oracle" else u
         e = est.update(s.time, c, tau)
         if k % n_cam < n_sample:

@@ -94,6 +94,13 @@ def test_the_slew_allowance_builds_up_over_one_command_period_at_most(core, desc
                    slew_period=-0.01)
 
 
+@pytest.mark.parametrize("key, value", [("max_speed", -1.0), ("max_speed", float("nan")), ("command_rate_hz", 0.0)])
+def test_a_bad_speed_limit_or_command_rate_is_refused_naming_it(desc, key, value):
+    cfg = dict(load_driver_config(), **{key: value})
+    with pytest.raises(DriverConfigError, match=key):
+        driver_core_from_config(cfg, desc.zeta_min, desc.zeta_max, desc.K_t)
+
+
 def test_currents_torques_and_zero_current_calibration(core, desc):
     sensor = core.sensor
     amps = np.array([0.3, -0.3, 1.0, -1.0, 2.0, 0.0])

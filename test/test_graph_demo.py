@@ -49,7 +49,7 @@ def test_demo_writes_the_report_with_a_plot_per_case(demo_run):
 def test_plate_and_rod_cases_are_detected_after_the_true_contact_onset(demo_run):
     # The arm case is not asserted: an arm contact reaches the plate residual only in part — with the scenario's 5 N
     # push its plate-equivalent wrench J_Dᵀ F peaks at 1.9 N / 0.15 N·m, below the thresholds, so it is detected only
-    # when model error adds to it (8 runs of 15; README, docs/observer_node.md "Observer lag and observability").
+    # when model error adds to it (10 runs of 19; README, docs/observer_node.md "Observer lag and observability").
     for c in [c for c in demo_run["result"]["cases"] if c["case"] != "arm"]:
         assert math.isfinite(c["detect_time"]), f"{c['case']}: no collision detected"
         assert c["detect_time"] > c["onset_true"], f"{c['case']}: detected before the contact began"

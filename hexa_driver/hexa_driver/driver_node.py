@@ -149,7 +149,7 @@ class DriverNode(Node):
             # moves in 4 ms /clock steps — its allowance never more than one command period: after a stall the
             # servos catch up at max_speed instead of jumping (docs/driver.md, "Catching up after a stall")
             board_now = self.board_clock.board_time_at(now)
-            robot_now = now if board_now is None else board_now
+            robot_now = now if board_now is None else board_now   # no sample yet: the host's clock (one command)
             zeta = self.core.limit_command(zeta, robot_now)
             pulses = self.core.accept(zeta, now, slew_now=robot_now)
             # provisional: samples still waiting in the Mega's port are not in the clock map yet (_on_samples)

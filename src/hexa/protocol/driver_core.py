@@ -132,6 +132,8 @@ class DriverCore:
         self.offsets = np.broadcast_to(np.asarray(self.offsets, float), (N_JOINTS,)).copy()
         if np.any(self.zeta_min > self.zeta_max):
             raise DriverConfigError(f"joint limits zeta_min {self.zeta_min} above zeta_max {self.zeta_max}")
+        if not (math.isfinite(self.max_speed) and self.max_speed >= 0):
+            raise DriverConfigError(f"max_speed must be >= 0 rad/s (0 = off), got {self.max_speed}")
         if not (math.isfinite(self.slew_period) and self.slew_period >= 0):
             raise DriverConfigError(f"slew_period must be >= 0 s (0 = no bound), got {self.slew_period}")
         self.counters = CommandCounters()
@@ -297,8 +299,11 @@ def driver_core_from_config(cfg: dict, zeta_min, zeta_max, k_t,
         servos = servo_calibrations_from_config(cfg["servos"])
     if servos is None:
         raise DriverConfigError("driver config `servos` is null and no calibration from the description was given")
+    rate = float(cfg["command_rate_hz"])
+    if not (math.isfinite(rate) and rate > 0):
+        raise DriverConfigError(f"command_rate_hz must be > 0, got {cfg['command_rate_hz']}")
     return DriverCore(servos=servos, zeta_min=zeta_min, zeta_max=zeta_max,
                       k_t=k_t, sensor=CurrentSensorModel.from_dict(cfg["sensor"]),
-                      max_speed=float(cfg["max_speed"]), slew_period=1.0 / float(cfg["command_rate_hz"]),
+                      max_speed=float(cfg["max_speed"]), slew_period=1.0 / rate,
                       joint_names=tuple(cfg["joint_names"]),
                       offsets=np.asarray(cfg["current_offsets"], dtype=float))
