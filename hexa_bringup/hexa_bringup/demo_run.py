@@ -144,12 +144,12 @@ def case_data_from_bag(case: str, bag: Path, ns: str = "/hexa"):
     from hexa_dynamics.conversions import hexa_pose_from_msg
 
     store = typestore()
-    rows: dict[str, list] = {k: [] for k in ("truth", "wrench_truth", "pose_truth", "res", "ev", "contact",
-                                             "wrench")}
+    rows: dict[str, list] = {k: [] for k in ("truth", "wrench_truth", "pose_truth", "zeta_truth", "res", "ev",
+                                             "contact", "wrench")}
     for topic, msgtype, _t, data in read_bag(bag):
         name = topic[len(ns) + 1:] if topic.startswith(ns + "/") else topic
-        if name not in ("sim/contact_truth", "sim/wrench_truth", "sim/plate_pose_truth", "residual", "collision",
-                        "contact", "contact_wrench"):
+        if name not in ("sim/contact_truth", "sim/wrench_truth", "sim/plate_pose_truth", "sim/joint_states_truth",
+                        "residual", "collision", "contact", "contact_wrench"):
             continue
         m = store.deserialize_cdr(data, msgtype)
         if name == "sim/contact_truth":
@@ -159,10 +159,13 @@ def case_data_from_bag(case: str, bag: Path, ns: str = "/hexa"):
             rows["wrench_truth"].append((_stamp(m.header), f.x, f.y, f.z))
         elif name == "sim/plate_pose_truth":
             rows["pose_truth"].append((_stamp(m.header), *hexa_pose_from_msg(m.pose)))
+        elif name == "sim/joint_states_truth":
+            rows["zeta_truth"].append((_stamp(m.header), *[float(v) for v in m.position[:6]]))
         elif name == "residual":
             w = m.wrench
             rows["res"].append((_stamp(m.header), w.force.x, w.force.y, w.force.z, w.torque.x, w.torque.y,
-                                w.torque.z, *[float(v) for v in m.threshold]))
+                                w.torque.z, *[float(v) for v in m.threshold], *[float(v) for v in m.servo_torque],
+                                *[float(v) for v in m.servo_threshold]))
         elif name == "collision":
             rows["ev"].append((_stamp(m.header), "START" if m.event == 0 else "END", int(m.id), str(m.axis_name)))
         elif name == "contact":
@@ -179,12 +182,17 @@ def case_data_from_bag(case: str, bag: Path, ns: str = "/hexa"):
         pt = np.array(sorted(rows["pose_truth"]), dtype=float)
         pose = np.stack([np.interp(truth[:, 0], pt[:, 0], np.unwrap(pt[:, k]) if k > 3 else pt[:, k])
                          for k in range(1, 7)], axis=1)
-    res = np.array(sorted(rows["res"]), dtype=float) if rows["res"] else np.zeros((0, 13))
+    zeta = None
+    if len(rows["zeta_truth"]) > 1:
+        zt = np.array(sorted(rows["zeta_truth"]), dtype=float)
+        zeta = np.stack([np.interp(truth[:, 0], zt[:, 0], zt[:, k]) for k in range(1, 7)], axis=1)
+    res = np.array(sorted(rows["res"]), dtype=float) if rows["res"] else np.zeros((0, 25))
     con = np.array(sorted(rows["contact"]), dtype=float) if rows["contact"] else np.zeros((0, 6))
     wr = np.array(sorted(rows["wrench"]), dtype=float) if rows["wrench"] else np.zeros((0, 4))
     return CaseData(
         case=case, truth_t=truth[:, 0], truth_force=force, truth_point=truth[:, 3:6],
         truth_link=truth[:, 1].astype(int), truth_chain=truth[:, 2].astype(int), truth_pose=pose,
         residual_t=res[:, 0], residual=res[:, 1:7], threshold=res[0, 7:13] if len(res) else np.full(6, 2.0),
+        truth_zeta=zeta, residual_servo=res[:, 13:19], servo_threshold=res[0, 19:25] if len(res) else np.zeros(6),
         events=sorted(rows["ev"]), contact_t=con[:, 0], contact_link=con[:, 1].astype(int),
         contact_chain=con[:, 2].astype(int), contact_point=con[:, 3:6], wrench_t=wr[:, 0], wrench_force=wr[:, 1:4])

@@ -18,6 +18,8 @@ e.g. `hexa param set /hexa/observer thresholds "[3.0,3.0,3.0,0.3,0.3,0.3]"`):
     bag recorded on the real robot with --clock.
   gains (double[6], 100 1/s): observer gains K_j per axis [fx fy fz mx my mz].
   thresholds (double[6], [2,2,2,0.2,0.2,0.2] N, N·m): r_low per axis.
+  servo_thresholds (double[6], 0.35 N·m each): threshold on the residual as servo torques τ_r = J_ζ⁻ᵀ r, servo 1..6
+    (0 switches one off); a START comes from either criterion (docs/observer_node.md, "Detection in servo coordinates").
   release_ratio (0.5): an axis releases below release_ratio·r_low.  min_duration (0.02 s): confirmation time.
   max_gap (0.1 s): longer joint_states spacing restarts the integration.
   pose_delay (0.5 s): camera poses are applied at sample time image stamp + pose_delay, so the output depends on
@@ -56,7 +58,6 @@ from sensor_msgs.msg import JointState
 from visualization_msgs.msg import Marker, MarkerArray
 
 JOINT_NAMES = [f"arm_{i}" for i in range(1, 7)]
-AXIS_NAMES = ("fx", "fy", "fz", "mx", "my", "mz")
 ESTIMATOR_KEYS = ("accel_sigma", "torque_sigma", "camera_sigma", "bias_walk", "saturation", "stall_sigma")
 INPUT_QOS = QoSProfile(depth=500, reliability=ReliabilityPolicy.RELIABLE, history=HistoryPolicy.KEEP_LAST)
 EVENT_QOS = QoSProfile(depth=20, reliability=ReliabilityPolicy.RELIABLE, history=HistoryPolicy.KEEP_LAST)
@@ -262,6 +263,7 @@ class ObserverNode(Node):
             raise ValueError(f"parameter zeta_source must be 'estimator' or 'measured', got {self.zeta_source!r}")
         gains = [float(v) for v in p("gains", [float(v) for v in dflt.gains]).value]
         thresholds = [float(v) for v in p("thresholds", [float(v) for v in dflt.thresholds]).value]
+        servo_th = [float(v) for v in p("servo_thresholds", [float(v) for v in dflt.servo_thresholds]).value]
         release = float(p("release_ratio", dflt.release_ratio).value)
         min_dur = float(p("min_duration", dflt.min_duration).value)
         max_gap = float(p("max_gap", dflt.max_gap).value)
@@ -274,7 +276,8 @@ class ObserverNode(Node):
 
         self.desc = load_hexa(desc_path)
         self.params = HexaDynamicParameters.from_description(self.desc)
-        cfg = ObserverConfig(gains=tuple(gains), thresholds=tuple(thresholds), release_ratio=release,
+        cfg = ObserverConfig(gains=tuple(gains), thresholds=tuple(thresholds), servo_thresholds=tuple(servo_th),
+                             release_ratio=release,
                              min_duration=min_dur, max_gap=max_gap)  # raises ObserverError naming a bad value
         self.observer = ResidualObserver(self.params, cfg)
         self.estimator = make_estimator(self.desc, est_cfg, delay)
@@ -296,7 +299,8 @@ class ObserverNode(Node):
         self.create_service(ResetObserver, "~/reset", self._on_reset)
         self.add_on_set_parameters_callback(self._on_set_parameters)
         self.create_timer(1.0, self._diagnostics)
-        self.get_logger().info(f"observer: ζ from {self.zeta_source}, r_low {thresholds}, K {gains}")
+        self.get_logger().info(f"observer: ζ from {self.zeta_source}, r_low {thresholds}, servo thresholds "
+                               f"{servo_th} N·m, K {gains}")
 
     # ------------------------------------------------------------------ parameters at runtime
     def _on_set_parameters(self, params: list) -> SetParametersResult:
@@ -315,6 +319,8 @@ class ObserverNode(Node):
                     return SetParametersResult(successful=False, reason=f"{name} is read at start-up only")
                 if name == "thresholds":  # validated by ObserverConfig; applied only when every parameter is valid
                     cfg = dataclasses.replace(cfg, thresholds=tuple(float(v) for v in val))
+                elif name == "servo_thresholds":
+                    cfg = dataclasses.replace(cfg, servo_thresholds=tuple(float(v) for v in val))
                 elif name == "gains":
                     cfg = dataclasses.replace(cfg, gains=tuple(float(v) for v in val))
                 elif name in ("release_ratio", "min_duration"):
@@ -335,6 +341,7 @@ class ObserverNode(Node):
         obs.config = cfg
         obs.detector.config = cfg
         obs.detector.set_thresholds(cfg.thresholds)
+        obs.detector.set_servo_thresholds(cfg.servo_thresholds)
         obs._K = np.asarray(cfg.gains, dtype=float)
         self.estimator.config = est_cfg
         self.get_logger().info(f"parameters set: {[p.name for p in params]}")
@@ -400,6 +407,9 @@ class ObserverNode(Node):
         r.wrench.torque.x, r.wrench.torque.y, r.wrench.torque.z = float(w[3]), float(w[4]), float(w[5])
         r.threshold = [float(v) for v in self.observer.detector.thresholds]
         r.over = [bool(v) for v in out.over]
+        r.servo_torque = [float(v) for v in out.servo_torque]
+        r.servo_threshold = [float(v) for v in self.observer.detector.servo_thresholds]
+        r.servo_over = [bool(v) for v in out.servo_over]
         r.in_collision = bool(out.in_collision)
         self.pub_residual.publish(r)
         for ev in out.events:
@@ -410,11 +420,11 @@ class ObserverNode(Node):
             c.id = int(ev.id)
             c.onset = stamp_from_seconds(ev.onset)
             c.axis = int(ev.axis)
-            c.axis_name = AXIS_NAMES[ev.axis]
+            c.axis_name = ev.axis_name
             c.value, c.peak, c.duration = float(ev.value), float(ev.peak), float(ev.duration)
             self.pub_collision.publish(c)
             self.events_sent += 1
-            self.get_logger().warn(f"collision {ev.id} {ev.kind} on {AXIS_NAMES[ev.axis]}: {ev.value:.3f} "
+            self.get_logger().warn(f"collision {ev.id} {ev.kind} on {ev.axis_name}: {ev.value:.3f} "
                                    f"(peak {ev.peak:.3f}, onset {ev.onset:.3f} s)")
         js = JointState()
         js.header.stamp = stamp

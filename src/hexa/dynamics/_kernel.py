@@ -75,6 +75,18 @@ def solve6_python(M: list[list[float]], b: Sequence[float]) -> Vec:
     return x
 
 
+def chain_jacobian_rows(geo: list) -> list[list[float]]:
+    """J_ζ (6×6, ζ̇ = J_ζ V, seed 000 eq 17) from `SampleKernel.geometry` rows: j_i = [d_i, r_i × d_i] / D_i."""
+    J = []
+    for (rx, ry, rz, ux, uy, uz, vx, vy, vz, dx, dy, dz, dd, D) in geo:
+        if abs(D) < 1e-12:
+            raise KernelError("serial singularity (rod perpendicular to the arm's motion)")
+        iD = 1.0 / D
+        J.append([dx * iD, dy * iD, dz * iD, (ry * dz - rz * dy) * iD, (rz * dx - rx * dz) * iD,
+                  (rx * dy - ry * dx) * iD])
+    return J
+
+
 def exp_rotate(w0: float, w1: float, w2: float, R: Sequence[float]) -> tuple[float, ...]:
     """exp([w]×)·R for a flat row-major 3×3 R."""
     th2 = w0 * w0 + w1 * w1 + w2 * w2
@@ -216,14 +228,7 @@ class SampleKernel:
         gcx0, gcy0, gcz0 = mk1 * gx, mk1 * gy, mk1 * gz
         mg = self.mas + la * mk0
         if twist is None:
-            J = []
-            for (rx, ry, rz, ux, uy, uz, vx, vy, vz, dx, dy, dz, dd, D) in geo:
-                if abs(D) < 1e-12:
-                    raise KernelError("serial singularity (rod perpendicular to the arm's motion)")
-                iD = 1.0 / D
-                J.append([dx * iD, dy * iD, dz * iD, (ry * dz - rz * dy) * iD, (rz * dx - rx * dz) * iD,
-                          (rx * dy - ry * dx) * iD])
-            V = solve6(J, zd)
+            V = solve6(chain_jacobian_rows(geo), zd)
         else:
             V = list(twist)
         v0, v1, v2, w0, w1, w2 = V

@@ -23,6 +23,13 @@ the plate twist is V = J_ζ⁻¹ ζ̇. ζ̇ is the measured rate when the sample
 Bad input never touches the state: non-finite values, time not increasing, gaps longer than `max_gap`, pose
 tracking failure or a singular J_ζ are rejected and counted by reason in `rejected`; after a gap the integration
 restarts at the next sample (r is kept).
+
+Detection (`CollisionDetector`): |r_j| > r_low on any plate axis (the paper's criterion, §3.1), or — beside it — the
+residual as servo torques τ_r = J_ζ⁻ᵀ r (N·m; u = J_ζᵀ τ maps servo torques onto the plate twist, so τ_r is the torque
+each servo delivers beyond the model) over a per-servo threshold. A contact on arm k gives τ_r = e_k·(moment of the
+force about the servo axis) exactly; a rod contact lands mostly on its own chain's servo. The sensor noise is per
+servo, so a per-servo threshold separates these contacts from free motion sooner than the plate-axis thresholds,
+which see them diluted (docs/observer_node.md, "Detection in servo coordinates").
 """
 from __future__ import annotations
 
@@ -32,7 +39,7 @@ from typing import TYPE_CHECKING, Iterable
 
 import numpy as np
 
-from hexa.dynamics._kernel import KernelError, SampleKernel, exp_rotate
+from hexa.dynamics._kernel import KernelError, SampleKernel, chain_jacobian_rows, exp_rotate, solve6
 from hexa.dynamics.lagrange import (DynamicsError, HexaDynamicParameters, MotionState, _Geometry, _momentum_terms,
                                     _Velocity, inverse_dynamics, motion_from_joint_rates, pose_to_position_rotation,
                                     wrench_to_generalized_zyz)
@@ -41,6 +48,8 @@ if TYPE_CHECKING:
     from numpy.typing import NDArray
 
 AXIS_NAMES = ("fx", "fy", "fz", "mx", "my", "mz")
+SERVO_AXIS_NAMES = ("servo1", "servo2", "servo3", "servo4", "servo5", "servo6")
+EVENT_AXIS_NAMES = AXIS_NAMES + SERVO_AXIS_NAMES  # CollisionEvent.axis 0..11
 REJECT_REASONS = ("non_finite", "time_not_increasing", "gap", "bad_shape", "pose_tracking", "singular", "no_pose",
                   "pose_stale")
 KINEMATICS = ("arm", "pose")
@@ -54,8 +63,9 @@ class ObserverError(ValueError):
 class ObserverConfig:
     """Observer and detector settings.
 
-    gains: K_j (1/s) per axis [fx fy fz mx my mz]; thresholds: r_low per axis (N, N·m); release_ratio: an axis
-    releases below release_ratio·r_low (hysteresis); min_duration (s): over threshold this long before START, all axes
+    gains: K_j (1/s) per axis [fx fy fz mx my mz]; thresholds: r_low per axis (N, N·m); servo_thresholds: per
+    servo 1..6 (N·m), on the residual as servo torques τ_r = J_ζ⁻ᵀ r, 0 switches that servo's check off;
+    release_ratio: an axis releases below release_ratio·r_low (hysteresis); min_duration (s): over threshold this long before START, all axes
     released this long before END; max_gap (s): longer arm-sample spacing is a gap; pose_tolerance (m²): largest
     |f_i| accepted after pose tracking.
 
@@ -74,6 +84,9 @@ class ObserverConfig:
     # timing" and "Free motion that moves for 60 s")
     gains: tuple[float, ...] = (100.0, 100.0, 100.0, 100.0, 100.0, 100.0)
     thresholds: tuple[float, ...] = (2.0, 2.0, 2.0, 0.2, 0.2, 0.2)
+    # free motion in the live graph peaks at 0.3–0.48 N·m in single samples; an arm push of 5 N gives 0.4–0.54 N·m,
+    # a rod push 0.8 N·m (docs/observer_node.md, "Detection in servo coordinates")
+    servo_thresholds: tuple[float, ...] = (0.35, 0.35, 0.35, 0.35, 0.35, 0.35)
     release_ratio: float = 0.5
     min_duration: float = 0.02
     max_gap: float = 0.1
@@ -91,6 +104,7 @@ class ObserverConfig:
         th = np.asarray(self.thresholds, dtype=float)
         if th.shape != (6,) or not np.all(np.isfinite(th)) or np.any(th <= 0):
             raise ObserverError(f"thresholds must be six positive values, got {self.thresholds!r}")
+        _check_servo_thresholds(self.servo_thresholds)
         if not 0.0 < self.release_ratio <= 1.0:
             raise ObserverError(f"release_ratio must be in (0, 1], got {self.release_ratio!r}")
         if not self.min_duration >= 0.0:
@@ -106,11 +120,19 @@ class ObserverConfig:
             raise ObserverError(f"max_pose_age must be > 0 s, got {self.max_pose_age!r}")
 
 
+def _check_servo_thresholds(values) -> NDArray:
+    th = np.asarray(values, dtype=float)
+    if th.shape != (6,) or not np.all(np.isfinite(th)) or np.any(th < 0):
+        raise ObserverError(f"servo_thresholds must be six values >= 0 (N·m, 0 = off), got {values!r}")
+    return th
+
+
 @dataclass(frozen=True)
 class CollisionEvent:
-    """START or END of a collision. onset: first sample over threshold; axis: 0..5 (AXIS_NAMES), the axis that
-    triggered (START) or whose |r|/r_low peaked (END); value: r on that axis at the event; peak: largest |r| on it;
-    duration: seconds since onset (0 at START); time: time of the event; id: collision number."""
+    """START or END of a collision. onset: first sample over threshold; axis: 0..11 (EVENT_AXIS_NAMES: the plate
+    axes fx..mz, then servo1..servo6 for τ_r), the axis that triggered (START) or whose |value|/threshold peaked (END);
+    value: r (or τ_r) on that axis at the event; peak: largest |value| on it; duration: seconds since onset (0 at
+    START); time: time of the event; id: collision number."""
 
     kind: str
     id: int
@@ -123,12 +145,13 @@ class CollisionEvent:
 
     @property
     def axis_name(self) -> str:
-        return AXIS_NAMES[self.axis]
+        return EVENT_AXIS_NAMES[self.axis]
 
 
 @dataclass
 class ResidualSample:
-    """Observer output at one arm sample: r as a wrench [F, N_P] in `base`, the paper's r_7..r_12 (Z-Y-Z), flags."""
+    """Observer output at one arm sample: r as a wrench [F, N_P] in `base`, the paper's r_7..r_12 (Z-Y-Z), r as
+    servo torques τ_r = J_ζ⁻ᵀ r (N·m; NaN when J_ζ is singular), over-threshold flags of both."""
 
     time: float
     wrench: NDArray
@@ -137,14 +160,19 @@ class ResidualSample:
     in_collision: bool
     pose: NDArray
     events: tuple[CollisionEvent, ...] = ()
+    servo_torque: NDArray = field(default_factory=lambda: np.full(6, np.nan))
+    servo_over: NDArray = field(default_factory=lambda: np.zeros(6, dtype=bool))
 
 
 class CollisionDetector:
-    """|r_j| > r_low with hysteresis (release at release_ratio·r_low) and a minimum duration; START/END events."""
+    """|r_j| > r_low, or |τ_r,i| over its servo threshold, with hysteresis (release at release_ratio·threshold) and a
+    minimum duration; START/END events. The twelve channels are one detector: a START needs some channel over its
+    threshold for min_duration without a break, an END every channel below release for min_duration."""
 
     def __init__(self, config: ObserverConfig) -> None:
         self.config = config
         self._th = np.asarray(config.thresholds, dtype=float)
+        self.set_servo_thresholds(config.servo_thresholds)
         self.reset()
         self.count = 0
 
@@ -154,7 +182,7 @@ class CollisionDetector:
         self._cand_axis = 0
         self._release_since: float | None = None
         self._onset = 0.0
-        self._peak = np.zeros(6)
+        self._peak = np.zeros(12)
 
     def set_thresholds(self, thresholds: Iterable[float]) -> None:
         th = np.asarray(list(thresholds), dtype=float)
@@ -162,13 +190,29 @@ class CollisionDetector:
             raise ObserverError(f"thresholds must be six positive values, got {thresholds!r}")
         self._th = th
 
+    def set_servo_thresholds(self, thresholds: Iterable[float]) -> None:
+        th = _check_servo_thresholds(list(thresholds))
+        self._th_servo = th
+        self._inv_servo = np.divide(1.0, th, out=np.zeros(6), where=th > 0)  # 0: that servo's check is off
+
     @property
     def thresholds(self) -> NDArray:
         return self._th.copy()
 
-    def update(self, t: float, r: NDArray) -> tuple[NDArray, tuple[CollisionEvent, ...]]:
-        """Feed one residual sample; returns the per-axis over-threshold flags and the events it caused."""
-        ratio = np.abs(r) / self._th
+    @property
+    def servo_thresholds(self) -> NDArray:
+        return self._th_servo.copy()
+
+    def update(self, t: float, r: NDArray, servo: NDArray | None = None) -> tuple[NDArray, tuple[CollisionEvent, ...]]:
+        """Feed one residual sample r (plate axes) and optionally τ_r (servo torques; None or NaN: not checked);
+        returns the twelve over-threshold flags (plate axes, then servos) and the events it caused."""
+        ratio = np.empty(12)
+        ratio[:6] = np.abs(r) / self._th
+        if servo is None:
+            ratio[6:] = 0.0
+        else:
+            ratio[6:] = np.nan_to_num(np.abs(servo) * self._inv_servo, nan=0.0)
+        value = np.concatenate([np.asarray(r, dtype=float), np.zeros(6) if servo is None else np.nan_to_num(servo)])
         over = ratio > 1.0
         md = self.config.min_duration
         if not self.active:
@@ -180,23 +224,24 @@ class CollisionDetector:
                     self.active = True
                     self.count += 1
                     self._onset = self._cand_onset
-                    self._peak = np.abs(r).copy()
+                    self._peak = np.abs(value)
                     self._release_since = None
                     ax = int(np.argmax(ratio))
-                    return over, (CollisionEvent("START", self.count, t, self._onset, ax, float(r[ax]),
+                    return over, (CollisionEvent("START", self.count, t, self._onset, ax, float(value[ax]),
                                                  float(self._peak[ax]), 0.0),)
             else:
                 self._cand_onset = None
             return over, ()
-        np.maximum(self._peak, np.abs(r), out=self._peak)
+        np.maximum(self._peak, np.abs(value), out=self._peak)
         if np.all(ratio < self.config.release_ratio):
             if self._release_since is None:
                 self._release_since = t
             if t - self._release_since >= md - 1e-12:
                 self.active = False
                 self._cand_onset = None
-                ax = int(np.argmax(self._peak / self._th))
-                return over, (CollisionEvent("END", self.count, t, self._onset, ax, float(r[ax]),
+                scale = np.concatenate([1.0 / self._th, self._inv_servo])
+                ax = int(np.argmax(self._peak * scale))
+                return over, (CollisionEvent("END", self.count, t, self._onset, ax, float(value[ax]),
                                              float(self._peak[ax]), t - self._onset),)
         else:
             self._release_since = None
@@ -470,7 +515,7 @@ class ResidualObserver:
         self._prev = s
         self.accepted += 1
         if prev is None:
-            return self._output(t, s)
+            return self._output(t, s, geo)
         dt = t - prev.t
         if self.form == "momentum":
             w_bar = np.array([(s.pi[m] - prev.pi[m]) / dt - 0.5 * (s.u[m] + prev.u[m]) for m in range(6)])
@@ -481,10 +526,11 @@ class ResidualObserver:
             self._calib.append(w_bar)
         a = np.exp(-self._K * dt)
         self.r = a * self.r + (1.0 - a) * w_bar
-        return self._output(t, s)
+        return self._output(t, s, geo)
 
-    def _output(self, t: float, s: _ArmSample) -> ResidualSample:
-        over, events = self.detector.update(t, self.r)
+    def _output(self, t: float, s: _ArmSample, geo: list) -> ResidualSample:
+        servo = servo_torque_residual(geo, self.r)
+        over, events = self.detector.update(t, self.r, servo)
         R = s.R
         r = self.r.tolist()
         st = math.hypot(R[2], R[5])
@@ -495,8 +541,8 @@ class ResidualObserver:
                           cf * sth * r[3] + sf * sth * r[4] + ct * r[5]])  # diag(1, Eᵀ)·r (see lagrange)
         pose = np.array([s.p[0], s.p[1], s.p[2], math.atan2(R[3], R[0]), math.asin(max(-1.0, min(1.0, -R[6]))),
                          math.atan2(R[7], R[8])])
-        return ResidualSample(time=t, wrench=np.array(r), r_zyz=r_zyz, over=over, in_collision=self.detector.active,
-                              pose=pose, events=events)
+        return ResidualSample(time=t, wrench=np.array(r), r_zyz=r_zyz, over=over[:6], in_collision=self.detector.active,
+                              pose=pose, events=events, servo_torque=servo, servo_over=over[6:])
 
     # ------------------------------------------------------------------ model evaluation
     def _evaluate(self, t, z, tq, zd, p, R, geo, zeta_ddot, V=None) -> _ArmSample:
@@ -527,6 +573,19 @@ class ResidualObserver:
         s.V = V[0].tolist()
         s.pi = s.u = None
         return s
+
+
+def servo_torque_residual(geo: list, r: NDArray) -> NDArray:
+    """The residual as servo torques, τ_r = J_ζ⁻ᵀ r (N·m): the torques the servos deliver beyond the model.
+
+    The reduced model's generalized force of the servo torques is u = J_ζᵀ τ (seed 000 eqs 17, 23), so a plate-
+    coordinate residual r corresponds to τ_r with J_ζᵀ τ_r = r. A force F at point D of arm k enters r as
+    J_ζᵀ e_k ((D − A_k) × F)·e_axis, hence τ_r = e_k × its moment about the servo axis. NaN where J_ζ is singular
+    (a type II singularity: there a finite wrench needs unbounded servo torques)."""
+    try:
+        return np.array(solve6(np.array(chain_jacobian_rows(geo)).T, r))
+    except KernelError:
+        return np.full(6, np.nan)
 
 
 def _floats(x) -> list | None:

@@ -23,8 +23,10 @@ class CaseData:
 
     truth_*: the simulator's force sensor (force at the contact point, its point, link code, chain);
     truth_pose: the simulator's plate pose (x y z α β γ) at truth_t, or None (then no plate-equivalent wrench);
-    residual_*: observer output as a wrench in base (N, N·m) and its thresholds; events: (t, kind "START"/"END",
-    id, axis_name); contact_*: isolation output; wrench_*: identified contact force.
+    truth_zeta: the simulator's arm angles at truth_t, or None (then no servo-torque equivalent);
+    residual_*: observer output as a wrench in base (N, N·m) and its thresholds; residual_servo: the same residual as
+    servo torques J_ζ⁻ᵀ r (N·m) and servo_threshold (0 = not checked); events: (t, kind "START"/"END", id,
+    axis_name); contact_*: isolation output; wrench_*: identified contact force.
     """
 
     case: str
@@ -37,6 +39,9 @@ class CaseData:
     residual_t: np.ndarray = field(default_factory=lambda: np.zeros(0))
     residual: np.ndarray = field(default_factory=lambda: np.zeros((0, 6)))
     threshold: np.ndarray = field(default_factory=lambda: np.full(6, 2.0))
+    truth_zeta: np.ndarray | None = None
+    residual_servo: np.ndarray = field(default_factory=lambda: np.zeros((0, 6)))
+    servo_threshold: np.ndarray = field(default_factory=lambda: np.zeros(6))
     events: list[tuple[float, str, int, str]] = field(default_factory=list)
     contact_t: np.ndarray = field(default_factory=lambda: np.zeros(0))
     contact_link: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=int))
@@ -57,7 +62,8 @@ class CaseMetrics:
     exceed_time: float           # first time a true force component exceeds r_low
     detect_time: float           # first START at or after the true onset
     delay_ms: float              # detect_time − exceed_time
-    plate_exceed_time: float     # first time the true plate-equivalent wrench exceeds a threshold (NaN: no pose)
+    plate_exceed_time: float     # first time the true plate-equivalent wrench exceeds a threshold, on the plate
+                                 # axes or as servo torques (NaN: no pose)
     observer_delay_ms: float     # detect_time − plate_exceed_time: the observer's own lag
     false_starts: int            # STARTs before the true onset
     found_link: str
@@ -108,14 +114,38 @@ def plate_equivalent_truth(d: CaseData, desc=None) -> np.ndarray:
     return W
 
 
+def servo_equivalent_truth(d: CaseData, plate_equivalent: np.ndarray, desc=None) -> np.ndarray | None:
+    """The true contact force as servo torques τ_W = J_ζ⁻ᵀ W (N·m) at every truth sample — what the residual's servo
+    form (hexa.dynamics.observer.servo_torque_residual) converges to; None without truth_zeta or truth_pose."""
+    from hexa.dynamics.lagrange import HexaDynamicParameters, chain_jacobian, pose_to_position_rotation
+
+    if d.truth_zeta is None or d.truth_pose is None:
+        return None
+    if desc is None:
+        from hexa.robots.hexa_description import load_hexa
+
+        desc = load_hexa()
+    p, R = pose_to_position_rotation(d.truth_pose)
+    J = chain_jacobian(HexaDynamicParameters.from_description(desc), d.truth_zeta, p, R)
+    W = np.nan_to_num(plate_equivalent)
+    with np.errstate(all="ignore"):
+        try:
+            tau = np.linalg.solve(np.transpose(J, (0, 2, 1)), W[..., None])[..., 0]
+        except np.linalg.LinAlgError:  # a singular row somewhere: row by row
+            tau = np.array([np.linalg.lstsq(j.T, w, rcond=None)[0] for j, w in zip(J, W)])
+    tau[~np.isfinite(plate_equivalent).all(axis=1)] = np.nan
+    return tau
+
+
 def compute_metrics(d: CaseData, r_low: float = 2.0, desc=None, plate_equivalent: np.ndarray | None = None
                     ) -> CaseMetrics:
     """Detection delay, link/chain, contact point error and force RMSE of one case against the ground truth.
 
     Two delays: from the first instant a true force component exceeds r_low (the issue's definition), and — with
     truth_pose — from the first instant the true plate-equivalent wrench W = J_Dᵀ F, which the residual estimates,
-    exceeds the observer's thresholds on any axis (its own lag; for arm and rod contacts only part of the force
-    reaches the plate coordinates, so W crosses later than F). `plate_equivalent`: W from plate_equivalent_truth, if
+    exceeds the observer's thresholds on any axis, or (with truth_zeta) its servo torques J_ζ⁻ᵀ W exceed the servo
+    thresholds (the observer's own lag; for arm and rod contacts only part of the force reaches the plate
+    coordinates, so W crosses later than F). `plate_equivalent`: W from plate_equivalent_truth, if
     already computed (the plot uses it too).
 
     Raises:
@@ -140,6 +170,11 @@ def compute_metrics(d: CaseData, r_low: float = 2.0, desc=None, plate_equivalent
     if d.truth_pose is not None:
         W = plate_equivalent_truth(d, desc) if plate_equivalent is None else plate_equivalent
         w_over = np.nanmax(np.abs(W) / np.asarray(d.threshold, dtype=float), axis=1) > 1.0
+        tau_w = servo_equivalent_truth(d, W, desc)
+        th_s = np.asarray(d.servo_threshold, dtype=float)
+        if tau_w is not None and np.any(th_s > 0):
+            inv = np.divide(1.0, th_s, out=np.zeros(6), where=th_s > 0)
+            w_over |= np.nan_to_num(np.abs(tau_w) * inv).max(axis=1) > 1.0
         w_over &= d.truth_t >= onset
         if w_over.any():
             plate_exceed = float(d.truth_t[int(np.argmax(w_over))])
@@ -179,15 +214,16 @@ def compute_metrics(d: CaseData, r_low: float = 2.0, desc=None, plate_equivalent
 
 
 def plot_case(d: CaseData, m: CaseMetrics, path: str | Path, plate_equivalent: np.ndarray | None = None) -> Path:
-    """Residual vs threshold and the true plate-equivalent force (`plate_equivalent`, else computed here),
-    identified vs true force, contact point error over time — one PNG."""
+    """Residual vs threshold and the true plate-equivalent force (`plate_equivalent`, else computed here), the
+    residual as servo torques vs the servo threshold and the true force's, identified vs true force, contact point
+    error over time — one PNG."""
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
     path = Path(path)
-    fig, ax = plt.subplots(3, 1, figsize=(9, 9), sharex=True)
+    fig, ax = plt.subplots(4, 1, figsize=(9, 11), sharex=True)
     colours = ("tab:red", "tab:green", "tab:blue")
     W = plate_equivalent
     if W is None and d.truth_pose is not None:
@@ -199,12 +235,28 @@ def plot_case(d: CaseData, m: CaseMetrics, path: str | Path, plate_equivalent: n
             ax[0].plot(d.truth_t, W[:, k], color=colours[k], lw=1, ls="--", label=f"true W_{name} = (J_Dᵀ F)_{name}")
         else:
             ax[0].plot(d.truth_t, d.truth_force[:, k], color=colours[k], lw=1, ls=":", label=f"true F_{name}")
-        ax[1].plot(d.truth_t, d.truth_force[:, k], color=colours[k], lw=1.2, ls=":", label=f"true F_{name}")
+        ax[2].plot(d.truth_t, d.truth_force[:, k], color=colours[k], lw=1.2, ls=":", label=f"true F_{name}")
         if len(d.wrench_t):
-            ax[1].plot(d.wrench_t, d.wrench_force[:, k], ".", color=colours[k], ms=3, label=f"identified F_{name}")
+            ax[2].plot(d.wrench_t, d.wrench_force[:, k], ".", color=colours[k], ms=3, label=f"identified F_{name}")
     thr = float(d.threshold[0]) if len(d.threshold) else 2.0
     ax[0].axhline(thr, color="k", lw=0.8, ls="--", label="±r_low")
     ax[0].axhline(-thr, color="k", lw=0.8, ls="--")
+    tau_w = servo_equivalent_truth(d, W) if W is not None else None
+    if len(d.residual_servo) and np.all(np.isfinite(d.servo_threshold)):
+        main = int(np.nanargmax(np.nanmax(np.abs(tau_w), axis=0))) if tau_w is not None and np.any(
+            np.nan_to_num(np.abs(tau_w)) > 0) else -1
+        for k in range(6):
+            hi = k == main
+            ax[1].plot(d.residual_t, d.residual_servo[:, k], lw=1.2 if hi else 0.6,
+                       color="tab:blue" if hi else "0.6", label=f"τ_r servo {k + 1}" if hi else None)
+        if tau_w is not None and main >= 0:
+            ax[1].plot(d.truth_t, tau_w[:, main], color="tab:blue", ls="--", lw=1,
+                       label=f"true (J_ζ⁻ᵀ W) servo {main + 1}")
+        ths = float(np.max(d.servo_threshold))
+        if ths > 0:
+            ax[1].axhline(ths, color="k", lw=0.8, ls="--", label="±servo threshold")
+            ax[1].axhline(-ths, color="k", lw=0.8, ls="--")
+    ax[1].set_ylabel("residual as servo torques (N·m)")
     for t, kind, _i, _a in d.events:
         for a in ax:
             a.axvline(t, color="tab:orange" if kind == "START" else "tab:purple", lw=0.8)
@@ -212,18 +264,18 @@ def plot_case(d: CaseData, m: CaseMetrics, path: str | Path, plate_equivalent: n
     found = f"delay {m.delay_ms:.1f} ms" if np.isfinite(m.delay_ms) else "not detected"
     ax[0].set_title(f"case {d.case}: true {m.true_link} chain {m.true_chain}; found {m.found_link} chain "
                     f"{m.found_chain}; {found}")
-    ax[1].set_ylabel("contact force (N)")
+    ax[2].set_ylabel("contact force (N)")
     if len(d.contact_t):
         idx = _nearest_index(d.truth_t, d.contact_t)
         err = np.linalg.norm(d.contact_point - d.truth_point[idx], axis=1) * 1e3
-        ax[2].plot(d.contact_t, err, ".", ms=4)
-    ax[2].set_ylabel("contact point error (mm)")
-    ax[2].set_xlabel("sim time (s)")
-    for a in ax[:2]:
+        ax[3].plot(d.contact_t, err, ".", ms=4)
+    ax[3].set_ylabel("contact point error (mm)")
+    ax[3].set_xlabel("sim time (s)")
+    for a in ax[:3]:
         a.legend(fontsize=7, ncol=3, loc="upper left")
     t_lo = max(float(d.truth_t[0]), m.onset_true - 1.5)
     t_hi = min(float(d.truth_t[-1]), m.onset_true + 2.0)
-    ax[2].set_xlim(t_lo, t_hi)
+    ax[3].set_xlim(t_lo, t_hi)
     fig.tight_layout()
     path.parent.mkdir(parents=True, exist_ok=True)
     fig.savefig(path, dpi=90)
@@ -261,7 +313,7 @@ def write_report(metrics: list[CaseMetrics], plots: dict[str, Path], out_dir: st
              "from the first instant a true force component exceeds r_low. The observer lag is measured from the "
              "first instant the true force's plate-equivalent wrench W = J_Dᵀ F (what the residual estimates: the "
              "force's virtual work in the plate's twist coordinates, moment about the plate centre) exceeds the "
-             "observer's threshold on any axis; on an arm or a rod only part of the force reaches the plate "
+             "observer's threshold on any axis (or its servo torques J_ζ⁻ᵀ W exceed the servo threshold); on an arm or a rod only part of the force reaches the plate "
              "coordinates, so W crosses later than the force.", "", markdown_table(metrics), ""]
     if notes:
         lines += [notes, ""]
