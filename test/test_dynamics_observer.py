@@ -8,8 +8,10 @@ import numpy as np
 import pytest
 
 from hexa.dynamics.lagrange import (HexaDynamicParameters, chain_jacobian, inverse_dynamics, motion_from_plate)
+from hexa.dynamics._kernel import SampleKernel
+from hexa.dynamics.contact_map import plate_equivalent_wrench
 from hexa.dynamics.observer import (CollisionDetector, ObserverConfig, ObserverError, ResidualObserver,
-                                    momentum_residual_batch)
+                                    momentum_residual_batch, servo_torque_residual)
 from hexa.kinematics import hexa6rus as kin
 from hexa.robots.hexa_description import load_hexa
 
@@ -44,7 +46,9 @@ def _data(t: np.ndarray, wrench_on: float = T_ON, tau_offset: np.ndarray | None 
 T = np.arange(0, 1.6, 0.001)
 DATA = _data(T)
 K = 40.0
-CFG = ObserverConfig(gains=(K,) * 6, thresholds=(1.0, 1.0, 1.0, 0.04, 0.04, 0.04), min_duration=0.005)
+# plate axes only here; the servo-torque criterion has its own tests below
+CFG = ObserverConfig(gains=(K,) * 6, thresholds=(1.0, 1.0, 1.0, 0.04, 0.04, 0.04), servo_thresholds=(0.0,) * 6,
+                     min_duration=0.005)
 
 
 def _run(obs: ResidualObserver, d: dict, pose_every: int = 1, rates: bool = True, accel: bool = False) -> np.ndarray:
@@ -229,6 +233,94 @@ def test_rejects_bad_configuration_naming_it():
         ObserverConfig(thresholds=(2.0, 2.0, 2.0, 0.2, 0.2, -1.0))
     with pytest.raises(ObserverError, match="form"):
         ResidualObserver(PRM, form="magic")
+    for bad in ((0.3,) * 5, (0.3, 0.3, 0.3, 0.3, 0.3, -0.1), (0.3, 0.3, float("nan"), 0.3, 0.3, 0.3)):
+        with pytest.raises(ObserverError, match="servo_thresholds"):
+            ObserverConfig(servo_thresholds=bad)
+
+
+def _geometry(pose: np.ndarray) -> tuple[list, np.ndarray]:
+    from hexa.dynamics.lagrange import pose_to_position_rotation
+
+    zeta = kin.inverse_kinematics(DESC, pose)
+    p, R = pose_to_position_rotation(pose[None])
+    geo, _ = SampleKernel(PRM).geometry(zeta.tolist(), p[0].tolist(), R[0].ravel().tolist())
+    return geo, zeta
+
+
+@pytest.mark.parametrize("chain", [1, 4, 6])
+def test_an_arm_force_as_servo_torques_is_its_moment_about_that_servo_axis(chain):
+    """τ_r = J_ζ⁻ᵀ W of an arm contact's plate-equivalent wrench (hexa.dynamics.contact_map, point velocities by
+    finite differences) is the force's moment about the arm's motor axis on that servo and zero on the others."""
+    pose = np.array([0.02, -0.015, -0.56, 0.05, -0.04, 0.1])
+    geo, zeta = _geometry(pose)
+    k = chain - 1
+    axis = np.array([-math.sin(PRM.alpha[k]), math.cos(PRM.alpha[k]), 0.0])
+    u = np.array([-math.cos(PRM.alpha[k]) * math.cos(zeta[k]), -math.sin(PRM.alpha[k]) * math.cos(zeta[k]),
+                  math.sin(zeta[k])])
+    D = PRM.A[k] + 0.6 * PRM.l_a * u + 0.01 * axis      # on the arm, 10 mm off its centre line
+    F = np.array([2.0, -3.0, 1.5])
+    tau = servo_torque_residual(geo, plate_equivalent_wrench(DESC, pose, "arm", chain, D, F))
+    moment = float(np.cross(D - PRM.A[k], F) @ axis)
+    assert abs(moment) > 0.05
+    assert tau[k] == pytest.approx(moment, rel=1e-4)
+    assert np.abs(np.delete(tau, k)).max() < 1e-4 * abs(moment)
+
+
+def test_servo_torque_criterion_detects_what_the_plate_axes_do_not():
+    """0.5 N·m more on servo 3 from 0.5 s to 1.0 s (a torque the model does not explain, as an arm contact gives):
+    τ_r converges to it, the plate thresholds (set out of reach) stay quiet, a START on servo3 then an END; with the
+    servo thresholds at 0 the same data raise nothing."""
+    offset = np.zeros((T.size, 6))
+    offset[(T >= 0.5) & (T < 1.0), 2] = 0.5
+    d = _data(T, wrench_on=10.0, tau_offset=offset)
+    base = dict(gains=(K,) * 6, thresholds=(1e3, 1e3, 1e3, 1e2, 1e2, 1e2), min_duration=0.005)
+    obs = ResidualObserver(PRM, ObserverConfig(**base, servo_thresholds=(0.35,) * 6))
+    quiet = ResidualObserver(PRM, ObserverConfig(**base, servo_thresholds=(0.0,) * 6))
+    events, tau_r, quiet_events = [], np.full((T.size, 6), np.nan), []
+    for k, t in enumerate(T):
+        args = (t, d["zeta"][k], d["tau"][k], d["zeta_dot"][k])
+        out = obs.update_arm(*args, pose=d["pose"][k])
+        events += out.events
+        tau_r[k] = out.servo_torque
+        quiet_events += quiet.update_arm(*args, pose=d["pose"][k]).events
+        assert not out.over.any()
+    # the measured torque exceeds the model by 0.5 N·m: the residual (external torque) is −0.5 N·m on servo 3
+    late = (T > 0.7) & (T < 1.0)
+    np.testing.assert_allclose(tau_r[late], np.broadcast_to([0, 0, -0.5, 0, 0, 0], tau_r[late].shape), atol=2e-3)
+    assert np.abs(tau_r[T < 0.5]).max() < 1e-3
+    assert [e.kind for e in events] == ["START", "END"] and quiet_events == []
+    start, end = events
+    assert start.axis == 8 and start.axis_name == "servo3" and start.value < -0.35
+    # the first-order lag of eq 25 crosses 0.35 of a 0.5 N·m step after ln(0.5/0.15)/K
+    assert start.onset == pytest.approx(0.5 + math.log(0.5 / 0.15) / K, abs=2e-3)
+    assert end.axis == 8 and end.peak == pytest.approx(0.5, rel=0.01) and 1.0 < end.time < 1.1
+
+
+def test_detector_servo_channels_have_the_same_hysteresis_and_can_be_switched_off():
+    det = CollisionDetector(ObserverConfig(servo_thresholds=(0.3, 0.3, 0.3, 0.0, 0.3, 0.3), min_duration=0.005))
+    zero, ev, t = np.zeros(6), [], 0.0
+    for v in [5.0] * 20:  # servo 4 is switched off: any value passes
+        t += 0.001
+        ev += det.update(t, zero, np.array([0, 0, 0, v, 0, 0]))[1]
+    for v in [0.0, np.nan] * 10:  # NaN (a singular J_ζ) is not a detection either
+        t += 0.001
+        ev += det.update(t, zero, np.array([0, 0, 0, 0, v, 0]))[1]
+    assert ev == []
+    for v in [0.4] * 10 + [0.2] * 10:  # over, then between release (0.15) and threshold: START, no END
+        t += 0.001
+        ev += det.update(t, zero, np.array([0, v, 0, 0, 0, 0]))[1]
+    assert [e.kind for e in ev] == ["START"] and ev[0].axis_name == "servo2"
+    for v in [0.1] * 10:
+        t += 0.001
+        ev += det.update(t, zero, np.array([0, v, 0, 0, 0, 0]))[1]
+    assert [e.kind for e in ev] == ["START", "END"] and ev[1].peak == pytest.approx(0.4)
+    det.set_servo_thresholds([0.0] * 6)
+    for _ in range(20):
+        t += 0.001
+        ev += det.update(t, zero, np.full(6, 9.0))[1]
+    assert len(ev) == 2
+    with pytest.raises(ObserverError, match="servo_thresholds"):
+        det.set_servo_thresholds([0.3] * 5)
 
 
 def test_arm_samples_before_any_pose_are_rejected_as_no_pose():

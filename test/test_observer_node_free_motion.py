@@ -22,7 +22,8 @@ CI_DURATION = 16.0
 def free_motion_run(trajectory: str, out_dir, domain: int, duration: float,
                     real_time_factor: float | None = None) -> dict:
     """Run the simulated graph with no collision scenario on `trajectory` for `duration` sim seconds; the collision
-    events and the residual force (N) and moment (N·m) peaks the observer published, read from the recorded bag.
+    events, the residual force (N), moment (N·m) and servo-torque (N·m) peaks the observer published, read from the
+    recorded bag, and the samples over a threshold (plate axes or servo torques).
 
     At real-time factor 0.3 the whole graph (simulator, two rendered cameras, vision, dynamics, recorder) uses about
     60 % of this 2-core machine; at 0.5 it saturates both cores, and a starved driver then forwards commands in bursts
@@ -46,14 +47,18 @@ def free_motion_run(trajectory: str, out_dir, domain: int, duration: float,
         elif topic == "/hexa/residual":
             m = store.deserialize_cdr(data, msgtype)
             f, q = m.wrench.force, m.wrench.torque
-            res.append((f.x, f.y, f.z, q.x, q.y, q.z, *[float(v) for v in m.threshold]))
+            res.append((f.x, f.y, f.z, q.x, q.y, q.z, *[float(v) for v in m.threshold],
+                        *[float(v) for v in m.servo_torque], *[float(v) for v in m.servo_threshold]))
         elif topic == "/hexa/joint_commands":
             m = store.deserialize_cdr(data, msgtype)
             cmds.append((m.header.stamp.sec + m.header.stamp.nanosec * 1e-9, *m.position))
-    r = np.array(res).reshape(-1, 12)
+    r = np.array(res).reshape(-1, 24)
     peaks = np.abs(r[:, :6]).max(axis=0).tolist() if len(r) else None
     peak, peak_moment = (peaks[:3], peaks[3:]) if peaks else (None, None)
-    over = (np.abs(r[:, :6]) > r[:, 6:]).any(axis=1)             # samples over a threshold (a START needs a run)
+    servo = np.nan_to_num(np.abs(r[:, 12:18]))
+    peak_servo = servo.max(axis=0).round(3).tolist() if len(r) else None
+    servo_over = ((servo > r[:, 18:]) & (r[:, 18:] > 0)).any(axis=1)
+    over = (np.abs(r[:, :6]) > r[:, 6:12]).any(axis=1) | servo_over   # samples over a threshold (a START needs a run)
     edges = np.flatnonzero(np.diff(np.r_[0, over.astype(int), 0]))   # run starts and ends, alternately
     runs = (edges[1::2] - edges[::2]) if over.any() else [0]
     # free motion means motion: the longest time (sim s) the commands stood still after the trajectory started
@@ -62,7 +67,8 @@ def free_motion_run(trajectory: str, out_dir, domain: int, duration: float,
     still = float(np.diff(np.r_[c[moved, 0], c[-1, 0]]).max()) if moved.size else float("inf")
     moving_s = float(c[-1, 0] - c[moved[0], 0]) if moved.size else 0.0
     return {"trajectory": trajectory, "events": events, "residuals": len(res), "peak": peak,
-            "peak_moment": peak_moment, "samples_over": int(over.sum()), "longest_run_over": int(max(runs)),
+            "peak_moment": peak_moment, "peak_servo_torque": peak_servo, "samples_over": int(over.sum()),
+            "samples_over_servo": int(servo_over.sum()), "longest_run_over": int(max(runs)),
             "moving_s": round(moving_s, 2), "longest_still_s": round(still, 3),
             "rc": run.returncode,
             "real_time_factor": real_time_factor, "wall_s": round(run.wall_s, 1)}

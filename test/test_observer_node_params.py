@@ -84,6 +84,11 @@ def test_runtime_parameters_reach_the_detector_and_the_estimator(rcl):
     bad = node.set_parameters([Parameter("thresholds", value=[3.0, -1.0, 4.0, 0.3, 0.3, 0.5])])
     assert not bad[0].successful and "thresholds" in bad[0].reason
     assert node.observer.detector.thresholds[1] == 3.0          # unchanged
+    res = node.set_parameters([Parameter("servo_thresholds", value=[0.5, 0.5, 0.5, 0.0, 0.5, 0.6])])
+    assert res[0].successful and node.observer.detector.servo_thresholds.tolist() == [0.5, 0.5, 0.5, 0.0, 0.5, 0.6]
+    bad = node.set_parameters([Parameter("servo_thresholds", value=[0.5, 0.5, -0.5, 0.0, 0.5, 0.6])])
+    assert not bad[0].successful and "servo_thresholds" in bad[0].reason
+    assert node.observer.detector.servo_thresholds[2] == 0.5    # unchanged
     ro = node.set_parameters([Parameter("zeta_source", value="measured")])
     assert not ro[0].successful and node.zeta_source == "estimator"
 
