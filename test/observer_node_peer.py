@@ -101,7 +101,8 @@ def main() -> int:
     node.create_subscription(Residual, "residual",
                              lambda m: (residuals.append((stamp_seconds(m.header.stamp),
                                                           [m.wrench.force.x, m.wrench.force.y, m.wrench.force.z],
-                                                          m.in_collision)), thresholds.append(list(m.threshold))),
+                                                          m.in_collision)),
+                                            thresholds.append(list(m.threshold) + list(m.servo_threshold))),
                              100)
     node.create_subscription(ContactWrench, "contact_wrench",
                              lambda m: wrenches.append({"t": stamp_seconds(m.header.stamp), "id": int(m.collision_id),
@@ -196,11 +197,13 @@ def main() -> int:
         cli.wait_for_service(timeout_sec=10)
         req = SetParameters.Request()
         req.parameters = [Parameter(name="thresholds", value=ParameterValue(
-            type=ParameterType.PARAMETER_DOUBLE_ARRAY, double_array_value=[20.0, 20.0, 20.0, 2.0, 2.0, 2.0]))]
+            type=ParameterType.PARAMETER_DOUBLE_ARRAY, double_array_value=[20.0, 20.0, 20.0, 2.0, 2.0, 2.0])),
+            Parameter(name="servo_thresholds", value=ParameterValue(
+                type=ParameterType.PARAMETER_DOUBLE_ARRAY, double_array_value=[3.0] * 6))]
         fut = cli.call_async(req)
         while not fut.done():
             spin(0.05)
-        out["set_thresholds_ok"] = bool(fut.result().results[0].successful)
+        out["set_thresholds_ok"] = all(res.successful for res in fut.result().results)
         bad = SetParameters.Request()
         bad.parameters = [Parameter(name="thresholds", value=ParameterValue(
             type=ParameterType.PARAMETER_DOUBLE_ARRAY, double_array_value=[-1.0, 2.0, 2.0, 0.2, 0.2, 0.2]))]

@@ -46,19 +46,20 @@ def test_demo_writes_the_report_with_a_plot_per_case(demo_run):
         assert (out / case / "bag" / "metadata.yaml").exists()
 
 
-def test_plate_and_rod_cases_are_detected_after_the_true_contact_onset(demo_run):
-    # The arm case is not asserted: an arm contact reaches the plate residual only in part — with the scenario's 5 N
-    # push its plate-equivalent wrench J_Dᵀ F peaks at 1.9 N / 0.15 N·m, below the thresholds, so it is detected only
-    # when model error adds to it (10 runs of 19; README, docs/observer_node.md "Observer lag and observability").
-    for c in [c for c in demo_run["result"]["cases"] if c["case"] != "arm"]:
+def test_all_three_cases_are_detected_after_the_true_contact_onset_on_the_right_link(demo_run):
+    # The arm push's plate-equivalent wrench J_Dᵀ F stays below the plate thresholds (1.9 N / 0.15 N·m); the servo-
+    # torque criterion finds it (0.45 N·m on servo 4 against 0.35): 6 runs of 6 at 56-121 ms, rod at -19 to -4 ms
+    # (before its force reaches r_low), plate 16-21 ms (docs/observer_node.md, "Detection in servo coordinates").
+    for c in demo_run["result"]["cases"]:
         assert math.isfinite(c["detect_time"]), f"{c['case']}: no collision detected"
         assert c["detect_time"] > c["onset_true"], f"{c['case']}: detected before the contact began"
         assert c["delay_ms"] < 250.0, f"{c['case']}: detection {c['delay_ms']:.0f} ms after the force exceeded r_low"
         assert (c["found_link"], c["found_chain"]) == (c["true_link"], c["true_chain"]), c
         assert c["point_error_median_mm"] < 10.0, c
-        # the observer's own lag, after the force's plate-equivalent wrench crossed the thresholds: plate 11 ms,
-        # rod 21 ms measured (the rod's delay after the force itself, 81-91 ms, is its partial observability)
-        assert c["observer_delay_ms"] < 60.0, f"{c['case']}: observer lag {c['observer_delay_ms']:.0f} ms"
+        # the observer's own lag, after the force's plate-equivalent wrench crossed a threshold (plate axes or servo
+        # torques): plate 16-21 ms, rod 16-26 ms, arm -4 to 61 ms measured
+        lag_limit = 120.0 if c["case"] == "arm" else 60.0
+        assert c["observer_delay_ms"] < lag_limit, f"{c['case']}: observer lag {c['observer_delay_ms']:.0f} ms"
     plate = [c for c in demo_run["result"]["cases"] if c["case"] == "plate"][0]
     # target ≤ 20 ms; measured 16-21 ms at K = 100 1/s, min_duration 0.02 s (11-31 ms at 0.015 s; 51-56 ms at the old
     # K = 25 1/s, 0.03 s)
@@ -78,9 +79,10 @@ def test_another_ros_process_receives_collision_events_and_contact_wrenches_with
     wrenches = [h for h in heard if h["topic"] == "contact_wrench"]
     assert {e["event"] for e in events} == {0, 1}, "START and END expected"
     assert all(e["type"] == "hexa_msgs.msg._collision_event.CollisionEvent" for e in events)
-    assert all(e["axis_name"] in ("fx", "fy", "fz", "mx", "my", "mz") for e in events)
+    assert all(e["axis_name"] in ("fx", "fy", "fz", "mx", "my", "mz") + tuple(f"servo{i}" for i in range(1, 7))
+               for e in events)
     starts = [e for e in events if e["event"] == 0]
-    assert len(starts) >= 2  # plate and rod (asserted detected above); the arm case is not asserted
+    assert len(starts) >= 3  # one per case (asserted detected above)
     assert wrenches, "no contact_wrench reached the other process"
     assert all(w["frame_id"] == "base" and w["link"] in (0, 1, 2) and len(w["force"]) == 3 for w in wrenches)
 

@@ -32,7 +32,7 @@ def test_observer_node_detects_the_push_and_takes_runtime_thresholds(procs, ros_
     assert r["forced_mean"][2] == pytest.approx(3.0, abs=0.3)
     # runtime thresholds: accepted, visible on `residual`, and the same push no longer triggers
     assert r["set_thresholds_ok"] and r["set_negative_rejected"]
-    assert r["threshold_seen"] == [20.0, 20.0, 20.0, 2.0, 2.0, 2.0]
+    assert r["threshold_seen"] == [20.0, 20.0, 20.0, 2.0, 2.0, 2.0] + [3.0] * 6   # plate axes, then servos
     assert r["events_phase2"] == 0 and r["residuals_phase2"] > 100
     # bad input is counted by reason; the node keeps publishing
     d = r["diag"]
