@@ -79,16 +79,17 @@ class ObserverConfig:
 
     # the live graph's values (the observer node declares these): K = 100 1/s, a 10 ms first-order lag — once the
     # simulated graph delivers commands on time, free-motion residual peaks reach r_low only in runs of a few samples,
-    # and the plate is detected 35 ms sooner than at 25 1/s; min_duration 0.02 s, 5 consecutive samples at 200 Hz —
-    # 3 × 60 s of looping free motion had runs of up to 3 samples over r_low (docs/observer_node.md, "Command
-    # timing" and "Free motion that moves for 60 s")
+    # and the plate is detected 35 ms sooner than at 25 1/s; min_duration 0.015 s, 4 consecutive samples at 200 Hz —
+    # 3 × 60 s of looping free motion with the board-clock driver had runs of 1 sample over any threshold, plate axes
+    # or servo torques (0.02 s while runs of 3 were seen; docs/observer_node.md, "Command timing", "Free motion that
+    # moves for 60 s" and "Detection in servo coordinates")
     gains: tuple[float, ...] = (100.0, 100.0, 100.0, 100.0, 100.0, 100.0)
     thresholds: tuple[float, ...] = (2.0, 2.0, 2.0, 0.2, 0.2, 0.2)
-    # free motion in the live graph peaks at 0.3–0.48 N·m in single samples; an arm push of 5 N gives 0.4–0.54 N·m,
+    # free motion in the live graph peaks at 0.3–0.52 N·m in single samples; an arm push of 5 N gives 0.4–0.54 N·m,
     # a rod push 0.8 N·m (docs/observer_node.md, "Detection in servo coordinates")
     servo_thresholds: tuple[float, ...] = (0.35, 0.35, 0.35, 0.35, 0.35, 0.35)
     release_ratio: float = 0.5
-    min_duration: float = 0.02
+    min_duration: float = 0.015
     max_gap: float = 0.1
     pose_tolerance: float = 1e-10
     newton_iterations: int = 4
@@ -172,6 +173,8 @@ class CollisionDetector:
     def __init__(self, config: ObserverConfig) -> None:
         self.config = config
         self._th = np.asarray(config.thresholds, dtype=float)
+        self._scale = np.empty(12)  # 1/threshold per channel: plate axes, then servos (0 = not checked)
+        self._scale[:6] = 1.0 / self._th
         self.set_servo_thresholds(config.servo_thresholds)
         self.reset()
         self.count = 0
@@ -189,11 +192,12 @@ class CollisionDetector:
         if th.shape != (6,) or not np.all(np.isfinite(th)) or np.any(th <= 0):
             raise ObserverError(f"thresholds must be six positive values, got {thresholds!r}")
         self._th = th
+        self._scale[:6] = 1.0 / th
 
     def set_servo_thresholds(self, thresholds: Iterable[float]) -> None:
         th = _check_servo_thresholds(list(thresholds))
         self._th_servo = th
-        self._inv_servo = np.divide(1.0, th, out=np.zeros(6), where=th > 0)  # 0: that servo's check is off
+        self._scale[6:] = np.divide(1.0, th, out=np.zeros(6), where=th > 0)  # 0: that servo's check is off
 
     @property
     def thresholds(self) -> NDArray:
@@ -206,17 +210,20 @@ class CollisionDetector:
     def update(self, t: float, r: NDArray, servo: NDArray | None = None) -> tuple[NDArray, tuple[CollisionEvent, ...]]:
         """Feed one residual sample r (plate axes) and optionally τ_r (servo torques; None or NaN: not checked);
         returns the twelve over-threshold flags (plate axes, then servos) and the events it caused."""
-        ratio = np.empty(12)
-        ratio[:6] = np.abs(r) / self._th
-        if servo is None:
-            ratio[6:] = 0.0
-        else:
-            ratio[6:] = np.nan_to_num(np.abs(servo) * self._inv_servo, nan=0.0)
-        value = np.concatenate([np.asarray(r, dtype=float), np.zeros(6) if servo is None else np.nan_to_num(servo)])
+        value = np.empty(12)  # a few whole-array operations: this runs at the sample rate (hexa bench dynamics)
+        value[:6] = r
+        value[6:] = 0.0 if servo is None else servo
+        mag = np.abs(value)
+        ratio = mag * self._scale
+        top = ratio.max()
+        if top != top:  # NaN servo torques (a singular J_ζ): not checked
+            bad = np.isnan(ratio)
+            value[bad] = mag[bad] = ratio[bad] = 0.0
+            top = ratio.max()
         over = ratio > 1.0
         md = self.config.min_duration
         if not self.active:
-            if over.any():
+            if top > 1.0:
                 if self._cand_onset is None:
                     self._cand_onset = t
                     self._cand_axis = int(np.argmax(ratio))
@@ -224,7 +231,7 @@ class CollisionDetector:
                     self.active = True
                     self.count += 1
                     self._onset = self._cand_onset
-                    self._peak = np.abs(value)
+                    self._peak = mag
                     self._release_since = None
                     ax = int(np.argmax(ratio))
                     return over, (CollisionEvent("START", self.count, t, self._onset, ax, float(value[ax]),
@@ -232,15 +239,14 @@ class CollisionDetector:
             else:
                 self._cand_onset = None
             return over, ()
-        np.maximum(self._peak, np.abs(value), out=self._peak)
-        if np.all(ratio < self.config.release_ratio):
+        np.maximum(self._peak, mag, out=self._peak)
+        if top < self.config.release_ratio:
             if self._release_since is None:
                 self._release_since = t
             if t - self._release_since >= md - 1e-12:
                 self.active = False
                 self._cand_onset = None
-                scale = np.concatenate([1.0 / self._th, self._inv_servo])
-                ax = int(np.argmax(self._peak * scale))
+                ax = int(np.argmax(self._peak * self._scale))
                 return over, (CollisionEvent("END", self.count, t, self._onset, ax, float(value[ax]),
                                              float(self._peak[ax]), t - self._onset),)
         else:
