@@ -85,3 +85,38 @@ def test_observer_lag_is_measured_from_the_plate_equivalent_wrench():
     W = plate_equivalent_truth(d)                   # computed once, given to both (the demo does)
     assert compute_metrics(d, plate_equivalent=W) == m
     assert math.isnan(compute_metrics(d, plate_equivalent=np.zeros_like(W)).plate_exceed_time)   # it is the one used
+
+
+def test_observer_lag_counts_the_servo_torque_criterion():
+    """With the arm angles known, the plate-equivalent wrench is also mapped to servo torques τ_W = J_ζ⁻ᵀ W. Checked
+    by virtual power, independently of J_ζ: for six plate motions (IK differences), τ_W · ζ̇ = W · V. With the plate
+    thresholds out of reach and a servo threshold met at F = 1 N, the lag counts from F = 1 N (t = 1.125 s)."""
+    from hexa.kinematics import hexa6rus as kin
+    from hexa.report.collision_demo import plate_equivalent_truth, servo_equivalent_truth
+    from hexa.robots.hexa_description import load_hexa
+    from hexa.trajectories import TRAJECTORIES
+
+    desc = load_hexa()
+    d = _case()
+    pose = np.asarray(TRAJECTORIES["circle"](0.0)[0], dtype=float)
+    d.truth_pose = np.tile(pose, (len(d.truth_t), 1))
+    d.truth_point = np.tile(pose[:3] + np.array([0.03, 0.1, 0.0]), (len(d.truth_t), 1))
+    d.truth_zeta = np.tile(kin.inverse_kinematics(desc, pose), (len(d.truth_t), 1))
+    W = plate_equivalent_truth(d, desc)
+    tau = servo_equivalent_truth(d, W, desc)
+    k = int(np.argmax(np.linalg.norm(d.truth_force, axis=1)))
+    h = 1e-6
+    V, zd = [], []
+    for j in range(6):
+        dq = np.eye(6)[j]
+        V.append(kin.twist_from_pose_rate(pose[None], dq[None])[0])
+        zd.append((kin.inverse_kinematics(desc, pose + h * dq) - kin.inverse_kinematics(desc, pose - h * dq)) / (2 * h))
+    tau_vp = np.linalg.solve(np.array(zd), np.array(V) @ W[k])
+    np.testing.assert_allclose(tau[k], tau_vp, rtol=1e-5, atol=1e-8)
+    per_newton = np.abs(tau[k]).max() / np.linalg.norm(d.truth_force[k])
+    d.threshold = np.array([100.0, 100.0, 100.0, 10.0, 10.0, 10.0])
+    d.servo_threshold = np.full(6, 1.0 * per_newton)
+    m = compute_metrics(d, desc=desc, plate_equivalent=W)
+    assert m.plate_exceed_time == pytest.approx(1.13) and m.observer_delay_ms == pytest.approx(140.0)
+    d.servo_threshold = np.zeros(6)                  # servo criterion off: nothing crosses
+    assert math.isnan(compute_metrics(d, desc=desc, plate_equivalent=W).plate_exceed_time)

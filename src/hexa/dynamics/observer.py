@@ -65,9 +65,9 @@ class ObserverConfig:
 
     gains: K_j (1/s) per axis [fx fy fz mx my mz]; thresholds: r_low per axis (N, N·m); servo_thresholds: per
     servo 1..6 (N·m), on the residual as servo torques τ_r = J_ζ⁻ᵀ r, 0 switches that servo's check off;
-    release_ratio: an axis releases below release_ratio·r_low (hysteresis); min_duration (s): over threshold this long before START, all axes
-    released this long before END; max_gap (s): longer arm-sample spacing is a gap; pose_tolerance (m²): largest
-    |f_i| accepted after pose tracking.
+    release_ratio: an axis releases below release_ratio·threshold (hysteresis); min_duration (s): over a threshold
+    this long before START, all axes released this long before END; max_gap (s): longer arm-sample spacing is a gap;
+    pose_tolerance (m²): largest |f_i| accepted after pose tracking.
 
     kinematics: "arm" — ζ (and ζ̇) come with the arm samples, the plate pose is tracked from them (servos with
     angle feedback, the simulator); "pose" — the arm samples bring only τ (and at most the commanded ζ, used as a

@@ -313,8 +313,10 @@ def write_report(metrics: list[CaseMetrics], plots: dict[str, Path], out_dir: st
              "from the first instant a true force component exceeds r_low. The observer lag is measured from the "
              "first instant the true force's plate-equivalent wrench W = J_Dᵀ F (what the residual estimates: the "
              "force's virtual work in the plate's twist coordinates, moment about the plate centre) exceeds the "
-             "observer's threshold on any axis (or its servo torques J_ζ⁻ᵀ W exceed the servo threshold); on an arm or a rod only part of the force reaches the plate "
-             "coordinates, so W crosses later than the force.", "", markdown_table(metrics), ""]
+             "observer's threshold on any axis, or its servo torques J_ζ⁻ᵀ W exceed the servo threshold; on an arm "
+             "or a rod only part of the force reaches the plate coordinates, so W crosses later than the force. The "
+             "observer detects on both: the residual on the plate axes and the residual as servo torques.", "",
+             markdown_table(metrics), ""]
     if notes:
         lines += [notes, ""]
     for case, p in plots.items():
