@@ -7,7 +7,8 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from hexa.dynamics.identification import IdentificationError, identify_contact_force
+from hexa.dynamics.identification import (ARM_NORMAL_MIN_GAIN, IdentificationError, arm_surface_normal,
+                                          identify_contact_force)
 from hexa.dynamics.lagrange import (HexaDynamicParameters, _Geometry, chain_jacobian, inverse_dynamics,
                                     motion_from_plate)
 from hexa.kinematics import hexa6rus as kin
@@ -92,6 +93,37 @@ def test_identification_recovers_the_observable_part_of_a_model_generated_force(
         assert est.residual_norm < 1e-8  # the plate's moment balance agrees with the point
 
 
+@settings(max_examples=60, deadline=None)
+@given(pose=st.lists(unit, min_size=6, max_size=6), twist=st.lists(st.floats(-0.5, 0.5), min_size=6, max_size=6),
+       chain=st.integers(1, 6), along=unit, around=st.floats(-np.pi, np.pi), push=st.floats(0.5, 8.0))
+def test_surface_normal_model_recovers_a_frictionless_push_on_an_arm(pose, twist, chain, along, around, push):
+    """A push along the inward surface normal at a surface point of arm k (radius 8 mm) is given back whole by
+    arm_force_model="surface_normal" — its two unobservable directions included — whenever the normal is within
+    72.5° of the arm's direction of motion; otherwise the model says it fell back to the minimum-norm answer."""
+    s = _sample(pose, twist, [0.0] * 6)
+    k = chain - 1
+    axis_pt = _point(s, "arm", chain, [along, 0.0])
+    u = (kin.elbows(DESC, s.zeta[0])[k] - PRM.A[k]) / PRM.l_a
+    e = np.array([-np.sin(PRM.alpha[k]), np.cos(PRM.alpha[k]), 0.0])
+    m = np.cos(around) * e + np.sin(around) * np.cross(u, e)       # outward normal, ⟂ the arm's axis
+    D = axis_pt + 0.008 * m
+    F = -push * m
+    tau = _torques(s, _generalized_force(s, "arm", chain, D, F))
+    est = identify_contact_force(PRM, s, tau, "arm", chain, D, arm_force_model="surface_normal")
+    np.testing.assert_allclose(arm_surface_normal(D, PRM.A[k], u), -m, atol=1e-9)
+    motion = np.cross(e, D - PRM.A[k])
+    if abs(m @ motion) >= ARM_NORMAL_MIN_GAIN * np.linalg.norm(motion):
+        assert est.force_model == "surface_normal"
+        np.testing.assert_allclose(est.force, F, atol=1e-8 * push)
+    else:
+        assert est.force_model == "min_norm"
+        n = est.unobservable_directions
+        np.testing.assert_allclose(est.force, F - n.T @ (n @ F), atol=1e-8)
+    assert est.rank == 1 and not est.observable          # the model fills in, it does not observe
+    on_axis = identify_contact_force(PRM, s, tau, "arm", chain, axis_pt, arm_force_model="surface_normal")
+    assert on_axis.force_model == "min_norm"              # no side of the arm known: nothing assumed
+
+
 def test_force_on_a_chain_other_than_the_named_one_is_not_recovered():
     """Naming the wrong chain gives a different answer: the chain matters (generalised from the paper's chain 1)."""
     s = _sample([0.2, -0.1, 0.3, 0.1, 0.0, -0.2], [0.05, 0, 0, 0, 0.1, 0], [0, 0.2, 0, 0, 0, 0.5])
@@ -120,6 +152,8 @@ def test_bad_requests_are_named():
         identify_contact_force(PRM, s, np.zeros(6), "arm", 7, np.zeros(3))
     with pytest.raises(IdentificationError, match="point"):
         identify_contact_force(PRM, s, np.zeros(6), "plate", 0, [np.nan, 0.0, 0.0])
+    with pytest.raises(IdentificationError, match="arm_force_model"):
+        identify_contact_force(PRM, s, np.zeros(6), "arm", 1, np.zeros(3), arm_force_model="guess")
     s.V_dot = None
     with pytest.raises(IdentificationError, match="accelerations"):
         identify_contact_force(PRM, s, np.zeros(6), "plate", 0, np.zeros(3))

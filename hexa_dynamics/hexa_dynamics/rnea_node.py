@@ -17,7 +17,9 @@ Parameters: description (""), zeta_source ("estimator" | "measured"), accel_sigm
 bias_walk, saturation, stall_sigma, command_delay (ZetaEstimator, as the observer), rate_hz (100; 0 = only on contact
 messages), torque_window (0.02 s), accel_tau (0.02 s: time constant of the ζ̈ low-pass derivative),
 require_collision (true: ignore contacts outside a START..END), marker_scale (0.02 m/N), frame_id ("base"), history
-(3.0 s of states kept for late contacts; 0 = no backfill).
+(3.0 s of states kept for late contacts; 0 = no backfill), arm_force_model ("surface_normal" | "min_norm": what an
+arm force's two unobservable directions get — a frictionless push along the inward surface normal at the contact
+point, or nothing; hexa.dynamics.identification).
 Topics (relative): sub `joint_states`, `motor_currents` (reliable; time_source as the observer), `plate_pose`,
 `contact` (hexa_msgs/Contact), `collision`
 (reliable); pub `contact_wrench` (hexa_msgs/ContactWrench), `contact_markers` (visualization_msgs/MarkerArray),
@@ -50,6 +52,7 @@ class RneaNode(Node):
 
     def __init__(self) -> None:
         super().__init__("rnea")
+        from hexa.dynamics.identification import ARM_FORCE_MODELS
         from hexa.dynamics.lagrange import HexaDynamicParameters
         from hexa.robots.hexa_description import load_hexa
 
@@ -67,6 +70,10 @@ class RneaNode(Node):
         self.marker_scale = float(p("marker_scale", 0.02).value)
         self.frame_id = str(p("frame_id", "base").value)
         self.history = float(p("history", 3.0).value)
+        self.arm_force_model = str(p("arm_force_model", "surface_normal").value)
+        if self.arm_force_model not in ARM_FORCE_MODELS:
+            raise ValueError(f"parameter arm_force_model must be one of {ARM_FORCE_MODELS}, "
+                             f"got {self.arm_force_model!r}")
         if not (math.isfinite(self.history) and self.history >= 0):
             raise ValueError(f"parameter history must be >= 0 s, got {self.history!r}")
         if not (self.torque_window >= 0 and self.accel_tau > 0):
@@ -253,7 +260,8 @@ class RneaNode(Node):
         point = np.array([c.point.x, c.point.y, c.point.z])
         try:
             st = motion_from_joint_rates(self.params, zeta[None], zd[None], pose[None], zdd[None])
-            est = identify_contact_force(self.params, st, tau, link, chain, point)
+            est = identify_contact_force(self.params, st, tau, link, chain, point,
+                                         arm_force_model=self.arm_force_model)
         except (ValueError, DynamicsError, np.linalg.LinAlgError) as exc:
             self.rejects["identification"] += 1
             self.get_logger().warn(f"identification failed: {exc}", throttle_duration_sec=1.0)
@@ -272,6 +280,7 @@ class RneaNode(Node):
         w.condition = float(est.condition)
         w.observable = bool(est.observable)
         w.residual_norm = float(est.residual_norm)
+        w.force_model = est.force_model
         self.pub_wrench.publish(w)
         self.published += 1
         if not backfill:  # markers show the present only (a backfilled state is history)

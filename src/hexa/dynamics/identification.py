@@ -14,6 +14,11 @@ of rod i on the plate, f_Bi the force of arm i on rod i, d_i = C_i − B_i.
   l_a u'_k·f_Bk − m_a s_a u'_k·g + b ζ̇_k. One equation: only the component of F_e along e_k × (D − A_k) (the arm's
   direction of motion) is observable — the motor bearing takes the rest. Rank 1, `observable` False, the two
   unobservable directions are returned. (The paper's eq 33 treats n_A as known in 3-D; a real hinge does not.)
+  `arm_force_model` chooses the rest: "min_norm" gives the unobservable directions no force; "surface_normal"
+  assumes a frictionless push, along the link's inward surface normal at D (from D to the arm's axis — the vision
+  puts D on the surface facing the object), scaled to match the observed component; it falls back to min_norm when
+  D lies on the axis or the normal makes more than 72.5° with the arm's direction of motion (cos < ARM_NORMAL_MIN_GAIN:
+  the observed component would be amplified more than 1/0.3).
 - Rod k hit (eqs 34–36): f_Ck as in eq 32; rod moments about B_k: (D − B_k) × F_e = d_k × f_Ck + κ d_k × F_rk + M_rk
   (rank 2: a force along the rod is invisible in it) and the arm's axis equation u'_k·(f_Ck + F_rk − F_e) = s_Bk
   (one more). Least squares on the 4×3 system (moment rows divided by |D − B_k| so all rows are in N): rank 3 unless
@@ -37,6 +42,9 @@ if TYPE_CHECKING:
     from numpy.typing import NDArray
 
 LINKS = ("plate", "arm", "rod")
+ARM_FORCE_MODELS = ("min_norm", "surface_normal")
+ARM_NORMAL_MIN_GAIN = 0.3      # |cos| between the surface normal and the arm's direction of motion, at least
+ARM_NORMAL_MIN_OFFSET = 5e-4   # m: D this close to the arm's axis gives no normal
 
 
 class IdentificationError(ValueError):
@@ -49,8 +57,10 @@ class ContactForceEstimate:
 
     rank / singular_values / condition describe the least-squares system (rows in N); observable is False when
     some direction of F_e cannot be seen (listed as unit vectors in unobservable_directions, its force component set
-    to 0); residual_norm is the least-squares residual (plate: the moment balance mismatch in N·m).
-    chain_forces: f_Ci (6, 3), the forces of the rods on the plate.
+    to 0, unless force_model says otherwise); residual_norm is the least-squares residual (plate: the moment balance
+    mismatch in N·m). chain_forces: f_Ci (6, 3), the forces of the rods on the plate. force_model: "measured"
+    (rank 3), "min_norm" (unobservable directions get no force) or "surface_normal" (an arm force along the inward
+    surface normal at the point, module docstring).
     """
 
     force: NDArray
@@ -64,6 +74,7 @@ class ContactForceEstimate:
     unobservable_directions: NDArray
     residual_norm: float
     chain_forces: NDArray
+    force_model: str = "measured"
 
 
 _KERNELS: dict[int, tuple[HexaDynamicParameters, SampleKernel]] = {}
@@ -98,18 +109,33 @@ def _lstsq(A: NDArray, b: NDArray, rcond: float) -> tuple[NDArray, int, NDArray,
     return x, rank, svals, cond, null, res
 
 
+def arm_surface_normal(point: NDArray, axis_origin: NDArray, axis_dir: NDArray) -> NDArray | None:
+    """Unit vector from `point` to the closest point of the arm's axis line (origin A_k, unit direction u_k): the
+    inward surface normal where a frictionless push at `point` acts. None when the point lies on the axis."""
+    D, A, u = (np.asarray(v, dtype=float) for v in (point, axis_origin, axis_dir))
+    q = A + ((D - A) @ u) * u
+    v = q - D
+    dist = float(np.linalg.norm(v))
+    return None if dist < ARM_NORMAL_MIN_OFFSET else v / dist
+
+
 def identify_contact_force(params: HexaDynamicParameters, state: MotionState, tau: NDArray, link: str,
-                           chain: int, point: NDArray, rcond: float = 1e-3) -> ContactForceEstimate:
+                           chain: int, point: NDArray, rcond: float = 1e-3,
+                           arm_force_model: str = "min_norm") -> ContactForceEstimate:
     """Contact force at `point` (base, m) on `link` of `chain` from one sample (seed 000 eqs 27–36).
 
     state: one sample (N = 1) with accelerations (motion_from_joint_rates(..., zeta_ddot) or motion_from_plate with
-    twist_dot); tau: servo torques K_t·I (6,) in N·m.
+    twist_dot); tau: servo torques K_t·I (6,) in N·m; arm_force_model: what an arm force's two unobservable
+    directions get, "min_norm" or "surface_normal" (module docstring).
 
     Raises:
-        IdentificationError: unknown link, chain not in 1..6 for an arm/rod, missing accelerations, bad point.
+        IdentificationError: unknown link or arm_force_model, chain not in 1..6 for an arm/rod, missing
+            accelerations, bad point.
     """
     if link not in LINKS:
         raise IdentificationError(f"link must be one of {LINKS}, got {link!r}")
+    if arm_force_model not in ARM_FORCE_MODELS:
+        raise IdentificationError(f"arm_force_model must be one of {ARM_FORCE_MODELS}, got {arm_force_model!r}")
     if link != "plate" and not (isinstance(chain, (int, np.integer)) and 1 <= int(chain) <= 6):
         raise IdentificationError(f"chain must be 1..6 for link {link!r}, got {chain!r}")
     if state.V_dot is None or state.n != 1:
@@ -173,6 +199,13 @@ def identify_contact_force(params: HexaDynamicParameters, state: MotionState, ta
         b = np.array([mom[0] / L, mom[1] / L, mom[2] / L,
                       s_B - sum(upk[m] * (fk[m] + Fr[m]) for m in range(3))])
     x, rank, sv, cond, null, res = _lstsq(A, b, rcond)
+    model = "measured" if rank == 3 else "min_norm"
+    if link == "arm" and arm_force_model == "surface_normal":
+        n = arm_surface_normal(D, prm.A[k], geo[k][3:6])
+        gain = None if n is None else float(A[0] @ n)
+        if gain is not None and abs(gain) >= ARM_NORMAL_MIN_GAIN * float(np.linalg.norm(A[0])):
+            x = (float(b[0]) / gain) * n   # the observed component, carried by a push along the normal
+            model = "surface_normal"
     return ContactForceEstimate(force=x, link=link, chain=k + 1, point=D, rank=rank, singular_values=sv,
                                 condition=cond, observable=rank == 3, unobservable_directions=null,
-                                residual_norm=res, chain_forces=np.array(fC))
+                                residual_norm=res, chain_forces=np.array(fC), force_model=model)
