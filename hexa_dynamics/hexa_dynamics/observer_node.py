@@ -20,7 +20,7 @@ e.g. `hexa param set /hexa/observer thresholds "[3.0,3.0,3.0,0.3,0.3,0.3]"`):
   thresholds (double[6], [2,2,2,0.2,0.2,0.2] N, N·m): r_low per axis.
   servo_thresholds (double[6], 0.35 N·m each): threshold on the residual as servo torques τ_r = J_ζ⁻ᵀ r, servo 1..6
     (0 switches one off); a START comes from either criterion (docs/observer_node.md, "Detection in servo coordinates").
-  release_ratio (0.5): an axis releases below release_ratio·r_low.  min_duration (0.015 s): confirmation time.
+  release_ratio (0.5): an axis releases below release_ratio·r_low.  min_duration (0.02 s): confirmation time.
   max_gap (0.1 s): longer joint_states spacing restarts the integration.
   pose_delay (0.5 s): camera poses are applied at sample time image stamp + pose_delay, so the output depends on
     stamps only (deterministic replay); poses later than that are applied on arrival (diagnostics `late_poses`).

@@ -79,17 +79,17 @@ class ObserverConfig:
 
     # the live graph's values (the observer node declares these): K = 100 1/s, a 10 ms first-order lag — once the
     # simulated graph delivers commands on time, free-motion residual peaks reach r_low only in runs of a few samples,
-    # and the plate is detected 35 ms sooner than at 25 1/s; min_duration 0.015 s, 4 consecutive samples at 200 Hz —
-    # 3 × 60 s of looping free motion with the board-clock driver had runs of 1 sample over any threshold, plate axes
-    # or servo torques (0.02 s while runs of 3 were seen; docs/observer_node.md, "Command timing", "Free motion that
-    # moves for 60 s" and "Detection in servo coordinates")
+    # and the plate is detected 35 ms sooner than at 25 1/s; min_duration 0.02 s, 5 consecutive samples at 200 Hz —
+    # free motion has had runs of up to 3 samples over a threshold (the plate axes in 3 × 60 s before the board-clock
+    # driver; the servo torques once, at a trajectory's start, 2026-12-02: 0.015 s was tried and reverted;
+    # docs/observer_node.md, "Command timing", "Free motion that moves for 60 s", "Detection in servo coordinates")
     gains: tuple[float, ...] = (100.0, 100.0, 100.0, 100.0, 100.0, 100.0)
     thresholds: tuple[float, ...] = (2.0, 2.0, 2.0, 0.2, 0.2, 0.2)
     # free motion in the live graph peaks at 0.3–0.52 N·m in single samples; an arm push of 5 N gives 0.4–0.54 N·m,
     # a rod push 0.8 N·m (docs/observer_node.md, "Detection in servo coordinates")
     servo_thresholds: tuple[float, ...] = (0.35, 0.35, 0.35, 0.35, 0.35, 0.35)
     release_ratio: float = 0.5
-    min_duration: float = 0.015
+    min_duration: float = 0.02
     max_gap: float = 0.1
     pose_tolerance: float = 1e-10
     newton_iterations: int = 4
