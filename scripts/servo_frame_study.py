@@ -19,7 +19,8 @@ catches up with the trajectory — at once (a jump) or at 1.5 or 1 rad/s (the dr
 command period); the residual's peak during each gap and in the 0.15 s after it (docs/driver.md).
 
 Printed per row: the estimator's ζ̇ error RMS (rad/s), the residual force RMS and peak per axis (N) after the first
-second, samples with a force component over r_low = 2 N, and the residual from the true ζ, ζ̇ (the observer itself).
+second, samples with a force component over r_low = 2 N, the residual as servo torques (peak, samples over the
+servo threshold 0.35 N·m), and the residual from the true ζ, ζ̇ (the observer itself).
 docs/observer_node.md ("What it takes to run with the pulse frame") has the table and what it means.
 """
 from __future__ import annotations
@@ -53,7 +54,7 @@ def run(frame: float, jitter: float, sample: float, setpoint: str, duration: flo
     rng = np.random.default_rng(seed)
     path = trajectories.TRAJECTORIES["circle"]
     n_sample, n_cmd, n_cam = (int(round(p / sim.timestep)) for p in (sample, 0.01, 1 / 30))
-    res, res_true, zd_err, times, pending, u = [], [], [], [], [], None
+    res, res_true, zd_err, times, pending, u, servo = [], [], [], [], [], None, []
     k = 0
     while sim.time < duration:
         if k % n_cmd == 0 and not any(a <= sim.time < b for a, b in gaps):
@@ -82,11 +83,13 @@ def run(frame: float, jitter: float, sample: float, setpoint: str, duration: flo
         if s.time > 1.0:
             if r is not None:
                 res.append(r.wrench[:3])
+                servo.append(r.servo_torque)
                 times.append(s.time)
                 zd_err.append(e.zeta_dot - s.zeta_dot)
             if rt is not None:
                 res_true.append(rt.wrench[:3])
     f, ft, zd, t = np.array(res), np.array(res_true), np.array(zd_err), np.array(times)
+    tq = np.abs(np.nan_to_num(np.array(servo)))
     peak = np.abs(f).max(1)
     gap_peaks = [(float(peak[(t >= a) & (t < b)].max()), float(peak[(t >= b) & (t < b + 0.15)].max()))
                  for a, b in gaps if b + 0.15 < duration]
@@ -94,6 +97,7 @@ def run(frame: float, jitter: float, sample: float, setpoint: str, duration: flo
             "zeta_dot_error_rms": float(np.sqrt((zd ** 2).mean())),
             "force_rms": np.sqrt((f ** 2).mean(0)).round(3).tolist(), "force_peak": np.abs(f).max(0).round(3).tolist(),
             "samples_over_2N": int((np.abs(f) > 2.0).any(1).sum()), "samples": len(f),
+            "servo_torque_peak": float(tq.max()), "samples_over_servo": int((tq > 0.35).any(1).sum()),
             "true_state_force_peak": np.abs(ft).max(0).round(3).tolist()}
 
 
@@ -135,12 +139,14 @@ def main() -> None:
         print(json.dumps(rows, indent=1))
         return
     print("| frame (s) | command jitter (s) | sample (ms) | estimator set-point | ζ̇ error RMS (rad/s) | "
-          "force RMS x y z (N) | force peak x y z (N) | samples > 2 N | true-state peak (N) |")
-    print("|---|---|---|---|---|---|---|---|---|")
+          "force RMS x y z (N) | force peak x y z (N) | samples > 2 N | servo torque peak (N·m) | samples > 0.35 N·m | "
+          "true-state peak (N) |")
+    print("|---|---|---|---|---|---|---|---|---|---|---|")
     for r in rows:
         print(f"| {r['frame_s']} | {r['jitter_s']} | {1e3 * r['sample_s']:.0f} | {r['setpoint']} | "
               f"{r['zeta_dot_error_rms']:.3f} | {' '.join(f'{v:.2f}' for v in r['force_rms'])} | "
               f"{' '.join(f'{v:.2f}' for v in r['force_peak'])} | {r['samples_over_2N']} of {r['samples']} | "
+              f"{r['servo_torque_peak']:.2f} | {r['samples_over_servo']} | "
               f"{' '.join(f'{v:.2f}' for v in r['true_state_force_peak'])} |")
 
 
