@@ -152,10 +152,15 @@ class DriverNode(Node):
             robot_now = now if board_now is None else board_now   # no sample yet: the host's clock (one command)
             zeta = self.core.limit_command(zeta, robot_now)
             pulses = self.core.accept(zeta, now, slew_now=robot_now)
-            # provisional: samples still waiting in the Mega's port are not in the clock map yet (_on_samples)
-            self.timeline.add(board_now, self.core.commanded, sent_at=now)
+            sent = self.uno.set_targets(pulses)
+            # dated from after the write: the Uno cannot have the command earlier. Timed before it, a process stop
+            # between the clock read and the write dated a command written after the stop back to its start, and the
+            # stop's samples carried it (a rare failure of test_driver_node's stall test). Provisional: samples still
+            # waiting in the Mega's port are not in the clock map yet (_on_samples)
+            t_sent = time.monotonic()
+            self.timeline.add(self.board_clock.board_time_at(t_sent), self.core.commanded, sent_at=t_sent)
             self._last_sent = now
-        if not self.uno.set_targets(pulses):
+        if not sent:
             self.tx_failures += 1
 
     # ------------------------------------------------------------------------------------------ telemetry

@@ -272,7 +272,8 @@ def plot_case(d: CaseData, m: CaseMetrics, path: str | Path, plate_equivalent: n
     ax[3].set_ylabel("contact point error (mm)")
     ax[3].set_xlabel("sim time (s)")
     for a in ax[:3]:
-        a.legend(fontsize=7, ncol=3, loc="upper left")
+        if a.get_legend_handles_labels()[0]:   # the servo panel is empty for data without servo torques
+            a.legend(fontsize=7, ncol=3, loc="upper left")
     t_lo = max(float(d.truth_t[0]), m.onset_true - 1.5)
     t_hi = min(float(d.truth_t[-1]), m.onset_true + 2.0)
     ax[3].set_xlim(t_lo, t_hi)
