@@ -27,9 +27,9 @@ restarts at the next sample (r is kept).
 Detection (`CollisionDetector`): |r_j| > r_low on any plate axis (the paper's criterion, §3.1), or — beside it — the
 residual as servo torques τ_r = J_ζ⁻ᵀ r (N·m; u = J_ζᵀ τ maps servo torques onto the plate twist, so τ_r is the torque
 each servo delivers beyond the model) over a per-servo threshold. A contact on arm k gives τ_r = e_k·(moment of the
-force about the servo axis) exactly; a rod contact lands mostly on its own chain's servo. The sensor noise is per
-servo, so a per-servo threshold separates these contacts from free motion sooner than the plate-axis thresholds,
-which see them diluted (docs/observer_node.md, "Detection in servo coordinates").
+force about the servo axis) exactly; a rod contact spreads over several servos, peaking on one. The sensor noise
+is per servo, so a per-servo threshold separates these contacts from free motion sooner than the plate-axis
+thresholds, which see them diluted (docs/observer_node.md, "Detection in servo coordinates").
 """
 from __future__ import annotations
 
