@@ -214,9 +214,10 @@ class SampleKernel:
         return out
 
     def terms(self, geo: list, zd: Sequence[float] | None, tau: Sequence[float], p: Sequence[float],
-              R: Sequence[float], twist: Sequence[float] | None = None) -> tuple[Vec, Vec, Vec]:
+              R: Sequence[float], twist: Sequence[float] | None = None,
+              jacobian: list[list[float]] | None = None) -> tuple[Vec, Vec, Vec]:
         """(V, π, u) for one sample with geometry `geo` (from geometry/track_pose); the twist is J_ζ⁻¹ζ̇, or
-        `twist` as given (then ζ̇ = J_ζ V).
+        `twist` as given (then ζ̇ = J_ζ V). `jacobian`: chain_jacobian_rows(geo) if the caller has it already.
 
         Per chain, with j_i = [d, r × d]/D, everything folds into forces at C_i plus couples:
         π_i = [Y, r × Y] with Y = (a/D) d + f_C, u_i = [X, r × X + (ω × r) × Y] with X = (c'/D) d + (a/D) ḋ + g_C
@@ -228,7 +229,7 @@ class SampleKernel:
         gcx0, gcy0, gcz0 = mk1 * gx, mk1 * gy, mk1 * gz
         mg = self.mas + la * mk0
         if twist is None:
-            V = solve6(chain_jacobian_rows(geo), zd)
+            V = solve6(chain_jacobian_rows(geo) if jacobian is None else jacobian, zd)
         else:
             V = list(twist)
         v0, v1, v2, w0, w1, w2 = V

@@ -182,7 +182,6 @@ class CollisionDetector:
     def reset(self) -> None:
         self.active = False
         self._cand_onset: float | None = None
-        self._cand_axis = 0
         self._release_since: float | None = None
         self._onset = 0.0
         self._peak = np.zeros(12)
@@ -226,7 +225,6 @@ class CollisionDetector:
             if top > 1.0:
                 if self._cand_onset is None:
                     self._cand_onset = t
-                    self._cand_axis = int(np.argmax(ratio))
                 if t - self._cand_onset >= md - 1e-12:
                     self.active = True
                     self.count += 1
@@ -316,7 +314,7 @@ class PoseFit:
 
 
 class _ArmSample:
-    __slots__ = ("t", "zeta", "tau", "zeta_dot", "pi", "u", "p", "R", "V", "Q")
+    __slots__ = ("t", "zeta", "tau", "zeta_dot", "pi", "u", "p", "R", "V", "Q", "J")
 
     t: float
     zeta: list
@@ -328,6 +326,7 @@ class _ArmSample:
     R: tuple
     V: list
     Q: NDArray | None
+    J: list  # J_ζ rows (chain_jacobian_rows): the twist and the servo-torque residual both use them
 
 
 class ResidualObserver:
@@ -535,7 +534,7 @@ class ResidualObserver:
         return self._output(t, s, geo)
 
     def _output(self, t: float, s: _ArmSample, geo: list) -> ResidualSample:
-        servo = servo_torque_residual(geo, self.r)
+        servo = servo_torque_residual(geo, self.r, jacobian=s.J)
         over, events = self.detector.update(t, self.r, servo)
         R = s.R
         r = self.r.tolist()
@@ -554,8 +553,9 @@ class ResidualObserver:
     def _evaluate(self, t, z, tq, zd, p, R, geo, zeta_ddot, V=None) -> _ArmSample:
         s = _ArmSample()
         s.t, s.zeta, s.tau, s.zeta_dot, s.p, s.R = t, z, tq, zd, p, R
+        s.J = chain_jacobian_rows(geo)
         if self.form == "momentum":
-            s.V, s.pi, s.u = self._kernel.terms(geo, zd, tq, p, R, twist=V)
+            s.V, s.pi, s.u = self._kernel.terms(geo, zd, tq, p, R, twist=V, jacobian=s.J)
             s.Q = None
             return s
         prm = self.params
@@ -581,15 +581,17 @@ class ResidualObserver:
         return s
 
 
-def servo_torque_residual(geo: list, r: NDArray) -> NDArray:
+def servo_torque_residual(geo: list, r: NDArray, jacobian: list[list[float]] | None = None) -> NDArray:
     """The residual as servo torques, τ_r = J_ζ⁻ᵀ r (N·m): the torques the servos deliver beyond the model.
 
     The reduced model's generalized force of the servo torques is u = J_ζᵀ τ (seed 000 eqs 17, 23), so a plate-
     coordinate residual r corresponds to τ_r with J_ζᵀ τ_r = r. A force F at point D of arm k enters r as
     J_ζᵀ e_k ((D − A_k) × F)·e_axis, hence τ_r = e_k × its moment about the servo axis. NaN where J_ζ is singular
-    (a type II singularity: there a finite wrench needs unbounded servo torques)."""
+    (a type II singularity: there a finite wrench needs unbounded servo torques). `jacobian`: J_ζ's rows
+    (chain_jacobian_rows(geo)) if the caller has them already."""
     try:
-        return np.array(solve6(np.array(chain_jacobian_rows(geo)).T, r))
+        rows = chain_jacobian_rows(geo) if jacobian is None else jacobian
+        return np.array(solve6(np.array(rows).T, r))
     except KernelError:
         return np.full(6, np.nan)
 
