@@ -124,6 +124,45 @@ def test_surface_normal_model_recovers_a_frictionless_push_on_an_arm(pose, twist
     assert on_axis.force_model == "min_norm"              # no side of the arm known: nothing assumed
 
 
+@settings(max_examples=60, deadline=None)
+@given(pose=st.lists(unit, min_size=6, max_size=6), twist=st.lists(st.floats(-0.5, 0.5), min_size=6, max_size=6),
+       chain=st.integers(1, 6), along=unit, direction=st.lists(unit, min_size=3, max_size=3),
+       push=st.floats(0.5, 8.0), scale=st.floats(0.1, 10.0))
+def test_object_axis_model_recovers_a_push_in_any_measured_direction(pose, twist, chain, along, direction, push,
+                                                                     scale):
+    """A push on arm k in an arbitrary direction (friction or not), with that direction measured (any length), is
+    given back whole by arm_force_model="object_axis" whenever the direction is within 72.5° of the arm's direction
+    of motion; otherwise the model falls back (surface normal, then min-norm) and says so. Without a usable
+    direction (None, NaN, zero) it answers as "surface_normal"."""
+    d = np.asarray(direction)
+    if np.linalg.norm(d) < 0.1:
+        d = np.array([0.0, 0.0, -1.0])
+    d = d / np.linalg.norm(d)
+    s = _sample(pose, twist, [0.0] * 6)
+    k = chain - 1
+    D = _point(s, "arm", chain, [along, 0.0]) - 0.008 * d     # on the side the object comes from
+    F = push * d
+    tau = _torques(s, _generalized_force(s, "arm", chain, D, F))
+    est = identify_contact_force(PRM, s, tau, "arm", chain, D, arm_force_model="object_axis",
+                                 push_direction=scale * d)
+    e = np.array([-np.sin(PRM.alpha[k]), np.cos(PRM.alpha[k]), 0.0])
+    motion = np.cross(e, D - PRM.A[k])
+    assert est.rank == 1 and not est.observable
+    if abs(d @ motion) >= ARM_NORMAL_MIN_GAIN * np.linalg.norm(motion):
+        assert est.force_model == "object_axis"
+        np.testing.assert_allclose(est.force, F, atol=1e-8 * push)
+    else:
+        assert est.force_model in ("surface_normal", "min_norm")
+        n = est.unobservable_directions            # whatever is assumed, the observed component is kept
+        np.testing.assert_allclose((np.eye(3) - n.T @ n) @ est.force, F - n.T @ (n @ F), atol=1e-8 * push)
+    for missing in (None, [np.nan, 0.0, 0.0], np.zeros(3), [1.0, 2.0]):
+        fallback = identify_contact_force(PRM, s, tau, "arm", chain, D, arm_force_model="object_axis",
+                                          push_direction=missing)
+        normal = identify_contact_force(PRM, s, tau, "arm", chain, D, arm_force_model="surface_normal")
+        assert fallback.force_model == normal.force_model
+        np.testing.assert_allclose(fallback.force, normal.force, atol=1e-12)
+
+
 def test_force_on_a_chain_other_than_the_named_one_is_not_recovered():
     """Naming the wrong chain gives a different answer: the chain matters (generalised from the paper's chain 1)."""
     s = _sample([0.2, -0.1, 0.3, 0.1, 0.0, -0.2], [0.05, 0, 0, 0, 0.1, 0], [0, 0.2, 0, 0, 0, 0.5])

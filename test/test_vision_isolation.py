@@ -116,6 +116,10 @@ def test_isolation_accuracy_against_simulator_truth(desc) -> None:
     assert rep.median_error <= 0.010, rep.per_case
     assert rep.p90_error <= 0.020
     assert table.count("\n") == len(rep.labels) + 1
+    # step 6: the pushing object's axis is the push direction (the simulator pushes along it)
+    push = np.array([c["push_direction_error_deg"] for c in rep.per_case if c["truth"] == c["estimate"]])
+    assert np.isfinite(push).mean() >= 0.8, push
+    assert np.nanmedian(push) <= 5.0 and np.nanmax(push) <= 20.0, push
 
 
 @needs_sim

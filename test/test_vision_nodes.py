@@ -160,6 +160,10 @@ def test_isolation_node_publishes_a_contact_on_collision_start(ros_env, procs, r
     assert c.link == link and c.chain == sample.chain
     assert np.linalg.norm([c.point.x - sample.point[0], c.point.y - sample.point[1],
                            c.point.z - sample.point[2]]) < 0.02
+    push = np.array([c.push_direction.x, c.push_direction.y, c.push_direction.z])
+    force = np.asarray(sample.meta["force_truth"])
+    assert abs(np.linalg.norm(push) - 1.0) < 1e-6                 # the pushing capsule is elongated: measured
+    assert push @ force / np.linalg.norm(force) > np.cos(np.radians(10.0))
 
 
 def test_bag_camera_republishes_recorded_frames(tmp_path, ros_env, procs, rclpy_node) -> None:

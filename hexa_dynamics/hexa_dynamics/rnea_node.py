@@ -17,9 +17,11 @@ Parameters: description (""), zeta_source ("estimator" | "measured"), accel_sigm
 bias_walk, saturation, stall_sigma, command_delay (ZetaEstimator, as the observer), rate_hz (100; 0 = only on contact
 messages), torque_window (0.02 s), accel_tau (0.02 s: time constant of the ζ̈ low-pass derivative),
 require_collision (true: ignore contacts outside a START..END), marker_scale (0.02 m/N), frame_id ("base"), history
-(3.0 s of states kept for late contacts; 0 = no backfill), arm_force_model ("surface_normal" | "min_norm": what an
-arm force's two unobservable directions get — a frictionless push along the inward surface normal at the contact
-point, or nothing; hexa.dynamics.identification).
+(3.0 s of states kept for late contacts; 0 = no backfill), arm_force_model ("object_axis" | "surface_normal" |
+"min_norm": what an arm force's two unobservable directions get — a push along the pushing object's axis as the
+vision measured it (`Contact.push_direction`; the collision's last measured direction when a contact carries none;
+else as "surface_normal"), a frictionless push along the inward surface normal at the contact point, or nothing;
+hexa.dynamics.identification).
 Topics (relative): sub `joint_states`, `motor_currents` (reliable; time_source as the observer), `plate_pose`,
 `contact` (hexa_msgs/Contact), `collision`
 (reliable); pub `contact_wrench` (hexa_msgs/ContactWrench), `contact_markers` (visualization_msgs/MarkerArray),
@@ -70,7 +72,7 @@ class RneaNode(Node):
         self.marker_scale = float(p("marker_scale", 0.02).value)
         self.frame_id = str(p("frame_id", "base").value)
         self.history = float(p("history", 3.0).value)
-        self.arm_force_model = str(p("arm_force_model", "surface_normal").value)
+        self.arm_force_model = str(p("arm_force_model", "object_axis").value)
         if self.arm_force_model not in ARM_FORCE_MODELS:
             raise ValueError(f"parameter arm_force_model must be one of {ARM_FORCE_MODELS}, "
                              f"got {self.arm_force_model!r}")
@@ -98,6 +100,7 @@ class RneaNode(Node):
         self._hist: deque[tuple] = deque()      # the states of the last `history` seconds
         self._spans: dict[int, list[float]] = {}  # collision id -> [START t, END t or inf], recent collisions
         self._identified: set[int] = set()       # collisions with at least one contact identified
+        self._push_dirs: dict[int, np.ndarray] = {}  # last measured push direction per collision id
         self.backfilled = 0
 
         self.pub_wrench = self.create_publisher(ContactWrench, "contact_wrench", EVENT_QOS)
@@ -180,6 +183,7 @@ class RneaNode(Node):
             for old in sorted(self._spans)[:-10]:  # only recent collisions can still get a late contact
                 self._spans.pop(old)
                 self._identified.discard(old)
+                self._push_dirs.pop(old, None)
             self._active = int(msg.id)
             self._started = max(self._started, int(msg.id))
             early = self._early_contacts.pop(int(msg.id), None)
@@ -258,10 +262,15 @@ class RneaNode(Node):
         link = LINK_NAMES[c.link]
         chain = 0 if link == "plate" else int(c.chain)
         point = np.array([c.point.x, c.point.y, c.point.z])
+        push = np.array([c.push_direction.x, c.push_direction.y, c.push_direction.z])
+        cid = int(c.collision_id)
+        if np.all(np.isfinite(push)) and np.any(push != 0.0):
+            self._push_dirs[cid] = push
+        push = self._push_dirs.get(cid)   # a later frame may not see the object's axis: keep the last measured
         try:
             st = motion_from_joint_rates(self.params, zeta[None], zd[None], pose[None], zdd[None])
             est = identify_contact_force(self.params, st, tau, link, chain, point,
-                                         arm_force_model=self.arm_force_model)
+                                         arm_force_model=self.arm_force_model, push_direction=push)
         except (ValueError, DynamicsError, np.linalg.LinAlgError) as exc:
             self.rejects["identification"] += 1
             self.get_logger().warn(f"identification failed: {exc}", throttle_duration_sec=1.0)

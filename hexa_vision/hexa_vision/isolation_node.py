@@ -316,6 +316,9 @@ class IsolationNode(Node):
             msg.pixel_u, msg.pixel_v = (float(v) for v in est.pixel)
             msg.camera = est.camera
             msg.confidence = float(est.confidence)
+            if np.all(np.isfinite(est.push_direction)):
+                msg.push_direction.x, msg.push_direction.y, msg.push_direction.z = (float(v) for v in
+                                                                                    est.push_direction)
             self.pub_contact.publish(msg)
         if debug:
             res = est.per_camera.get(est.camera) or next(iter(est.per_camera.values()))

@@ -18,7 +18,9 @@ of rod i on the plate, f_Bi the force of arm i on rod i, d_i = C_i − B_i.
   assumes a frictionless push, along the link's inward surface normal at D (from D to the arm's axis — the vision
   puts D on the surface facing the object), scaled to match the observed component; it falls back to min_norm when
   D lies on the axis or the normal makes more than 72.5° with the arm's direction of motion (cos < ARM_NORMAL_MIN_GAIN:
-  the observed component would be amplified more than 1/0.3).
+  the observed component would be amplified more than 1/0.3). "object_axis" takes the direction the vision measured
+  (`push_direction`: the pushing object's axis, hexa.vision.isolation step 6) — a push along the object's own axis,
+  friction or not — with the same gain test, and falls back to "surface_normal" without a usable direction.
 - Rod k hit (eqs 34–36): f_Ck as in eq 32; rod moments about B_k: (D − B_k) × F_e = d_k × f_Ck + κ d_k × F_rk + M_rk
   (rank 2: a force along the rod is invisible in it) and the arm's axis equation u'_k·(f_Ck + F_rk − F_e) = s_Bk
   (one more). Least squares on the 4×3 system (moment rows divided by |D − B_k| so all rows are in N): rank 3 unless
@@ -42,8 +44,8 @@ if TYPE_CHECKING:
     from numpy.typing import NDArray
 
 LINKS = ("plate", "arm", "rod")
-ARM_FORCE_MODELS = ("min_norm", "surface_normal")
-ARM_NORMAL_MIN_GAIN = 0.3      # |cos| between the surface normal and the arm's direction of motion, at least
+ARM_FORCE_MODELS = ("min_norm", "surface_normal", "object_axis")
+ARM_NORMAL_MIN_GAIN = 0.3      # |cos| between the assumed force direction and the arm's direction of motion, at least
 ARM_NORMAL_MIN_OFFSET = 5e-4   # m: D this close to the arm's axis gives no normal
 
 
@@ -59,8 +61,9 @@ class ContactForceEstimate:
     some direction of F_e cannot be seen (listed as unit vectors in unobservable_directions, its force component set
     to 0, unless force_model says otherwise); residual_norm is the least-squares residual (plate: the moment balance
     mismatch in N·m). chain_forces: f_Ci (6, 3), the forces of the rods on the plate. force_model: "measured"
-    (rank 3), "min_norm" (unobservable directions get no force) or "surface_normal" (an arm force along the inward
-    surface normal at the point, module docstring).
+    (rank 3), "min_norm" (unobservable directions get no force), "surface_normal" (an arm force along the inward
+    surface normal at the point) or "object_axis" (an arm force along the measured push direction; module
+    docstring).
     """
 
     force: NDArray
@@ -119,14 +122,27 @@ def arm_surface_normal(point: NDArray, axis_origin: NDArray, axis_dir: NDArray) 
     return None if dist < ARM_NORMAL_MIN_OFFSET else v / dist
 
 
+def push_direction_unit(direction: NDArray | None) -> NDArray | None:
+    """`direction` as a unit vector, or None when it is missing, not 3 finite numbers, or (near) zero."""
+    if direction is None:
+        return None
+    v = np.asarray(direction, dtype=float).reshape(-1)
+    if v.shape != (3,) or not np.all(np.isfinite(v)):
+        return None
+    nrm = float(np.linalg.norm(v))
+    return None if nrm < 1e-9 else v / nrm
+
+
 def identify_contact_force(params: HexaDynamicParameters, state: MotionState, tau: NDArray, link: str,
                            chain: int, point: NDArray, rcond: float = 1e-3,
-                           arm_force_model: str = "min_norm") -> ContactForceEstimate:
+                           arm_force_model: str = "min_norm", push_direction: NDArray | None = None
+                           ) -> ContactForceEstimate:
     """Contact force at `point` (base, m) on `link` of `chain` from one sample (seed 000 eqs 27–36).
 
     state: one sample (N = 1) with accelerations (motion_from_joint_rates(..., zeta_ddot) or motion_from_plate with
     twist_dot); tau: servo torques K_t·I (6,) in N·m; arm_force_model: what an arm force's two unobservable
-    directions get, "min_norm" or "surface_normal" (module docstring).
+    directions get, "min_norm", "surface_normal" or "object_axis" (module docstring); push_direction: the measured
+    direction of the push (base, any length; None or non-finite = not measured), used by "object_axis".
 
     Raises:
         IdentificationError: unknown link or arm_force_model, chain not in 1..6 for an arm/rod, missing
@@ -200,12 +216,17 @@ def identify_contact_force(params: HexaDynamicParameters, state: MotionState, ta
                       s_B - sum(upk[m] * (fk[m] + Fr[m]) for m in range(3))])
     x, rank, sv, cond, null, res = _lstsq(A, b, rcond)
     model = "measured" if rank == 3 else "min_norm"
-    if link == "arm" and arm_force_model == "surface_normal":
-        n = arm_surface_normal(D, prm.A[k], geo[k][3:6])
-        gain = None if n is None else float(A[0] @ n)
-        if gain is not None and abs(gain) >= ARM_NORMAL_MIN_GAIN * float(np.linalg.norm(A[0])):
-            x = (float(b[0]) / gain) * n   # the observed component, carried by a push along the normal
-            model = "surface_normal"
+    if link == "arm" and arm_force_model != "min_norm":
+        candidates = []
+        if arm_force_model == "object_axis":
+            candidates.append(("object_axis", push_direction_unit(push_direction)))
+        candidates.append(("surface_normal", arm_surface_normal(D, prm.A[k], geo[k][3:6])))
+        for name, n in candidates:
+            gain = None if n is None else float(A[0] @ n)
+            if gain is not None and abs(gain) >= ARM_NORMAL_MIN_GAIN * float(np.linalg.norm(A[0])):
+                x = (float(b[0]) / gain) * n   # the observed component, carried by a push along n
+                model = name
+                break
     return ContactForceEstimate(force=x, link=link, chain=k + 1, point=D, rank=rank, singular_values=sv,
                                 condition=cond, observable=rank == 3, unobservable_directions=null,
                                 residual_norm=res, chain_forces=np.array(fC), force_model=model)

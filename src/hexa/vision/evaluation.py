@@ -134,7 +134,8 @@ def render_contact(collision: Any, seed: int = 0, desc: Any = None, min_clearanc
             frames[name] = (rgb, depth_to_meters(d, "16UC1"))
         return ContactSample(truth.link, int(truth.chain), np.asarray(truth.point, float), np.asarray(st.pose),
                              np.asarray(st.zeta), frames, bgs, cams,
-                             {"trajectory": collision.trajectory, "time": float(st.time), "clearance_m": gap})
+                             {"trajectory": collision.trajectory, "time": float(st.time), "clearance_m": gap,
+                              "force_truth": np.asarray(truth.force, float).tolist()})
     finally:
         sim.close()
 
@@ -215,6 +216,17 @@ def contact_samples(n: int, seed: int = 0, min_clearance: float = 0.003, desc: A
             stats[f"infeasible {link}"] = stats.get(f"infeasible {link}", 0) + 1
 
 
+def push_direction_error(estimate: np.ndarray, force_truth: Any) -> float:
+    """Angle (deg) between the estimated push direction and the true force; NaN when either is missing."""
+    if force_truth is None:
+        return float("nan")
+    e, f = np.asarray(estimate, float), np.asarray(force_truth, float)
+    if not (np.all(np.isfinite(e)) and np.linalg.norm(f) > 0):
+        return float("nan")
+    c = float(e @ f) / (np.linalg.norm(e) * np.linalg.norm(f))
+    return float(np.degrees(np.arccos(np.clip(c, -1.0, 1.0))))
+
+
 def evaluate_isolation(samples: Iterator[ContactSample] | list[ContactSample], desc: Any,
                        config: IsolationConfig | None = None, pose_from_markers: bool = False) -> IsolationReport:
     """Isolation accuracy over samples (see IsolationReport and `isolate_sample`)."""
@@ -236,6 +248,8 @@ def evaluate_isolation(samples: Iterator[ContactSample] | list[ContactSample], d
         if both:
             errors.append(err)
         cases.append({"truth": t_lab, "estimate": e_lab, "error_m": err, "camera": est.camera,
+                      "push_direction_error_deg": push_direction_error(est.push_direction,
+                                                                       s.meta.get("force_truth")),
                       "confidence": est.confidence, "point_truth": s.point.tolist(),
                       "point_estimate": np.asarray(est.point).tolist(), **s.meta})
     e = np.asarray(errors)

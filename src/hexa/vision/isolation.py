@@ -13,6 +13,10 @@ Per camera (the paper's flow, Figure 4):
   5. contact point: plate — mean of the candidates, the line from the plate centre through it, intersected with
      the hexagonal border (Fig. 12g); rod/arm — mean of the candidates projected on the link axis, moved to the
      surface facing the object (Fig. 17g / 22g).
+  6. push direction (not in the paper): when the object is elongated (a stick, a forearm), its axis — the principal
+     direction of its points — oriented from the object into the link; of the cameras that agree on the link, the
+     one that sees the object longest (least foreshortened) gives it. The rnea node can take it as the direction
+     of an arm force, whose two other components the dynamics cannot see (hexa.dynamics.identification).
 The top camera is evaluated first (plate and rods, case 1); the side camera (arms, case 2) when the top camera
 finds nothing, and the more confident answer is kept when both do. Pixels → 3D with the camera model.
 """
@@ -231,6 +235,8 @@ class CameraResult:
     n_candidates: int = 0
     n_object: int = 0
     reason: str = ""
+    push_direction: np.ndarray = field(default_factory=lambda: np.full(3, np.nan))
+    elongation: float = 0.0     # spread ratio of the object's points (1st / 2nd principal direction)
     layers: dict[str, Any] = field(default_factory=dict)
 
     @property
@@ -241,7 +247,8 @@ class CameraResult:
 @dataclass
 class ContactEstimate:
     """The isolation's answer (hexa_msgs/Contact fields): link code, chain 1..6 (0 plate/unknown), point in base (m),
-    pixel in `camera`'s image, confidence 0..1; and each camera's result."""
+    pixel in `camera`'s image, confidence 0..1; and each camera's result. push_direction: unit vector (base) along
+    the elongated object's axis, from the object into the link (NaN when the object is not elongated, step 6)."""
 
     link: int
     chain: int
@@ -250,6 +257,7 @@ class ContactEstimate:
     camera: str
     confidence: float
     per_camera: dict[str, CameraResult]
+    push_direction: np.ndarray = field(default_factory=lambda: np.full(3, np.nan))
 
     @property
     def link_name(self) -> str:
@@ -497,6 +505,7 @@ class CollisionIsolator:
         d_sel = np.maximum(D[best][sel] - closest[best], 0.0)
         wk = np.exp(-0.5 * (d_sel / sig) ** 2)
         mean_pt = (wk[:, None] * pts[sel]).sum(axis=0) / wk.sum()
+        obj_axis = self._object_axis(pts, cam)
         if best == len(links):
             res.link, res.chain = LINK_PLATE, 0
             R, t = geom.T_plate[:3, :3], geom.T_plate[:3, 3]
@@ -536,7 +545,7 @@ class CollisionIsolator:
             res.link, res.chain = code, chain
             s = float(np.clip((wk * S[best][sel]).sum() / wk.sum(), 0.0, 1.0))
             if cfg.axis_contact:
-                s_axis = self._axis_crossing(pts, cam, seg)
+                s_axis = self._axis_crossing(obj_axis, seg)
                 if s_axis is not None and abs(s_axis - s) * np.linalg.norm(seg[1] - seg[0]) <= cfg.axis_max_shift:
                     s = s_axis
             axis_pt = seg[0] + s * (seg[1] - seg[0])
@@ -546,6 +555,9 @@ class CollisionIsolator:
             nrm = np.linalg.norm(off)
             point = axis_pt + (radius * off / nrm if nrm > 1e-9 else 0.0)
         res.point = point
+        if obj_axis is not None:   # step 6: the object's axis, pointing from the object into the link
+            a, c, res.elongation = obj_axis
+            res.push_direction = a if a @ (point - c) >= 0 else -a
         uv, _ = cam.project(point)
         res.pixel = uv
         # confidence: how much nearer this link is than the runner-up, and how many points support it
@@ -556,14 +568,15 @@ class CollisionIsolator:
             res.layers["selected"] = np.stack([uu[sel], vv[sel]], axis=1)
         return res
 
-    def _axis_crossing(self, pts: np.ndarray, cam: CameraModel, seg: np.ndarray) -> float | None:
-        """Segment parameter where an elongated object's axis (its points' principal direction, moved from the
-        visible near side to the axis) passes closest to the link's axis, or None (object not elongated, lines
-        parallel)."""
+    def _object_axis(self, pts: np.ndarray, cam: CameraModel) -> tuple[np.ndarray, np.ndarray, float] | None:
+        """(unit axis a, point c on the axis, spread ratio) of an elongated object: its points' principal direction,
+        the mean moved from the visible near side to the axis; None when the object is not elongated (spread ratio
+        below `axis_elongation`)."""
         cfg = self.config
         c = pts.mean(axis=0)
         _, sv, vt = np.linalg.svd(pts - c, full_matrices=False)
-        if sv[0] < cfg.axis_elongation * max(sv[1], 1e-12):
+        ratio = float(sv[0] / max(sv[1], 1e-12))
+        if ratio < cfg.axis_elongation:
             return None
         a = vt[0]
         wv = (cam.position - c) - ((cam.position - c) @ a) * a
@@ -572,6 +585,15 @@ class CollisionIsolator:
             off = (pts - c) @ np.cross(a, wv)
             r_est = 0.5 * float(np.percentile(off, 95) - np.percentile(off, 5))
             c = c - wv * (2.0 / np.pi) * r_est
+        return a, c, ratio
+
+    @staticmethod
+    def _axis_crossing(axis: tuple[np.ndarray, np.ndarray, float] | None, seg: np.ndarray) -> float | None:
+        """Segment parameter where the object's axis (`_object_axis`) passes closest to the link's axis, or None
+        (no axis, lines parallel)."""
+        if axis is None:
+            return None
+        a, c, _ = axis
         e = seg[1] - seg[0]
         w0 = seg[0] - c
         A, B, C = float(e @ e), float(e @ a), float(a @ a)
@@ -621,7 +643,12 @@ class CollisionIsolator:
             plate = [r for r in found if r.link == LINK_PLATE]
             if plate and np.linalg.norm(best.point - joint) <= self.config.corner_radius:
                 best = plate[0]
-        return ContactEstimate(best.link, best.chain, best.point, best.pixel, best.camera, best.confidence, results)
+        # the push direction from the camera that sees the object longest (least foreshortened), of those that
+        # agree on the link
+        agree = [r for r in found if r.link == best.link and r.chain == best.chain and r.elongation > 0]
+        push = max(agree, key=lambda r: r.elongation).push_direction.copy() if agree else np.full(3, np.nan)
+        return ContactEstimate(best.link, best.chain, best.point, best.pixel, best.camera, best.confidence, results,
+                               push)
 
 
 # ----------------------------------------------------------------------------------------------------------------
