@@ -16,6 +16,11 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--rtf", type=float, default=None,
                    help="simulator real-time factor (default 0.3; the graph must keep up: 0.5 saturates 2 cores)")
     p.add_argument("--record-images", action="store_true", help="also record the camera topics (large bags)")
+    p.add_argument("--contact-model", choices=["scripted", "physical"], default="scripted",
+                   help="scripted: the scenario's force applied exactly along the object's axis (default); physical: "
+                        "a capsule pushes through MuJoCo contacts with friction (truth = MuJoCo's contact force)")
+    p.add_argument("--params", default=None,
+                   help="node parameter YAML (default: the bundled hexa_bringup/config/hexa_params.yaml)")
     p.add_argument("--ns", default="/hexa")
     p.add_argument("--json", action="store_true", help="print the metrics as JSON")
     p.set_defaults(func=run)
@@ -24,7 +29,7 @@ def register(sub: argparse._SubParsersAction) -> None:
 def run(args: argparse.Namespace) -> int:
     from hexa.report.collision_demo import (compute_metrics, markdown_table, plate_equivalent_truth, plot_case,
                                             write_report)
-    from hexa_bringup.demo_run import CASES, REAL_TIME_FACTOR, case_data_from_bag, run_case
+    from hexa_bringup.demo_run import CASES, DEFAULT_PARAMS, REAL_TIME_FACTOR, case_data_from_bag, run_case
     from hexa_bringup.rosenv import ros_env
     from hexa_bringup.supervisor import SupervisorError
 
@@ -35,13 +40,18 @@ def run(args: argparse.Namespace) -> int:
     os.environ.update(env)  # the progress display in this process joins the same graph
     cases = list(CASES) if args.case == "all" else [args.case]
     rtf = REAL_TIME_FACTOR if args.rtf is None else args.rtf
+    params = DEFAULT_PARAMS if args.params is None else Path(args.params)
+    if not params.is_file():
+        print(f"hexa demo: parameter file {params} not found", file=sys.stderr)
+        return 2
     metrics, plots, problems = [], {}, []
     for i, case in enumerate(cases, 1):
         print(f"\n=== hexa demo: case {i}/{len(cases)}: {case} (scenario {CASES[case][0]}, trajectory "
               f"{CASES[case][1]}, {CASES[case][2]:.1f} s of sim time at {rtf:g}x real time) ===", flush=True)
         try:
             run = run_case(case, out, env, ns=args.ns, seed=args.seed, real_time_factor=rtf,
-                           record_images=args.record_images)
+                           record_images=args.record_images, contact_model=args.contact_model,
+                           params=params)
         except SupervisorError as exc:
             print(f"hexa demo: cannot start the graph: {exc}", file=sys.stderr)
             return 2
