@@ -21,19 +21,6 @@ from pathlib import Path
 import numpy as np
 
 
-def friction_cone_direction(push: np.ndarray | None, normal: np.ndarray, mu: float) -> np.ndarray:
-    """The push direction clamped into the friction cone about the inward normal (half-angle atan μ)."""
-    if push is None:
-        return normal
-    c = float(push @ normal)
-    half = np.arctan(mu)
-    if np.arccos(np.clip(c, -1.0, 1.0)) <= half:
-        return push
-    t = push - c * normal
-    nt = float(np.linalg.norm(t))
-    return normal if nt < 1e-9 else np.cos(half) * normal + np.sin(half) * t / nt
-
-
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("bags", nargs="+", type=Path, help="arm-case bags of `hexa demo`")
@@ -42,7 +29,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--ns", default="/hexa")
     args = ap.parse_args(argv)
 
-    from hexa.dynamics.identification import ARM_NORMAL_MIN_GAIN, arm_surface_normal
+    from hexa.dynamics.identification import ARM_NORMAL_MIN_GAIN, arm_surface_normal, friction_cone_direction
     from hexa.kinematics import hexa6rus as kin
     from hexa.report.collision_demo import compute_metrics
     from hexa.robots.hexa_description import load_hexa
@@ -98,7 +85,8 @@ def main(argv: list[str] | None = None) -> int:
                 elif model == "object_axis":
                     g = push if push is not None else normal
                 else:
-                    g = friction_cone_direction(push, normal, float(model.split("=")[1]))
+                    mu = float(model.split("=")[1])
+                    g = normal if push is None else friction_cone_direction(push, normal, mu)
                 if g is not None and abs(g @ mdir) < ARM_NORMAL_MIN_GAIN and g is not normal:
                     g = normal          # the node's fallback order: measured direction, then the normal
                 if g is None or abs(g @ mdir) < ARM_NORMAL_MIN_GAIN:

@@ -26,7 +26,7 @@ def main() -> int:
     def on_wrench(m: ContactWrench) -> None:
         print(json.dumps({"topic": "contact_wrench", "type": type(m).__module__ + "." + type(m).__name__,
                           "link": m.link, "chain": m.chain, "frame_id": m.header.frame_id,
-                          "force": [m.force.x, m.force.y, m.force.z]}), flush=True)
+                          "force": [m.force.x, m.force.y, m.force.z], "force_model": m.force_model}), flush=True)
 
     node.create_subscription(CollisionEvent, "/hexa/collision", on_collision, reliable)
     node.create_subscription(ContactWrench, "/hexa/contact_wrench", on_wrench, reliable)

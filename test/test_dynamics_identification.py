@@ -8,7 +8,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from hexa.dynamics.identification import (ARM_NORMAL_MIN_GAIN, IdentificationError, arm_surface_normal,
-                                          identify_contact_force)
+                                          friction_cone_direction, identify_contact_force)
 from hexa.dynamics.lagrange import (HexaDynamicParameters, _Geometry, chain_jacobian, inverse_dynamics,
                                     motion_from_plate)
 from hexa.kinematics import hexa6rus as kin
@@ -163,6 +163,48 @@ def test_object_axis_model_recovers_a_push_in_any_measured_direction(pose, twist
         np.testing.assert_allclose(fallback.force, normal.force, atol=1e-12)
 
 
+@settings(max_examples=60, deadline=None)
+@given(pose=st.lists(unit, min_size=6, max_size=6), chain=st.integers(1, 6), along=unit,
+       around=st.floats(-np.pi, np.pi), tilt=st.floats(0.0, 1.4), spin=st.floats(-np.pi, np.pi),
+       mu=st.floats(0.0, 2.0), push=st.floats(0.5, 8.0))
+def test_friction_cone_model_is_coulomb_between_the_normal_and_the_object_axis(pose, chain, along, around, tilt,
+                                                                               spin, mu, push):
+    """Object axis d at angle `tilt` from the inward normal n. Inside the friction cone (tilt ≤ atan μ) the contact
+    sticks and a push along d comes back whole; outside it slides and the force is on the cone's edge, in the plane
+    of d and n — a push generated there comes back whole too. μ = 0 answers as "surface_normal"."""
+    s = _sample(pose, [0.0] * 6, [0.0] * 6)
+    k = chain - 1
+    u = (kin.elbows(DESC, s.zeta[0])[k] - PRM.A[k]) / PRM.l_a
+    e = np.array([-np.sin(PRM.alpha[k]), np.cos(PRM.alpha[k]), 0.0])
+    m = np.cos(around) * e + np.sin(around) * np.cross(u, e)     # outward normal, ⟂ the arm's axis
+    D = _point(s, "arm", chain, [along, 0.0]) + 0.008 * m
+    n = -m
+    t1 = np.cross(n, u)
+    side = np.cos(spin) * u + np.sin(spin) * t1                  # a tangent direction at D
+    d = np.cos(tilt) * n + np.sin(tilt) * side
+    g = friction_cone_direction(d, n, mu)
+    assert abs(np.linalg.norm(g) - 1.0) < 1e-12
+    assert abs(np.cross(d, n) @ g) < 1e-9                              # in the plane of d and n
+    half = np.arctan(mu)
+    if tilt <= half:
+        np.testing.assert_allclose(g, d, atol=1e-12)
+    else:                                                        # the cone's edge on d's side
+        np.testing.assert_allclose(g, np.cos(half) * n + np.sin(half) * side, atol=1e-9)
+    F = push * g
+    tau = _torques(s, _generalized_force(s, "arm", chain, D, F))
+    est = identify_contact_force(PRM, s, tau, "arm", chain, D, arm_force_model="friction_cone", push_direction=d,
+                                 friction=mu)
+    motion = np.cross(e, D - PRM.A[k])
+    if abs(g @ motion) >= ARM_NORMAL_MIN_GAIN * np.linalg.norm(motion):
+        assert est.force_model == "friction_cone"
+        np.testing.assert_allclose(est.force, F, atol=1e-8 * push)
+    else:
+        assert est.force_model in ("surface_normal", "min_norm")
+    if mu == 0.0:
+        normal = identify_contact_force(PRM, s, tau, "arm", chain, D, arm_force_model="surface_normal")
+        np.testing.assert_allclose(est.force, normal.force, atol=1e-9 * push)
+
+
 def test_force_on_a_chain_other_than_the_named_one_is_not_recovered():
     """Naming the wrong chain gives a different answer: the chain matters (generalised from the paper's chain 1)."""
     s = _sample([0.2, -0.1, 0.3, 0.1, 0.0, -0.2], [0.05, 0, 0, 0, 0.1, 0], [0, 0.2, 0, 0, 0, 0.5])
@@ -193,6 +235,10 @@ def test_bad_requests_are_named():
         identify_contact_force(PRM, s, np.zeros(6), "plate", 0, [np.nan, 0.0, 0.0])
     with pytest.raises(IdentificationError, match="arm_force_model"):
         identify_contact_force(PRM, s, np.zeros(6), "arm", 1, np.zeros(3), arm_force_model="guess")
+    for mu in (-0.1, float("nan"), float("inf")):
+        with pytest.raises(IdentificationError, match="friction"):
+            identify_contact_force(PRM, s, np.zeros(6), "arm", 1, np.zeros(3), arm_force_model="friction_cone",
+                                   friction=mu)
     s.V_dot = None
     with pytest.raises(IdentificationError, match="accelerations"):
         identify_contact_force(PRM, s, np.zeros(6), "plate", 0, np.zeros(3))

@@ -66,11 +66,16 @@ def test_all_three_cases_are_detected_after_the_true_contact_onset_on_the_right_
     assert plate["delay_ms"] < 50.0, plate
 
 
-def test_plate_force_rmse_is_below_the_papers_on_every_axis(demo_run):
+def test_plate_and_arm_force_rmse_is_below_the_papers_on_every_axis(demo_run):
     # the rod's RMSE was below the paper's in the last runs but one stalled-servo outlier used to double it, too few
-    # runs to assert it; the arm force is observable in one component only (README, demo)
-    plate = [c for c in demo_run["result"]["cases"] if c["case"] == "plate"][0]
-    assert all(ours < paper for ours, paper in zip(plate["force_rmse"], plate["paper_rmse"])), plate
+    # runs to assert it. The arm force is observable in one component only; the rest comes from the push direction
+    # the vision measures, clamped into a friction cone (docs/dynamics.md, "Arm force models compared": y 0.84-1.08 N
+    # over 4 scripted runs, paper 1.497)
+    for case in ("plate", "arm"):
+        c = [c for c in demo_run["result"]["cases"] if c["case"] == case][0]
+        assert all(ours < paper for ours, paper in zip(c["force_rmse"], c["paper_rmse"])), c
+    arm = [w for w in demo_run["heard"] if w["topic"] == "contact_wrench" and w["link"] == 1]
+    assert arm and {w["force_model"] for w in arm} == {"friction_cone"}, {w["force_model"] for w in arm}
 
 
 def test_another_ros_process_receives_collision_events_and_contact_wrenches_with_documented_types(demo_run):

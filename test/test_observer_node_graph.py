@@ -46,12 +46,14 @@ def test_observer_node_detects_the_push_and_takes_runtime_thresholds(procs, ros_
 
 @pytest.mark.parametrize("module, param", [("hexa_dynamics.observer_node", "zeta_source"),
                                            ("hexa_dynamics.observer_node", "servo_thresholds"),
-                                           ("hexa_dynamics.rnea_node", "arm_force_model")])
+                                           ("hexa_dynamics.rnea_node", "arm_force_model"),
+                                           ("hexa_dynamics.rnea_node", "arm_friction")])
 def test_observer_node_rejects_a_bad_parameter_at_start_naming_it(procs, ros_env, module, param):
-    value = "[0.3,0.3,-1.0,0.3,0.3,0.3]" if param == "servo_thresholds" else "guess"
+    value = {"servo_thresholds": "[0.3,0.3,-1.0,0.3,0.3,0.3]", "arm_friction": "-0.5"}.get(param, "guess")
     p = procs.start([PY, "-m", module, "--ros-args", "-p", f"{param}:={value}"], ros_env)
     _out, err = p.communicate(timeout=60)
-    assert p.returncode == 2 and param in err and ("-1.0" in err if param == "servo_thresholds" else "'guess'" in err)
+    shown = {"servo_thresholds": "-1.0", "arm_friction": "-0.5"}.get(param, "'guess'")
+    assert p.returncode == 2 and param in err and shown in err, err
 
 
 @pytest.mark.parametrize("module", ["hexa_dynamics.observer_node", "hexa_dynamics.rnea_node"])

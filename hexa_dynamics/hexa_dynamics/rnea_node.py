@@ -17,11 +17,12 @@ Parameters: description (""), zeta_source ("estimator" | "measured"), accel_sigm
 bias_walk, saturation, stall_sigma, command_delay (ZetaEstimator, as the observer), rate_hz (100; 0 = only on contact
 messages), torque_window (0.02 s), accel_tau (0.02 s: time constant of the ζ̈ low-pass derivative),
 require_collision (true: ignore contacts outside a START..END), marker_scale (0.02 m/N), frame_id ("base"), history
-(3.0 s of states kept for late contacts; 0 = no backfill), arm_force_model ("object_axis" | "surface_normal" |
-"min_norm": what an arm force's two unobservable directions get — a push along the pushing object's axis as the
-vision measured it (`Contact.push_direction`; the collision's last measured direction when a contact carries none;
-else as "surface_normal"), a frictionless push along the inward surface normal at the contact point, or nothing;
-hexa.dynamics.identification).
+(3.0 s of states kept for late contacts; 0 = no backfill), arm_force_model ("friction_cone" | "object_axis" |
+"surface_normal" | "min_norm": what an arm force's two unobservable directions get — the pushing object's axis as the
+vision measured it (`Contact.push_direction`; the collision's last measured direction when a contact carries none)
+clamped into the friction cone about the inward surface normal at the contact point; that axis unclamped; a
+frictionless push along the normal; or nothing; without a measured direction the first two act as
+"surface_normal"; hexa.dynamics.identification), arm_friction (0.2: μ of "friction_cone").
 Topics (relative): sub `joint_states`, `motor_currents` (reliable; time_source as the observer), `plate_pose`,
 `contact` (hexa_msgs/Contact), `collision`
 (reliable); pub `contact_wrench` (hexa_msgs/ContactWrench), `contact_markers` (visualization_msgs/MarkerArray),
@@ -72,7 +73,10 @@ class RneaNode(Node):
         self.marker_scale = float(p("marker_scale", 0.02).value)
         self.frame_id = str(p("frame_id", "base").value)
         self.history = float(p("history", 3.0).value)
-        self.arm_force_model = str(p("arm_force_model", "object_axis").value)
+        self.arm_force_model = str(p("arm_force_model", "friction_cone").value)
+        self.arm_friction = float(p("arm_friction", 0.2).value)
+        if not (math.isfinite(self.arm_friction) and self.arm_friction >= 0):
+            raise ValueError(f"parameter arm_friction must be a finite coefficient >= 0, got {self.arm_friction!r}")
         if self.arm_force_model not in ARM_FORCE_MODELS:
             raise ValueError(f"parameter arm_force_model must be one of {ARM_FORCE_MODELS}, "
                              f"got {self.arm_force_model!r}")
@@ -270,7 +274,8 @@ class RneaNode(Node):
         try:
             st = motion_from_joint_rates(self.params, zeta[None], zd[None], pose[None], zdd[None])
             est = identify_contact_force(self.params, st, tau, link, chain, point,
-                                         arm_force_model=self.arm_force_model, push_direction=push)
+                                         arm_force_model=self.arm_force_model, push_direction=push,
+                                         friction=self.arm_friction)
         except (ValueError, DynamicsError, np.linalg.LinAlgError) as exc:
             self.rejects["identification"] += 1
             self.get_logger().warn(f"identification failed: {exc}", throttle_duration_sec=1.0)

@@ -21,6 +21,9 @@ of rod i on the plate, f_Bi the force of arm i on rod i, d_i = C_i − B_i.
   the observed component would be amplified more than 1/0.3). "object_axis" takes the direction the vision measured
   (`push_direction`: the pushing object's axis, hexa.vision.isolation step 6) — a push along the object's own axis,
   friction or not — with the same gain test, and falls back to "surface_normal" without a usable direction.
+  "friction_cone" (Coulomb) lies between the two: the push along the object's axis while that axis lies inside the
+  friction cone about the inward normal (half-angle atan μ, `friction`), else along the cone's edge nearest the
+  axis (a sliding contact); μ = 0 is "surface_normal", μ → ∞ is "object_axis".
 - Rod k hit (eqs 34–36): f_Ck as in eq 32; rod moments about B_k: (D − B_k) × F_e = d_k × f_Ck + κ d_k × F_rk + M_rk
   (rank 2: a force along the rod is invisible in it) and the arm's axis equation u'_k·(f_Ck + F_rk − F_e) = s_Bk
   (one more). Least squares on the 4×3 system (moment rows divided by |D − B_k| so all rows are in N): rank 3 unless
@@ -44,7 +47,7 @@ if TYPE_CHECKING:
     from numpy.typing import NDArray
 
 LINKS = ("plate", "arm", "rod")
-ARM_FORCE_MODELS = ("min_norm", "surface_normal", "object_axis")
+ARM_FORCE_MODELS = ("min_norm", "surface_normal", "object_axis", "friction_cone")
 ARM_NORMAL_MIN_GAIN = 0.3      # |cos| between the assumed force direction and the arm's direction of motion, at least
 ARM_NORMAL_MIN_OFFSET = 5e-4   # m: D this close to the arm's axis gives no normal
 
@@ -62,8 +65,8 @@ class ContactForceEstimate:
     to 0, unless force_model says otherwise); residual_norm is the least-squares residual (plate: the moment balance
     mismatch in N·m). chain_forces: f_Ci (6, 3), the forces of the rods on the plate. force_model: "measured"
     (rank 3), "min_norm" (unobservable directions get no force), "surface_normal" (an arm force along the inward
-    surface normal at the point) or "object_axis" (an arm force along the measured push direction; module
-    docstring).
+    surface normal at the point), "object_axis" (along the measured push direction) or "friction_cone" (the push
+    direction clamped into the friction cone about the normal; module docstring).
     """
 
     force: NDArray
@@ -133,16 +136,33 @@ def push_direction_unit(direction: NDArray | None) -> NDArray | None:
     return None if nrm < 1e-9 else v / nrm
 
 
+def friction_cone_direction(push: NDArray, normal: NDArray, friction: float) -> NDArray:
+    """Direction of a Coulomb contact force pushed along unit `push` on a surface with inward unit `normal`:
+    `push` itself inside the friction cone (angle to the normal ≤ atan μ: the contact sticks), else the cone's edge
+    in the plane of `push` and the normal (the contact slides). Unit vector."""
+    p, n = np.asarray(push, dtype=float), np.asarray(normal, dtype=float)
+    c = float(p @ n)
+    half = math.atan(friction)
+    if math.acos(max(-1.0, min(1.0, c))) <= half:
+        return p
+    t = p - c * n
+    nt = float(np.linalg.norm(t))
+    if nt < 1e-12:          # pushing straight out of the surface: no side to slide to
+        return n
+    return math.cos(half) * n + math.sin(half) * (t / nt)
+
+
 def identify_contact_force(params: HexaDynamicParameters, state: MotionState, tau: NDArray, link: str,
                            chain: int, point: NDArray, rcond: float = 1e-3,
-                           arm_force_model: str = "min_norm", push_direction: NDArray | None = None
-                           ) -> ContactForceEstimate:
+                           arm_force_model: str = "min_norm", push_direction: NDArray | None = None,
+                           friction: float = 0.2) -> ContactForceEstimate:
     """Contact force at `point` (base, m) on `link` of `chain` from one sample (seed 000 eqs 27–36).
 
     state: one sample (N = 1) with accelerations (motion_from_joint_rates(..., zeta_ddot) or motion_from_plate with
     twist_dot); tau: servo torques K_t·I (6,) in N·m; arm_force_model: what an arm force's two unobservable
-    directions get, "min_norm", "surface_normal" or "object_axis" (module docstring); push_direction: the measured
-    direction of the push (base, any length; None or non-finite = not measured), used by "object_axis".
+    directions get, "min_norm", "surface_normal", "object_axis" or "friction_cone" (module docstring);
+    push_direction: the measured direction of the push (base, any length; None or non-finite = not measured), used
+    by "object_axis" and "friction_cone"; friction: Coulomb coefficient μ ≥ 0 of "friction_cone".
 
     Raises:
         IdentificationError: unknown link or arm_force_model, chain not in 1..6 for an arm/rod, missing
@@ -152,6 +172,8 @@ def identify_contact_force(params: HexaDynamicParameters, state: MotionState, ta
         raise IdentificationError(f"link must be one of {LINKS}, got {link!r}")
     if arm_force_model not in ARM_FORCE_MODELS:
         raise IdentificationError(f"arm_force_model must be one of {ARM_FORCE_MODELS}, got {arm_force_model!r}")
+    if not (isinstance(friction, (int, float, np.floating)) and friction >= 0 and math.isfinite(friction)):
+        raise IdentificationError(f"friction must be a finite coefficient >= 0, got {friction!r}")
     if link != "plate" and not (isinstance(chain, (int, np.integer)) and 1 <= int(chain) <= 6):
         raise IdentificationError(f"chain must be 1..6 for link {link!r}, got {chain!r}")
     if state.V_dot is None or state.n != 1:
@@ -217,10 +239,14 @@ def identify_contact_force(params: HexaDynamicParameters, state: MotionState, ta
     x, rank, sv, cond, null, res = _lstsq(A, b, rcond)
     model = "measured" if rank == 3 else "min_norm"
     if link == "arm" and arm_force_model != "min_norm":
+        normal = arm_surface_normal(D, prm.A[k], geo[k][3:6])
+        push = push_direction_unit(push_direction)
         candidates = []
         if arm_force_model == "object_axis":
-            candidates.append(("object_axis", push_direction_unit(push_direction)))
-        candidates.append(("surface_normal", arm_surface_normal(D, prm.A[k], geo[k][3:6])))
+            candidates.append(("object_axis", push))
+        elif arm_force_model == "friction_cone" and push is not None and normal is not None:
+            candidates.append(("friction_cone", friction_cone_direction(push, normal, float(friction))))
+        candidates.append(("surface_normal", normal))
         for name, n in candidates:
             gain = None if n is None else float(A[0] @ n)
             if gain is not None and abs(gain) >= ARM_NORMAL_MIN_GAIN * float(np.linalg.norm(A[0])):
