@@ -217,3 +217,101 @@ class CommandTimeline:
         while len(self._items) > 1 and self._items[1][0] <= board_time - self.horizon:
             self._items.popleft()
         return found
+
+
+class ServoFrameTimeline:
+    """The set-point each servo acts on, from the servo board's pulse frames (LATCH reports).
+
+    A hobby servo takes a new set-point only from its pulse, one per `period` (20 ms) frame, the six pulses one after
+    the other: servo i acts on the command its latest pulse carried from that pulse's end on. The servo board reports
+    each frame — its start, each pulse's start and the SEQ of the SET_TARGETS each pulse carried (docs/protocol.md,
+    LATCH) — after the frame's last pulse, so the frames of the last ≈ 20 ms are not reported yet when their current
+    samples arrive. Those are predicted: the frames are periodic, each pulse starts where it started in the newest
+    reported frame (its width changes little from one frame to the next), and it carries the newest command the board
+    had when it started, which `commands` (the CommandTimeline of send times) approximates. A reported frame
+    replaces the prediction (`mismatches` counts the servos whose reported command differed from the predicted one).
+
+    All times here are on one clock — the current board's (the driver maps the servo board's clock through the host's
+    onto it, or the caller's clock in tests).
+
+    Args:
+        period: the frame period (s).
+        horizon: seconds of reported frames kept for samples that arrive late.
+    """
+
+    def __init__(self, period: float = 0.02, horizon: float = 1.0) -> None:
+        if not (period > 0 and horizon > period):
+            raise ValueError(f"bad ServoFrameTimeline period {period} / horizon {horizon}")
+        self.period = float(period)
+        self.horizon = float(horizon)
+        self._by_seq: dict[int, np.ndarray] = {}            # SEQ -> the angles that SET_TARGETS carried
+        # (start, latch offsets, angles | nan, pulse start offsets)
+        self._frames: deque[tuple[float, np.ndarray, np.ndarray, np.ndarray]] = deque()
+        self.frames = 0
+        self.unknown_seq = 0
+        self.mismatches = 0
+
+    def reset(self) -> None:
+        """Forget the frames (the servo board or a clock restarted); the commands by SEQ stay valid."""
+        self._frames.clear()
+
+    def add_command(self, seq: int, zeta: np.ndarray) -> None:
+        """A SET_TARGETS frame with header SEQ `seq` (0..255) carried the angles `zeta` (rad)."""
+        self._by_seq[int(seq) & 0xFF] = np.array(zeta, dtype=float)
+
+    def add_frame(self, start: float, pulse_offsets: np.ndarray, latch_offsets: np.ndarray, seqs: np.ndarray,
+                  mask: int, commands: CommandTimeline | None = None) -> None:
+        """A reported frame: its start (s, on this timeline's clock), each servo's pulse start and latch (pulse end)
+        offsets from the start (s), the SEQ each pulse carried and the bit mask of servos pulsed (others keep their
+        set-point). With `commands`, counts the servos whose reported command differs from the one predicted."""
+        offsets = np.asarray(latch_offsets, dtype=float).reshape(6)
+        starts = np.asarray(pulse_offsets, dtype=float).reshape(6)
+        angles = np.full(6, np.nan)
+        for i in range(6):
+            if not (int(mask) >> i) & 1:
+                continue
+            zeta = self._by_seq.get(int(seqs[i]) & 0xFF)
+            if zeta is None:
+                self.unknown_seq += 1
+                continue
+            angles[i] = zeta[i]
+            if commands is not None:
+                predicted = commands.at(start + starts[i])
+                if predicted is not None and abs(predicted[i] - zeta[i]) > 1e-9:
+                    self.mismatches += 1
+        if self._frames and start <= self._frames[-1][0] + 0.5 * self.period:
+            if start < self._frames[-1][0] - 0.5 * self.period:   # the clock went back: start over
+                self._frames.clear()
+            else:
+                return                                             # a repeated report of a known frame
+        self._frames.append((float(start), offsets, angles, starts))
+        self.frames += 1
+        while len(self._frames) > 1 and self._frames[0][0] < start - self.horizon:
+            self._frames.popleft()
+
+    def setpoints_at(self, t: float, commands: CommandTimeline) -> np.ndarray | None:
+        """The six set-points the servos act on at time `t` (s); None before any reported frame (the caller falls
+        back to `commands.at`). A servo's set-point comes from the latest pulse that ended at or before t: a
+        reported frame's, or for a frame not reported yet, the command `commands` had when that pulse started."""
+        if not self._frames:
+            return None
+        out = np.full(6, np.nan)
+        last_start, last_off, _, last_pulse = self._frames[-1]
+        for i in range(6):
+            # the latest pulse end of servo i at or before t, on the frame grid of the newest report
+            k = math.floor((t - last_start - last_off[i]) / self.period + 1e-9)
+            if k > 0:     # a frame after the newest report: its pulse carries the command sent before it started
+                z = commands.at(last_start + k * self.period + last_pulse[i])
+                if z is not None:
+                    out[i] = z[i]
+                    continue
+            for start, off, ang, _ in reversed(self._frames):
+                if start + off[i] <= t and np.isfinite(ang[i]):
+                    out[i] = ang[i]
+                    break
+        if np.isnan(out).any():
+            fallback = commands.at(t)
+            if fallback is None:
+                return None
+            out = np.where(np.isnan(out), fallback, out)
+        return out

@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import dataclasses
 import threading
+from collections import deque
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -126,6 +127,16 @@ def _desc_default(desc: Any) -> Any:
     from hexa.robots.hexa_description import load_hexa
 
     return load_hexa()
+
+
+@dataclass(frozen=True)
+class LatchFrame:
+    """One pulse frame of the simulated servo board: start (sim time, s), each servo's pulse start (s after it) and
+    the tag of the targets each pulse carried (-1: none given)."""
+
+    start: float
+    pulse_offsets: np.ndarray
+    tags: np.ndarray
 
 
 class Simulator:
@@ -245,6 +256,9 @@ class Simulator:
         self._setpoints = zeta0.copy()        # what each servo last received (with frames)
         self._frame_phase = float(np.random.default_rng([self.seed, 3]).uniform(0.0, 1.0)) * self._frame_period
         self._latch_at: np.ndarray | None = None   # sim time of each servo's next pulse end; None: frames not running
+        self._target_tag = -1                 # tag of the newest targets (the servo board's SET_TARGETS seq)
+        self._setpoint_tags = np.full(6, -1)  # tag of the targets each servo last latched
+        self._latch_frames: deque[LatchFrame] = deque(maxlen=500)   # frames completed, for the virtual Uno's report
         self.data.ctrl[:6] = zeta0
         self._manual: _Contact | None = None
         self._scripted: _Contact | None = None
@@ -292,10 +306,12 @@ class Simulator:
     def timestep(self) -> float:
         return self._dt
 
-    def set_servo_targets(self, zeta: np.ndarray) -> None:
+    def set_servo_targets(self, zeta: np.ndarray, tag: int = -1) -> None:
         """Command the six servo angles ζ (rad); the servos move there at most at their speed limit.
 
-        Switches `drive` to "external" (a trajectory drive stops following its table).
+        Switches `drive` to "external" (a trajectory drive stops following its table). `tag` names the targets
+        (the virtual Uno passes its SET_TARGETS seq); with a pulse frame, `pop_latch_frames` says which tag each
+        servo's pulse carried.
 
         Raises:
             SimulatorError: not six finite values.
@@ -305,7 +321,17 @@ class Simulator:
             raise SimulatorError(f"servo targets must be six finite angles (rad), got {zeta!r}")
         with self._lock:
             self._targets = z.copy()
+            self._target_tag = int(tag)
             self.drive = "external"
+
+    def pop_latch_frames(self) -> list[LatchFrame]:
+        """The pulse frames completed since the last call (with `sim.servo.frame_period` > 0 and the external drive):
+        each frame's start (sim time), the start of each servo's pulse in it (s after the frame's start; a servo
+        takes the set-point at its pulse's end, `pulse_slot` later) and the tag of the targets each pulse carried."""
+        with self._lock:
+            out = list(self._latch_frames)
+            self._latch_frames.clear()
+        return out
 
     def step(self, n: int = 1) -> None:
         """Advance the physics by `n` timesteps."""
@@ -331,7 +357,12 @@ class Simulator:
         due = self._latch_at <= t
         if due.any():
             self._setpoints[due] = self._targets[due]
+            self._setpoint_tags[due] = self._target_tag
             frames = np.floor((t - self._latch_at[due]) / self._frame_period) + 1.0
+            if due[5]:   # the frame's last pulse: the frame is complete
+                start = float(self._latch_at[5] + (frames[-1] - 1.0) * self._frame_period - 6 * self._pulse_slot)
+                self._latch_frames.append(LatchFrame(start, self._pulse_slot * np.arange(6),
+                                                     self._setpoint_tags.copy()))
             self._latch_at[due] += frames * self._frame_period
         return self._setpoints
 
