@@ -97,3 +97,43 @@ def test_unpack_wrong_length_names_type():
         fr.unpack_sample(b"abc")
     with pytest.raises(fr.ProtocolError, match="needs 6 values"):
         fr.pack_targets([1500] * 5)
+
+
+latch_st = st.builds(fr.Latch, st.integers(0, 2**32 - 1),
+                     st.lists(st.integers(0, 0xFFFF), min_size=6, max_size=6).map(tuple),
+                     st.lists(st.integers(0, 255), min_size=6, max_size=6).map(tuple), st.integers(0, 0x3F))
+
+
+@given(latch_st)
+def test_latch_payload_round_trip(latch):
+    payload = fr.pack_latch(latch)
+    assert len(payload) == fr.LATCH_SIZE == 23
+    assert fr.unpack_latch(payload) == latch
+    (frame,) = fr.FrameParser().feed(fr.encode_frame(fr.LATCH, 3, payload))
+    assert frame.type == fr.LATCH and fr.unpack_latch(frame.payload) == latch
+
+
+def test_latch_layout_little_endian_fields_in_order():
+    latch = fr.Latch(0x01020304, (0, 1500, 3000, 4500, 6000, 7500), (9, 9, 9, 10, 10, 10), 0b111111)
+    p = fr.pack_latch(latch)
+    assert p[:4] == bytes((4, 3, 2, 1)) and p[4:8] == bytes((0, 0, 0xDC, 0x05))
+    assert p[16:22] == bytes((9, 9, 9, 10, 10, 10)) and p[22] == 0x3F
+    assert latch.pulse_start_us(2) == 0x01020304 + 3000
+    assert fr.Latch(0xFFFFFF00, (0, 0x200) + (0,) * 4, (0,) * 6, 1).pulse_start_us(1) == 0x100   # wraps like micros()
+
+
+def test_latch_and_latch_report_reject_wrong_lengths_and_values():
+    with pytest.raises(fr.ProtocolError, match="LATCH payload has 22 bytes, expected 23"):
+        fr.unpack_latch(bytes(22))
+    with pytest.raises(fr.ProtocolError, match="LATCH payload has 24 bytes"):
+        fr.unpack_latch(bytes(24))
+    with pytest.raises(fr.ProtocolError, match="SET_LATCH_REPORT payload has 2 bytes"):
+        fr.unpack_latch_report(b"\x01\x00")
+    assert fr.unpack_latch_report(fr.pack_latch_report(True)) == 1
+    assert fr.REQUEST_SIZES[fr.SET_LATCH_REPORT] == 1
+    with pytest.raises(fr.ProtocolError, match="needs 6 seqs"):
+        fr.pack_latch(fr.Latch(0, (0,) * 6, (0,) * 5, 1))
+    with pytest.raises(fr.ProtocolError, match="needs 6 values"):
+        fr.pack_latch(fr.Latch(0, (0,) * 7, (0,) * 6, 1))
+    with pytest.raises(fr.ProtocolError, match="mask"):
+        fr.pack_latch(fr.Latch(0, (0,) * 6, (0,) * 6, 0x40))

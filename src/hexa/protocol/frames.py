@@ -36,6 +36,8 @@ ERROR = 0x08         # board -> host: u8 code, u8 offending type, u8 offending s
 SET_TARGETS = 0x10   # host -> Uno: 6 x u16 pulse widths (us); no reply (status reports clamping)
 SET_LIMITS = 0x11    # host -> Uno: 6 x u16 min, 6 x u16 max (us) -> ACK or ERROR(BAD_VALUE)
 SET_WATCHDOG = 0x12  # host -> Uno: u16 command timeout (ms) -> ACK
+SET_LATCH_REPORT = 0x13  # host -> Uno: u8 enable (0/1) -> ACK or ERROR(BAD_VALUE); off after reset
+LATCH = 0x14         # Uno -> host, once per 20 ms frame while enabled: see Latch
 START_STREAM = 0x20  # host -> Mega: u16 rate (Hz, 1..1000) -> ACK or ERROR(BAD_VALUE)
 STOP_STREAM = 0x21   # host -> Mega: empty -> ACK
 SAMPLE = 0x22        # Mega -> host: u32 sample sequence, u32 board time (us), 6 x u16 ADC counts
@@ -43,7 +45,7 @@ SAMPLE = 0x22        # Mega -> host: u32 sample sequence, u32 board time (us), 6
 TYPE_NAMES = {
     HELLO: "HELLO", HELLO_REPLY: "HELLO_REPLY", PING: "PING", PONG: "PONG", GET_STATUS: "GET_STATUS",
     STATUS: "STATUS", ACK: "ACK", ERROR: "ERROR", SET_TARGETS: "SET_TARGETS", SET_LIMITS: "SET_LIMITS",
-    SET_WATCHDOG: "SET_WATCHDOG", START_STREAM: "START_STREAM", STOP_STREAM: "STOP_STREAM", SAMPLE: "SAMPLE",
+    SET_WATCHDOG: "SET_WATCHDOG", SET_LATCH_REPORT: "SET_LATCH_REPORT", LATCH: "LATCH", START_STREAM: "START_STREAM", STOP_STREAM: "STOP_STREAM", SAMPLE: "SAMPLE",
 }
 
 # Board kinds (HELLO_REPLY).
@@ -189,6 +191,7 @@ _ERROR = struct.Struct("<BBBB")
 _SIX_U16 = struct.Struct("<6H")
 _LIMITS = struct.Struct("<12H")
 _SAMPLE = struct.Struct("<II6H")
+_LATCH = struct.Struct("<I6H6BB")
 _STATUS_COMMON = struct.Struct("<BHHHI")
 _STATUS_SERVO = struct.Struct("<6HH")
 _STATUS_CURRENT = struct.Struct("<HHI")
@@ -230,6 +233,32 @@ class Sample(NamedTuple):
     sequence: int
     board_time_us: int
     counts: tuple[int, int, int, int, int, int]
+
+
+@dataclass(frozen=True)
+class Latch:
+    """One 20 ms pulse frame of the servo board (LATCH): when each channel's pulse started and which command it carried.
+
+    A hobby servo takes a new set-point only from a pulse, so `seqs[i]` names the SET_TARGETS (its frame header SEQ)
+    whose width channel i's pulse carried, and its set-point changed at that pulse (edge at
+    ``frame_start_us + offsets_us[i]``, falling edge one pulse width later).
+
+    Attributes:
+        frame_start_us: board time (µs, the micros() clock of PONG/STATUS, wraps at 2^32) of channel 1's rising edge;
+            4 µs resolution on the 16 MHz Uno.
+        offsets_us: start of each channel's slot (its rising edge) in µs after `frame_start_us` (offsets_us[0] = 0).
+        seqs: SEQ of the SET_TARGETS frame whose target each channel's pulse carried.
+        mask: bit i set when channel i's output was on (a pulse was sent) in this frame.
+    """
+
+    frame_start_us: int
+    offsets_us: tuple[int, ...]
+    seqs: tuple[int, ...]
+    mask: int
+
+    def pulse_start_us(self, channel: int) -> int:
+        """Board time (µs, wrapped to 32 bits) at which `channel`'s pulse (0-based) started."""
+        return (self.frame_start_us + self.offsets_us[channel]) & 0xFFFFFFFF
 
 
 @dataclass(frozen=True)
@@ -348,6 +377,36 @@ def unpack_watchdog(payload: bytes) -> int:
     return _U16.unpack(payload)[0]
 
 
+def pack_latch_report(enable: bool | int) -> bytes:
+    return _U8.pack(int(enable))
+
+
+def unpack_latch_report(payload: bytes) -> int:
+    """The enable byte of SET_LATCH_REPORT (the board answers ERROR(BAD_VALUE) to anything but 0 or 1)."""
+    _expect(payload, 1, SET_LATCH_REPORT)
+    return payload[0]
+
+
+def pack_latch(latch: Latch) -> bytes:
+    """LATCH payload (23 bytes): u32 frame start (µs), 6 x u16 pulse start offsets (µs), 6 x u8 seq, u8 mask.
+
+    Raises:
+        ProtocolError: not six offsets or seqs, or a value that does not fit its field.
+    """
+    offsets = _six(latch.offsets_us, "LATCH offsets")
+    seqs = tuple(int(v) for v in latch.seqs)
+    if len(seqs) != N_CHANNELS or not all(0 <= v <= 0xFF for v in seqs) or not 0 <= latch.mask <= 0x3F:
+        raise ProtocolError(f"LATCH needs {N_CHANNELS} seqs in 0..255 and a mask in 0..0x3F, got {seqs}, "
+                            f"{latch.mask}")
+    return _LATCH.pack(latch.frame_start_us & 0xFFFFFFFF, *offsets, *seqs, latch.mask)
+
+
+def unpack_latch(payload: bytes) -> Latch:
+    _expect(payload, _LATCH.size, LATCH)
+    v = _LATCH.unpack(payload)
+    return Latch(v[0], tuple(v[1:7]), tuple(v[7:13]), v[13])
+
+
 def pack_start_stream(rate_hz: int) -> bytes:
     return _U16.pack(rate_hz)
 
@@ -395,7 +454,8 @@ def unpack_current_status(payload: bytes) -> CurrentStatus:
 
 # Fixed payload sizes of host -> board messages (the boards reject others with ERROR(BAD_LENGTH)).
 REQUEST_SIZES = {HELLO: 1, PING: 4, GET_STATUS: 0, SET_TARGETS: 12, SET_LIMITS: 24, SET_WATCHDOG: 2,
-                 START_STREAM: 2, STOP_STREAM: 0}
+                 SET_LATCH_REPORT: 1, START_STREAM: 2, STOP_STREAM: 0}
 SERVO_STATUS_SIZE = _STATUS_COMMON.size + _STATUS_SERVO.size
 CURRENT_STATUS_SIZE = _STATUS_COMMON.size + _STATUS_CURRENT.size
 SAMPLE_SIZE = _SAMPLE.size
+LATCH_SIZE = _LATCH.size   # 23 bytes: a LATCH frame is 30 bytes on the wire, 600 µs of the link every 20 ms
