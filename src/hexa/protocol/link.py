@@ -424,16 +424,26 @@ class BoardLink:
 
 
 class ServoLink(BoardLink):
-    """The Uno servo board: pulse targets (us), limits and command watchdog set on every (re)connect."""
+    """The Uno servo board: pulse targets (us), limits and command watchdog set on every (re)connect.
+
+    With `on_latch`, the board's latch report is enabled on every (re)connect (SET_LATCH_REPORT) and
+    `on_latch(latch, t_rx)` is called with each LATCH (frames.Latch: when each servo's pulse started, board clock,
+    and the SET_TARGETS seq it carried; `set_targets` records the seq it used in `last_targets_seq`). Firmware
+    without the report answers UNKNOWN_TYPE: the link connects anyway, with `latch_supported` False.
+    """
 
     kind = fr.BOARD_SERVO
 
     def __init__(self, port: str, min_us: Sequence[int] = (500,) * 6, max_us: Sequence[int] = (2500,) * 6,
-                 watchdog_ms: int = 500, **kw) -> None:
+                 watchdog_ms: int = 500, on_latch: Callable[[fr.Latch, float], None] | None = None, **kw) -> None:
         super().__init__(port, **kw)
         self.min_us = tuple(int(v) for v in min_us)
         self.max_us = tuple(int(v) for v in max_us)
         self.watchdog_ms = int(watchdog_ms)
+        self.on_latch = on_latch
+        self.last_targets_seq: int | None = None
+        self.latches = 0
+        self.latch_supported: bool | None = None   # None: not asked (no on_latch) or not connected yet
         self.status: fr.ServoStatus | None = None
         self.status_time = 0.0
         self.targets_sent = 0
@@ -443,6 +453,15 @@ class ServoLink(BoardLink):
     def on_connected(self) -> None:
         self.request(fr.SET_LIMITS, fr.pack_limits(self.min_us, self.max_us))
         self.request(fr.SET_WATCHDOG, fr.pack_watchdog(self.watchdog_ms))
+        if self.on_latch is not None:
+            try:
+                self.request(fr.SET_LATCH_REPORT, fr.pack_latch_report(True))
+                self.latch_supported = True
+            except LinkError as exc:   # firmware before the latch report: the link works without it
+                if "UNKNOWN_TYPE" not in str(exc):
+                    raise
+                self.latch_supported = False
+                self.stats.last_error = str(exc)
         if self.last_targets is not None:  # after a board reset: restore what the host believes is commanded
             self.send(fr.SET_TARGETS, fr.pack_targets(self.last_targets))
             self.restored += 1
@@ -453,7 +472,10 @@ class ServoLink(BoardLink):
         The last targets are re-sent after every reconnect (the board starts with its outputs off).
         """
         self.last_targets = tuple(int(p) for p in pulses_us)
-        ok = self.send(fr.SET_TARGETS, fr.pack_targets(self.last_targets)) is not None
+        seq = self.send(fr.SET_TARGETS, fr.pack_targets(self.last_targets))
+        ok = seq is not None
+        if ok:
+            self.last_targets_seq = seq
         self.targets_sent += ok
         return ok
 
@@ -461,6 +483,11 @@ class ServoLink(BoardLink):
         if frame.type == fr.STATUS:
             self.status = fr.unpack_servo_status(frame.payload)
             self.status_time = t_rx
+        elif frame.type == fr.LATCH:
+            latch = fr.unpack_latch(frame.payload)
+            self.latches += 1
+            if self.on_latch is not None:
+                self.on_latch(latch, t_rx)
 
 
 class CurrentLink(BoardLink):
