@@ -90,3 +90,77 @@ def test_mega_firmware_streams_injected_adc_voltages_at_1khz(tmp_path):
             n = len(samples)
             time.sleep(0.2)
             assert len(samples) <= n + 2   # STOP_STREAM stops the stream
+
+
+def _rising_edges(uno, pin):
+    """Simulated times (µs) of the rising edges on `pin` with the widths of their pulses."""
+    return [(p.sim_time_us - p.width_us, p.width_us) for p in list(uno.pulses) if p.pin == pin]
+
+
+def _nearest(edges, t_us):
+    return min(edges, key=lambda e: abs(e[0] - t_us))
+
+
+LATCH_CLOCK_TOL_US = 4.0    # micros() counts in 4 µs steps (Timer0, prescaler 64 at 16 MHz)
+LATCH_EDGE_JITTER_US = 6.0  # an edge is late by however long another ISR (Timer0 overflow, UART) holds the CPU
+
+
+def test_uno_firmware_latch_report_times_each_pulse_and_names_its_command(tmp_path):
+    latches: list[fr.Latch] = []
+    with SimavrBoard("uno", link=tmp_path / "uno") as uno:
+        with ServoLink(uno.port) as link:
+            assert link.wait_connected(5.0), link.stats.last_error
+            assert link.set_targets([1500] * 6)
+            time.sleep(0.3)
+            assert link.latches == 0                      # off after reset: no LATCH without the enable
+            with pytest.raises(LinkError, match="BAD_LENGTH"):
+                link.request(fr.SET_LATCH_REPORT, b"\x01\x00")
+            with pytest.raises(LinkError, match="BAD_VALUE"):
+                link.request(fr.SET_LATCH_REPORT, b"\x02")
+            link.on_latch = lambda latch, t_rx: latches.append(latch)
+            link.request(fr.SET_LATCH_REPORT, fr.pack_latch_report(True))
+            widths: dict[int, tuple[int, ...]] = {link.last_targets_seq: (1500,) * 6}
+            for k in range(1, 21):   # a command every ~50 ms, each with its own widths
+                w = tuple(1000 + 100 * i + 20 * k for i in range(6))
+                assert link.set_targets(w)
+                widths[link.last_targets_seq] = w
+                time.sleep(0.05)
+            time.sleep(0.1)
+            link.request(fr.SET_LATCH_REPORT, fr.pack_latch_report(False))
+            n_off = len(latches)
+            time.sleep(0.2)
+            assert len(latches) <= n_off + 1              # disabled: the stream stops (one may be in flight)
+            assert link.stats.crc_errors == 0 and link.stats.decode_errors == 0
+        del latches[n_off:]
+        assert len(latches) >= 30                         # ~1.1 s of commands (less when simavr runs slow)
+        starts = [x.frame_start_us for x in latches]
+        spacing = [b - a for a, b in zip(starts, starts[1:])]
+        # one LATCH per 20 ms frame of simulated time, none missing: 50 per simulated second
+        assert all(abs(d - 20000) <= LATCH_CLOCK_TOL_US for d in spacing), sorted(set(spacing))
+        edges = {i: _rising_edges(uno, pin) for i, pin in enumerate(SERVO_PINS)}
+        # the board's micros() clock and the simulated time differ by a constant: estimate it, then check each edge
+        offset = sorted(_nearest(edges[0], s)[0] - s for s in starts)[len(starts) // 2]
+        start_err, slot_err, width_err, seen = [], [], [], set()
+        for x in latches:
+            assert x.mask == 0x3F and x.offsets_us[0] == 0
+            rise0, _ = _nearest(edges[0], x.frame_start_us + offset)
+            start_err.append(rise0 - offset - x.frame_start_us)
+            for i in range(6):
+                rise, width = _nearest(edges[i], rise0 + x.offsets_us[i])
+                slot_err.append(rise - rise0 - x.offsets_us[i])
+                assert x.seqs[i] in widths, (x, i)
+                width_err.append(width - widths[x.seqs[i]][i])   # the pulse carried that command (20 µs apart)
+                assert abs(width_err[-1]) <= LATCH_EDGE_JITTER_US, (x, i, width)
+                seen.add(x.seqs[i])
+        assert max(map(abs, start_err)) <= LATCH_CLOCK_TOL_US + LATCH_EDGE_JITTER_US, start_err
+        assert max(map(abs, slot_err)) <= LATCH_EDGE_JITTER_US, slot_err
+        # every command reached every servo, in order: per channel, seqs step through the commands without going back
+        order = list(widths)
+        for i in range(6):
+            idx = [order.index(x.seqs[i]) for x in latches]
+            assert idx == sorted(idx)
+        assert set(order[1:]) <= seen
+        print(f"LATCH frames {len(latches)}, spacing {min(spacing)}..{max(spacing)} us, frame start vs edge "
+              f"{min(start_err):+.2f}..{max(start_err):+.2f} us (clock offset {offset:.2f} us), "
+              f"slot offsets vs edges {min(slot_err):+.2f}..{max(slot_err):+.2f} us, "
+              f"widths {min(width_err):+.2f}..{max(width_err):+.2f} us")

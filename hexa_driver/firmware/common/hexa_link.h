@@ -32,6 +32,9 @@
 #define HX_SET_TARGETS 0x10
 #define HX_SET_LIMITS 0x11
 #define HX_SET_WATCHDOG 0x12
+#define HX_SET_LATCH_REPORT 0x13
+#define HX_LATCH 0x14
+#define HX_LATCH_SIZE 23   /* u32 frame start, 6 x u16 pulse start offsets, 6 x u8 seq, u8 mask */
 #define HX_START_STREAM 0x20
 #define HX_STOP_STREAM 0x21
 #define HX_SAMPLE 0x22

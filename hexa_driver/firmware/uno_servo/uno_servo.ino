@@ -8,6 +8,9 @@
  * clamped to per-channel limits (default 500..2500 us, SET_LIMITS); if commands stop for longer than the command
  * watchdog (default 500 ms, SET_WATCHDOG) the board holds the last targets and reports WATCHDOG_HOLD in STATUS; the
  * AVR hardware watchdog (1 s) resets the MCU if the main loop ever hangs.
+ * Latch report (SET_LATCH_REPORT, off after reset): once per frame the board sends LATCH: the frame's start on the
+ * micros() clock, each channel's pulse start (us after it) and the SEQ of the SET_TARGETS each pulse carried. The
+ * ISR fills one of two records (no Serial there); loop() sends the finished one.
  * Protocol: docs/protocol.md (hexa_link.h). Serial 500000 baud 8N1.
  */
 #include <avr/wdt.h>
@@ -24,6 +27,22 @@ static int8_t slot = -1;                       /* pulse running since the last c
 static uint8_t cur_mask, next_mask;            /* pin high now / pin to raise at the next compare */
 static uint16_t next_ticks;                    /* length of the slot that starts at the next compare */
 static uint16_t frame_start;
+static volatile uint8_t ticks_seq;             /* SEQ of the SET_TARGETS that ticks[] comes from */
+static uint8_t next_seq;                       /* ticks_seq as read with next_ticks */
+
+/* Latch report, filled by the ISR: record latch_rec[k & 1] belongs to the k-th frame since the report was enabled;
+ * latch_done counts the records completed (the main loop sends latch_rec[(latch_done - 1) & 1]). */
+struct LatchRec {
+  uint32_t start_us;                 /* micros() at channel 1's compare (frame start) */
+  uint16_t offset_us[HX_CHANNELS];   /* slot i's compare, us after the frame start */
+  uint8_t seq[HX_CHANNELS];          /* SEQ of the SET_TARGETS whose width slot i's pulse carried */
+  uint8_t mask;                      /* bit i: channel i's output was on */
+};
+static struct LatchRec latch_rec[2];
+static volatile uint8_t latch_on = 0, latch_done = 0;
+static uint8_t latch_frame = 0;   /* ISR: this frame is being recorded (latch_on sampled at its start: whole frames) */
+static uint8_t latch_sent = 0;
+static struct LatchRec *latch_w = &latch_rec[0];
 
 static uint16_t pulse_us[HX_CHANNELS];
 static uint16_t min_us[HX_CHANNELS], max_us[HX_CHANNELS];
@@ -38,10 +57,25 @@ ISR(TIMER1_COMPA_vect) {
   PORTD = (PORTD & ~cur_mask) | next_mask;
   cur_mask = next_mask;
   slot++;
-  if (slot == 0) frame_start = OCR1A;
+  if (slot == 0) {
+    frame_start = OCR1A;
+    latch_frame = latch_on;
+    if (latch_frame) {   /* micros() now, less the ticks since the compare: 4 us resolution (Timer0 prescaler 64) */
+      uint16_t late = TCNT1 - frame_start;
+      latch_w = &latch_rec[latch_done & 1];
+      latch_w->start_us = micros() - (late >> 1);
+      latch_w->mask = 0;
+    }
+  }
   if (slot < HX_CHANNELS) {
+    if (latch_frame) {
+      latch_w->offset_us[slot] = (uint16_t)(OCR1A - frame_start) >> 1;
+      latch_w->seq[slot] = next_seq;
+      if (cur_mask) latch_w->mask |= (uint8_t)(1 << slot);
+    }
     OCR1A += next_ticks;
   } else if (slot == HX_CHANNELS) {         /* all pulses done: idle until just before the next frame */
+    if (latch_frame) latch_done++;
     OCR1A = frame_start + FRAME_TICKS - PREP_TICKS;
   } else {                                  /* prepare point: channel 1 below reads the newest target */
     OCR1A = frame_start + FRAME_TICKS;
@@ -52,17 +86,39 @@ ISR(TIMER1_COMPA_vect) {
     uint16_t t = ticks[ns];
     next_mask = t ? pin_mask[ns] : 0;
     next_ticks = t ? t : OFF_SLOT_TICKS;
+    next_seq = ticks_seq;
   } else {
     next_mask = 0;
   }
 }
+
+static uint8_t targets_seq;   /* SEQ of the last SET_TARGETS */
 
 static void apply_targets(void) {
   uint16_t t[HX_CHANNELS];
   for (uint8_t i = 0; i < HX_CHANNELS; i++) t[i] = outputs_on ? pulse_us[i] * 2 : 0;
   ATOMIC_BLOCK(ATOMIC_RESTORESTATE) {
     for (uint8_t i = 0; i < HX_CHANNELS; i++) ticks[i] = t[i];
+    ticks_seq = targets_seq;
   }
+}
+
+/* Send the newest finished latch record, if any and if some output was on. A record is copied without blocking the
+ * ISR: the ISR writes the other one, and this one is only rewritten two frames later (checked after the copy). */
+static void send_latch(void) {
+  uint8_t n = latch_done;
+  if (n == latch_sent) return;
+  latch_sent = n;
+  struct LatchRec r = latch_rec[(uint8_t)(n - 1) & 1];
+  if (latch_done != n || !latch_on || !r.mask) return;   /* overwritten while copying, or nothing latched */
+  uint8_t p[HX_LATCH_SIZE];
+  hx_put_u32(p, r.start_us);
+  for (uint8_t i = 0; i < HX_CHANNELS; i++) {
+    hx_put_u16(p + 4 + 2 * i, r.offset_us[i]);
+    p[16 + i] = r.seq[i];
+  }
+  p[22] = r.mask;
+  hx_send(HX_LATCH, p, HX_LATCH_SIZE);
 }
 
 static uint16_t clamp_us(uint8_t i, uint16_t v) {
@@ -99,6 +155,7 @@ static void handle_frame(void) {
       }
       outputs_on = 1;
       last_cmd_ms = millis();
+      targets_seq = rx.seq;
       apply_targets();
       return;
     case HX_SET_LIMITS:
@@ -125,6 +182,16 @@ static void handle_frame(void) {
     case HX_GET_STATUS:
       if (!hx_check_length(&rx, 0)) return;
       send_status();
+      return;
+    case HX_SET_LATCH_REPORT:
+      if (!hx_check_length(&rx, 1)) return;
+      if (rx.payload[0] > 1) {
+        hx_send_error(HX_ERR_BAD_VALUE, rx.type, rx.seq, rx.payload[0]);
+        return;
+      }
+      if (rx.payload[0] && !latch_on) latch_sent = latch_done;   /* report frames that start from now on */
+      latch_on = rx.payload[0];
+      hx_send_ack(rx.type, rx.seq);
       return;
     default:
       hx_unknown(&rx);
@@ -153,4 +220,5 @@ void loop() {
   while (Serial.available() > 0) {
     if (hx_rx_byte(&rx, (uint8_t)Serial.read())) handle_frame();
   }
+  send_latch();
 }
