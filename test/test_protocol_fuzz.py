@@ -154,3 +154,36 @@ def test_link_keeps_streaming_correct_samples_through_noise_bursts(tmp_path):
             assert all(s.counts == expected for s in samples)   # nothing wrong got through
             assert n_bursts[0] > 50 and link.stats.resyncs > 0
             assert link.sample_gaps <= link.stats.crc_errors + link.stats.bad_length  # a gap only where damaged
+
+
+def test_servo_link_parses_latch_reports_through_noise_bursts(tmp_path):
+    from hexa.protocol.emulator import UnoEmulator
+    from hexa.protocol.link import ServoLink
+
+    rng = np.random.default_rng(7)
+    n_bursts = [0]
+
+    def noisy(data: bytes) -> bytes:
+        if rng.random() < 0.3:   # garbage between 30 % of the board's frames
+            n_bursts[0] += 1
+            return rng.integers(0, 256, int(rng.integers(1, 60))).astype(np.uint8).tobytes() + data
+        return data
+
+    latches: list[fr.Latch] = []
+    with UnoEmulator(link=tmp_path / "uno", tx_filter=noisy) as uno:
+        with ServoLink(uno.port, on_latch=lambda x, t: latches.append(x)) as link:
+            assert link.wait_connected(3.0), link.stats.last_error
+            assert link.set_targets([1234] * 6)
+            seq = link.last_targets_seq
+            t_end = time.monotonic() + 5.0
+            while len(latches) < 40 and time.monotonic() < t_end:
+                time.sleep(0.01)
+            assert len(latches) >= 40 and n_bursts[0] > 10
+            if latches[0].mask != 0x3F:   # the command arrived mid-frame: channels before it were still off
+                del latches[0]
+            # nothing wrong got through: every LATCH is a whole frame of the one command, on the 20 ms grid
+            assert all(x.seqs == (seq,) * 6 and x.mask == 0x3F and x.frame_start_us % 20000 == 0 for x in latches)
+            assert all(x.offsets_us == tuple(1234 * i for i in range(6)) for x in latches)
+            missing = sum((b.frame_start_us - a.frame_start_us) // 20000 - 1 for a, b in zip(latches, latches[1:]))
+            assert missing <= link.stats.crc_errors + link.stats.bad_length   # a LATCH lost only where damaged
+            assert link.stats.decode_errors == 0

@@ -28,6 +28,9 @@ FIRMWARE_VERSION = 0x0100
 DEFAULT_MIN_US = 500
 DEFAULT_MAX_US = 2500
 DEFAULT_WATCHDOG_MS = 500
+FRAME_US = 20000        # the Uno's pulse frame (uno_servo.ino FRAME_TICKS)
+OFF_SLOT_US = 100       # slot of a channel whose output is off (OFF_SLOT_TICKS)
+PREP_US = 50            # channel 1's width is read this long before its frame starts (PREP_TICKS)
 
 
 class EmulatorError(RuntimeError):
@@ -247,9 +250,22 @@ class _BoardEmulator:
 class UnoEmulator(_BoardEmulator):
     """The servo board (Arduino Uno): six pulse-width targets with limits and a hold-last-command watchdog.
 
+    Latch report (SET_LATCH_REPORT, off after reset): like the firmware, one LATCH per 20 ms pulse frame on the
+    board clock. Frames start at board times k·20 ms; the six slots follow one another (a channel's slot is its
+    pulse width, or 100 µs when its output is off); channel 1's width is the command handled up to 50 µs before the
+    frame, channel i's the command handled up to the start of channel i-1's slot (as the firmware's ISR reads them).
+    A frame is reported once its last slot has ended; frames more than 0.1 s behind are skipped (`latch_skipped`).
+
     Args:
         on_targets: called with the six pulse widths (us, after clamping to the limits) of every SET_TARGETS,
             from the emulator thread.
+        on_command: like `on_targets`, called with the widths and the SET_TARGETS frame's SEQ (the tag a simulator
+            can attach to the targets, so that its own pulse frames can name the command each servo latched).
+        latch_source: when given, the LATCH frames come from it instead of the emulator's own frame model: called
+            every tick while the report is enabled, it returns the frames (frames.Latch, board clock µs) completed
+            since the last call. Mapping from hexa.sim's `Simulator.pop_latch_frames()` (LatchFrame): frame_start_us
+            = board time of `start` in µs, offsets_us = `pulse_offsets` in µs, seqs = `tags` & 0xFF (the seq passed
+            via `on_command`), mask = 0x3F (servos without a tag yet carry tag -1: leave their bit clear).
         link: optional stable symlink path for `.port`.
         tx_filter: optional function applied to every chunk the board sends (fault injection in tests).
     """
@@ -258,9 +274,15 @@ class UnoEmulator(_BoardEmulator):
 
     def __init__(self, on_targets: Callable[[tuple[int, ...]], None] | None = None,
                  link: str | os.PathLike | None = None, tx_filter: Callable[[bytes], bytes] | None = None,
-                 clock: Callable[[], float] = time.monotonic) -> None:
+                 clock: Callable[[], float] = time.monotonic,
+                 on_command: Callable[[tuple[int, ...], int], None] | None = None,
+                 latch_source: Callable[[], Sequence[fr.Latch]] | None = None) -> None:
         super().__init__(link=link, tx_filter=tx_filter, clock=clock)
         self.on_targets = on_targets
+        self.on_command = on_command
+        self.latch_source = latch_source
+        self.latches_sent = 0
+        self.latch_skipped = 0
         self._reset_board()
 
     def _reset_board(self) -> None:
@@ -273,6 +295,10 @@ class UnoEmulator(_BoardEmulator):
         self.clamped = False
         self.last_command_time: float | None = None
         self.commands = 0
+        self.targets_seq = 0
+        self.latch_report = False
+        self._next_frame = 0      # index of the next pulse frame to report
+        self._history: list[tuple[float, int, tuple[int, ...]]] = []   # (board µs handled, seq, widths), in order
 
     @property
     def targets(self) -> tuple[int, ...]:
@@ -280,7 +306,14 @@ class UnoEmulator(_BoardEmulator):
         return self.pulses_us
 
     def _accepts(self, msg_type: int) -> bool:
-        return super()._accepts(msg_type) or msg_type in (fr.SET_TARGETS, fr.SET_LIMITS, fr.SET_WATCHDOG)
+        return super()._accepts(msg_type) or msg_type in (fr.SET_TARGETS, fr.SET_LIMITS, fr.SET_WATCHDOG,
+                                                          fr.SET_LATCH_REPORT)
+
+    def _now_us(self) -> float:
+        return (self._clock() - self._t0) * 1e6
+
+    def _record(self) -> None:
+        self._history.append((self._now_us(), self.targets_seq, self.pulses_us))
 
     def _handle_board_frame(self, frame: fr.Frame) -> None:
         if frame.type == fr.SET_TARGETS:
@@ -291,9 +324,13 @@ class UnoEmulator(_BoardEmulator):
             self.outputs_enabled = True
             self.last_command_time = self._clock()
             self.commands += 1
-            if self.on_targets is not None:
+            self.targets_seq = frame.seq
+            self._record()
+            for callback, args in ((self.on_targets, (out,)), (self.on_command, (out, frame.seq))):
+                if callback is None:
+                    continue
                 try:
-                    self.on_targets(out)
+                    callback(*args)
                 except Exception as exc:  # the consumer failed: the board keeps running, like the real one
                     self.callback_errors += 1
                     self.last_callback_error = f"{type(exc).__name__}: {exc}"
@@ -305,10 +342,80 @@ class UnoEmulator(_BoardEmulator):
             self.min_us, self.max_us = list(lo), list(hi)
             if self.outputs_enabled:
                 self.pulses_us = tuple(min(max(p, a), b) for p, a, b in zip(self.pulses_us, lo, hi))
+                self._record()
             self._send(fr.ACK, fr.pack_ack(frame.type, frame.seq))
         elif frame.type == fr.SET_WATCHDOG:
             self.watchdog_ms = fr.unpack_watchdog(frame.payload)
             self._send(fr.ACK, fr.pack_ack(frame.type, frame.seq))
+        elif frame.type == fr.SET_LATCH_REPORT:
+            enable = fr.unpack_latch_report(frame.payload)
+            if enable > 1:
+                self._send(fr.ERROR, fr.pack_error(fr.ERR_BAD_VALUE, frame.type, frame.seq, enable))
+                return
+            if enable and not self.latch_report:   # whole frames only: the first one starting from now
+                self._next_frame = int(self._now_us() // FRAME_US) + 1
+            self.latch_report = bool(enable)
+            self._send(fr.ACK, fr.pack_ack(frame.type, frame.seq))
+
+    # ------------------------------------------------------------------ latch report
+    def _widths_at(self, t_us: float) -> tuple[int, tuple[int, ...]]:
+        """(seq, widths) of the newest command handled at or before board time `t_us` ((0, all off) if none)."""
+        for t, seq, widths in reversed(self._history):
+            if t <= t_us:
+                return seq, widths
+        return 0, (0,) * fr.N_CHANNELS
+
+    def latch_frame(self, k: int) -> tuple[fr.Latch, float]:
+        """The LATCH of pulse frame `k` (starting at board time k·20 ms) and the board time (µs) its last slot ends."""
+        start = k * FRAME_US
+        offsets, seqs, mask = [], [], 0
+        t, read_at = 0, start - PREP_US
+        for i in range(fr.N_CHANNELS):
+            seq, widths = self._widths_at(read_at)
+            offsets.append(t)
+            seqs.append(seq)
+            if widths[i]:
+                mask |= 1 << i
+            read_at = start + t
+            t += widths[i] or OFF_SLOT_US
+        return fr.Latch(start & 0xFFFFFFFF, tuple(offsets), tuple(seqs), mask), float(start + t)
+
+    def _send_latches(self) -> None:
+        if self.latch_source is not None:
+            for latch in self.latch_source():
+                self._send(fr.LATCH, fr.pack_latch(latch))
+                self.latches_sent += 1
+            return
+        now = self._now_us()
+        behind = int(now // FRAME_US) - self._next_frame
+        if behind > 0.1 * 1e6 / FRAME_US:   # fell far behind (host stalled): skip to the newest frames, counted
+            self.latch_skipped += behind - 1
+            self._next_frame += behind - 1
+        while True:
+            latch, end = self.latch_frame(self._next_frame)
+            if end > now:
+                break
+            self._next_frame += 1
+            if latch.mask:
+                self._send(fr.LATCH, fr.pack_latch(latch))
+                self.latches_sent += 1
+        # keep the newest command handled before the frame still to be reported, and everything after it
+        first = self._next_frame * FRAME_US - PREP_US
+        while len(self._history) > 1 and self._history[1][0] <= first:
+            del self._history[0]
+
+    def _poll_timeout(self) -> float:
+        if not self.latch_report:
+            return 0.01
+        return max(0.0, min(0.01, (self.latch_frame(self._next_frame)[1] - self._now_us()) * 1e-6))
+
+    def _tick(self) -> None:
+        if not self.latch_report:
+            if len(self._history) > 1:
+                del self._history[:-1]
+            return
+        if self._master is not None:
+            self._send_latches()
 
     def _status_payload(self) -> bytes:
         since = (0xFFFF if self.last_command_time is None
