@@ -172,3 +172,26 @@ def test_servo_link_connects_to_firmware_without_latch_report():
         assert link.wait_connected(3.0), link.stats.last_error
         assert link.latch_supported is False and "UNKNOWN_TYPE" in link.stats.last_error
         assert link.set_targets([1500] * 6)
+
+
+def test_uno_emulator_hooks_pass_the_seq_and_forward_a_simulators_frames():
+    commands, pending = [], []
+    sim_frame = fr.Latch(123456, (0, 1500, 3000, 4500, 6000, 7500), (9,) * 6, 0x3F)
+
+    def source():
+        out = list(pending)
+        pending.clear()
+        return out
+
+    with UnoEmulator(on_command=lambda w, seq: commands.append((w, seq)), latch_source=source) as uno, \
+            serial.Serial(uno.port, 500000, timeout=0.05) as s:
+        p = fr.FrameParser()
+        s.write(fr.encode_frame(fr.SET_TARGETS, 9, fr.pack_targets([1500] * 6)))
+        pending.append(sim_frame)
+        got = _exchange(s, p, fr.encode_frame(fr.GET_STATUS, 10), 1) + _frames_for(s, p, 0.05)
+        assert commands == [((1500,) * 6, 9)]
+        assert not [f for f in got if f.type == fr.LATCH] and pending   # report off: the source is not asked
+        got = _exchange(s, p, fr.encode_frame(fr.SET_LATCH_REPORT, 11, fr.pack_latch_report(True)), 1)
+        got += _frames_for(s, p, 0.1)
+        assert [fr.unpack_latch(f.payload) for f in got if f.type == fr.LATCH] == [sim_frame]
+        assert uno.latches_sent == 1
