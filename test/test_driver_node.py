@@ -182,8 +182,9 @@ def test_a_late_burst_of_samples_carries_the_command_in_effect_when_each_was_mea
             UnoEmulator(on_targets=lambda p: received.setdefault(p, mega.board_time_us()),
                         link=tmp_path / "uno") as uno:
         # a board clock that never stops (a real Mega's): extrapolate past the newest sample as far as needed
+        # the command timeline itself: each sample carries the command as sent (no pulse frames)
         procs.start(driver_args(uno.port, mega.port, "max_speed:=0.0", "stream_rate_hz:=200",
-                                "board_clock_max_extrapolation:=0.1"), ros_env)
+                                "board_clock_max_extrapolation:=0.1", "latch_report:=false"), ros_env)
         assert wait_for(lambda: len(probe.currents) >= 20, 30.0), "no motor_currents from the driver"
         probe.command(zeta0)
         assert wait_for(lambda: np.allclose(probe.states[-1][1].position, zeta0), 5.0)
@@ -243,7 +244,7 @@ def test_a_stopped_driver_dates_its_next_command_after_the_samples_that_waited_i
 
     with MegaEmulator(current_source=lambda t: [0.0] * 6, link=tmp_path / "mega") as mega, \
             UnoEmulator(on_targets=on_targets, link=tmp_path / "uno") as uno:
-        driver = procs.start(driver_args(uno.port, mega.port, "stream_rate_hz:=200"), ros_env)
+        driver = procs.start(driver_args(uno.port, mega.port, "stream_rate_hz:=200", "latch_report:=false"), ros_env)
         assert wait_for(lambda: len(probe.currents) >= 20, 30.0), "no motor_currents from the driver"
         probe.command(zeta0)
         assert wait_for(lambda: np.allclose(probe.states[-1][1].position, zeta0), 5.0)
@@ -310,3 +311,52 @@ def test_driver_refuses_a_negative_board_clock_extrapolation(procs, ros_env):
     p = procs.start([DRIVER, "--ros-args", "-p", "board_clock_max_extrapolation:=-1.0"], ros_env)
     _out, err = p.communicate(timeout=60)
     assert p.returncode == 1 and "board_clock_max_extrapolation" in err, err
+
+
+def test_each_servo_carries_the_set_point_its_last_pulse_latched(tmp_path, procs, ros_env, probe):
+    """With the Uno's latch report (default) a sample carries, per servo, the command that servo's last pulse carried:
+    a servo takes a new set-point only from its pulse, once per 20 ms frame, so after a command each servo switches
+    at the end of its first pulse that carried it (the Uno's frames, its clock mapped through the host's onto the
+    Mega's) — 0-20 ms after the Uno got the command, not when it got it."""
+    from hexa.protocol.emulator import FRAME_US
+
+    desc = load_hexa()
+    servos = servo_calibrations_from_config(None, desc)
+    zeta0 = np.full(6, desc.zeta_center)
+    zeta1 = zeta0 + 0.02 * np.arange(1, 7)
+    pulses1 = tuple(s.pulse_from_angle(z) for s, z in zip(servos, zeta1))
+    with MegaEmulator(current_source=lambda t: [0.0] * 6, link=tmp_path / "mega") as mega, \
+            UnoEmulator(link=tmp_path / "uno") as uno:
+        procs.start(driver_args(uno.port, mega.port, "max_speed:=0.0", "stream_rate_hz:=500",
+                                "diagnostics_period:=0.1"), ros_env)
+        assert wait_for(lambda: len(probe.currents) >= 20, 30.0), "no motor_currents from the driver"
+        probe.command(zeta0)
+        assert wait_for(lambda: np.allclose(probe.states[-1][1].position, zeta0), 5.0)
+        time.sleep(0.6)                                    # the clock maps' rates are fitted over ≥ 0.2 s
+        probe.command(zeta1)
+        assert wait_for(lambda: uno.pulses_us == pulses1, 2.0), "the Uno did not get the command"
+        seq1 = uno.targets_seq
+        handled = [t for t, seq, w in uno._history if seq == seq1][0]          # Uno board µs
+        assert wait_for(lambda: len(probe.states) > 0 and np.allclose(probe.states[-1][1].position, zeta1), 5.0)
+        time.sleep(0.2)
+        offset_us = (uno._t0 - mega._t0) * 1e6               # Uno board time + offset = Mega board time
+        by_stamp = {(m.header.stamp.sec, m.header.stamp.nanosec): m.board_time_us for _, m in probe.currents}
+        samples = [(by_stamp[(js.header.stamp.sec, js.header.stamp.nanosec)], np.asarray(js.position))
+                   for _, js in probe.states if (js.header.stamp.sec, js.header.stamp.nanosec) in by_stamp]
+        k0 = int(handled // FRAME_US)
+        margin = 2500                                      # µs: the two clock maps' errors
+        delays = []
+        for i in range(6):
+            k = next(k for k in range(k0, k0 + 4) if uno.latch_frame(k)[0].seqs[i] == seq1)
+            latch = uno.latch_frame(k)[0]
+            switch = latch.frame_start_us + latch.offsets_us[i] + pulses1[i] + offset_us    # pulse end, Mega µs
+            delays.append((switch - offset_us - handled) * 1e-3)
+            before = [p[i] for b, p in samples if switch - 60_000 <= b < switch - margin]
+            after = [p[i] for b, p in samples if switch + margin < b <= switch + 60_000]
+            assert len(before) >= 5 and np.allclose(before, zeta0[i]), (i, before)
+            assert len(after) >= 5 and np.allclose(after, zeta1[i]), (i, after)
+        assert all(0.0 <= d <= 23.0 for d in delays), delays   # ms from the Uno's receipt to each servo's latch
+        t_diag = time.monotonic()
+        diag = kv(wait_for(lambda: probe.diag_status("servo board", since=t_diag), 5.0))
+        assert int(diag["latch_frames"]) > 20 and diag["latch_report"] == "True"
+        assert int(diag["latch_unknown_seq"]) == 0

@@ -27,7 +27,7 @@ from rclpy.qos import QoSProfile, ReliabilityPolicy, HistoryPolicy
 from sensor_msgs.msg import JointState
 
 from hexa.protocol import frames as fr
-from hexa.protocol.board_clock import BoardClockMap, CommandTimeline
+from hexa.protocol.board_clock import BoardClockMap, CommandTimeline, ServoFrameTimeline
 from hexa.protocol.driver_core import (SCALAR_KEYS, CommandRejected, default_driver_config_path,
                                        driver_core_from_config, load_driver_config,
                                        servo_calibrations_from_config)
@@ -79,6 +79,13 @@ class DriverNode(Node):
             raise ValueError(f"parameter board_clock_max_extrapolation must be >= 0 s, got {max_extrapolation}")
         self.board_clock = BoardClockMap(max_extrapolation=max_extrapolation)
         self.timeline = CommandTimeline()
+        # with the Uno's latch report, each servo's set-point is the command its last pulse carried (the 20 ms pulse
+        # frame), its frames mapped from the Uno's clock through the host's onto the Mega's (board_clock)
+        self.latch_report = bool(cfg["latch_report"])
+        self.uno_clock = BoardClockMap(max_extrapolation=0.05)
+        self.frames = ServoFrameTimeline()
+        self._pulses_by_seq: dict[int, list[int]] = {}
+        self.latches_unmapped = 0
         self._board_restarts = 0
         self._last_sample_time = 0.0
         self._rate_mark = (time.monotonic(), 0)
@@ -91,6 +98,7 @@ class DriverNode(Node):
         servos = self.core.servos
         self.uno = ServoLink(str(cfg["uno_port"]), min_us=[s.min_us for s in servos],
                              max_us=[s.max_us for s in servos], watchdog_ms=int(cfg["watchdog_ms"]),
+                             on_latch=self._on_latch if self.latch_report else None,
                              on_state=lambda s: self._on_link_state("uno", s), **common)
         self.mega = CurrentLink(str(cfg["mega_port"]), rate_hz=int(cfg["stream_rate_hz"]),
                                 on_samples=self._on_samples, on_state=lambda s: self._on_link_state("mega", s),
@@ -115,10 +123,14 @@ class DriverNode(Node):
     def _on_link_state(self, board: str, state: str) -> None:
         if not self.context.ok():
             return
-        if board == "mega" and state == CONNECTED:  # the board may have restarted: its clock with it
+        if state == CONNECTED:  # the board may have restarted: its clock with it
             with self._lock:
-                self.board_clock.reset()
-                self.timeline.rebase()
+                if board == "mega":
+                    self.board_clock.reset()
+                    self.timeline.rebase()
+                else:
+                    self.uno_clock.reset()
+                self.frames.reset()
         # separate call sites: rclpy refuses one call site logging at two severities
         if state == CONNECTED:
             self.get_logger().info(f"{board} link CONNECTED")
@@ -159,6 +171,10 @@ class DriverNode(Node):
             # waiting in the Mega's port are not in the clock map yet (_on_samples)
             t_sent = time.monotonic()
             self.timeline.add(self.board_clock.board_time_at(t_sent), self.core.commanded, sent_at=t_sent)
+            seq = self.uno.last_targets_seq
+            if sent and seq is not None:
+                self.frames.add_command(seq, self.core.commanded)
+                self._pulses_by_seq[seq] = pulses
             self._last_sent = now
         if not sent:
             self.tx_failures += 1
@@ -175,9 +191,40 @@ class DriverNode(Node):
                     self.timeline.rebase()
             # a command sent before this read is dated no earlier than its samples prove (board_clock.CommandTimeline)
             self.timeline.confirm(t_read, max(board_times), self.board_clock.rate)
-            commands = [self.timeline.at(b) for b in board_times]
+            commands = [self._setpoints_at(b) for b in board_times]
         for (sample, _gap), command in zip(batch, commands):
             self._publish_sample(sample, command, t_rx)
+
+    def _setpoints_at(self, board_time: float) -> np.ndarray | None:
+        """The set-points the servos acted on at Mega board time `board_time`: from the Uno's pulse frames when it
+        reports them, else the command in effect (sent) then."""
+        z = self.frames.setpoints_at(board_time, self.timeline)
+        return self.timeline.at(board_time) if z is None else z
+
+    def _on_latch(self, latch: fr.Latch, t_rx: float) -> None:
+        """A LATCH from the Uno (its link thread): the frame's pulses onto the Mega's clock, into the frame timeline.
+
+        The Uno sends it right after the frame's last pulse, so that pulse's end (board time) is what the Uno's clock
+        read, at the latest, when the report arrived at host time t_rx: it feeds the Uno's clock map like a Mega
+        sample does the Mega's."""
+        with self._lock:
+            widths = np.array([(self._pulses_by_seq.get(s) or [1500] * 6)[i] for i, s in enumerate(latch.seqs)],
+                              dtype=float) * 1e-6
+            starts = np.asarray(latch.offsets_us, dtype=float) * 1e-6
+            end_us = (latch.frame_start_us + int(latch.offsets_us[5]) + int(round(widths[5] * 1e6))) & 0xFFFFFFFF
+            b_end = self.uno_clock.update(end_us, t_rx)
+            b_now = self.uno_clock.board_time_at(t_rx)
+            if b_now is None:
+                return
+            frame_start = b_end - starts[5] - widths[5]
+            t_frame = t_rx - (b_now - frame_start) / self.uno_clock.rate     # host time of the frame's start
+            mega_start = self.board_clock.board_time_at(t_frame)
+            if mega_start is None:
+                self.latches_unmapped += 1
+                return
+            scale = self.board_clock.rate / self.uno_clock.rate              # Uno seconds → Mega seconds
+            self.frames.add_frame(mega_start, starts * scale, (starts + widths) * scale, np.asarray(latch.seqs),
+                                  int(latch.mask), commands=self.timeline)
 
     def _publish_sample(self, sample: fr.Sample, command: np.ndarray | None, t_rx: float) -> None:
         currents = self.core.currents_from_counts(sample.counts)
@@ -282,6 +329,11 @@ class DriverNode(Node):
                      ("commands_slew_limited", c.slew_limited), ("commands_coalesced", c.coalesced),
                      ("commands_unsent", self.tx_failures), ("targets_restored_after_reconnect", self.uno.restored),
                      ("board_pulses_us", list(uno_status.pulses_us) if uno_status else "?"),
+                     ("latch_report", self.latch_report), ("latch_frames", self.frames.frames),
+                     ("latch_unknown_seq", self.frames.unknown_seq),
+                     ("latch_predicted_wrong", self.frames.mismatches),
+                     ("latch_unmapped", self.latches_unmapped),
+                     ("uno_clock_rate", f"{self.uno_clock.rate:.4f}"),
                      ("board_watchdog_hold", bool(uno_status.flags & fr.FLAG_WATCHDOG_HOLD) if uno_status else "?")]
         mega = self._link_status("current board (Mega)", self.mega, mega_extra)
         if mega.level == OK and age > float(self.cfg["stale_timeout"]):

@@ -151,6 +151,10 @@ class _BoardEmulator:
         """Board clock (us since the emulator was created, wraps at 2^32 like micros())."""
         return int((self._clock() - self._t0) * 1e6) & 0xFFFFFFFF
 
+    def board_time_us_at(self, t: float) -> int:
+        """The board clock (µs, wrapping at 2³²) when the emulator's clock read `t` (s)."""
+        return int(round((t - self._t0) * 1e6)) & 0xFFFFFFFF
+
     def _send(self, msg_type: int, payload: bytes = b"") -> None:
         data = fr.encode_frame(msg_type, self._seq, payload)
         self._seq = (self._seq + 1) & 0xFF

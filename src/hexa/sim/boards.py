@@ -1,7 +1,11 @@
 """The simulator's two virtual Arduino boards on pseudo-terminals, using the project's protocol emulators.
 
 - Uno (servo board): every SET_TARGETS pulse width is turned into an arm angle with the same per-servo calibration
-  the driver uses (hexa_driver/config/driver.yaml `servos`, hexa.protocol.driver_core) and commanded to the servos.
+  the driver uses (hexa_driver/config/driver.yaml `servos`, hexa.protocol.driver_core) and commanded to the servos,
+  tagged with the frame's SEQ. With the simulator's pulse frame (`sim.servo.frame_period` > 0) the Uno's latch
+  report (LATCH, when the host enables it) carries the simulator's own frames (`Simulator.pop_latch_frames`): when
+  each servo's pulse started and which SET_TARGETS it carried — the frames the servos really acted on. (The simulator
+  hands a servo the newest target at its pulse's end, the firmware at its start: at most one pulse width apart.)
 - Mega (current board): each sample at board time t reads the simulated servo torques τ at the sim time of that
   sample and streams I = τ / K_t + I_0 through the ACS712-like sensor and the 10-bit ADC (hexa.protocol.sensor_model),
   with Gaussian ADC noise; I_0 is a per-channel zero offset drawn once from the seed (what the driver's zero-current
@@ -15,6 +19,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from hexa.protocol import frames as fr
 from hexa.protocol.driver_core import load_driver_config, servo_calibrations_from_config
 from hexa.protocol.emulator import MegaEmulator, UnoEmulator
 from hexa.protocol.sensor_model import CurrentSensorModel
@@ -51,7 +56,8 @@ class VirtualBoards:
             Path(link_dir).mkdir(parents=True, exist_ok=True)
             uno_link, mega_link = Path(link_dir) / "uno", Path(link_dir) / "mega"
         clock = self._clock
-        self.uno = UnoEmulator(on_targets=self._on_targets, link=uno_link, clock=clock)
+        self.uno = UnoEmulator(on_command=self._on_command, link=uno_link, clock=clock,
+                               latch_source=self._latches if sim.config.servo.frame_period > 0 else None)
         self.mega = MegaEmulator(current_source=self._currents, units="amps", sensor=self.sensor,
                                  noise_counts=sim.config.current_noise_counts, seed=seed, link=mega_link, clock=clock)
         self._t0 = self._clock()
@@ -63,8 +69,20 @@ class VirtualBoards:
         """Arm angles (rad) commanded by six pulse widths (us)."""
         return np.array([s.angle_from_pulse(p) for s, p in zip(self.servos, pulses_us)])
 
-    def _on_targets(self, pulses_us: tuple[int, ...]) -> None:
-        self.sim.set_servo_targets(self.angles_from_pulses(pulses_us))
+    def _on_command(self, pulses_us: tuple[int, ...], seq: int) -> None:
+        self.sim.set_servo_targets(self.angles_from_pulses(pulses_us), tag=seq)
+
+    def _latches(self) -> list[fr.Latch]:
+        """The simulator's completed pulse frames as LATCH reports on the Uno's board clock."""
+        out = []
+        for f in self.sim.pop_latch_frames():
+            mask = sum(1 << i for i in range(6) if f.tags[i] >= 0)
+            if not mask:
+                continue
+            out.append(fr.Latch(self.uno.board_time_us_at(f.start),
+                                tuple(int(round(o * 1e6)) for o in f.pulse_offsets),
+                                tuple(int(t) & 0xFF if t >= 0 else 0 for t in f.tags), mask))
+        return out
 
     def currents_at(self, t_sim: float) -> np.ndarray:
         """The six true motor currents (A) the Mega measures at sim time `t_sim`: τ/K_t + I_0."""
