@@ -10,7 +10,8 @@ trajectory and the scenario's clock start; the collision happens at lead_in + th
 this trajectory's start pose, as a scenario starts at its own: the trajectory node's first command is its start pose,
 and from home that is a 0.36 rad jump the servos make at their torque limit), max_lag (0.005 wall s: when a camera
 render or a host stall puts the loop further behind the real-time factor, the lost time is dropped instead of caught
-up in a burst — see hexa_bringup.pacing).
+up in a burst — see hexa_bringup.pacing), servo_frame_period (-1 = the description's sim.servo.frame_period; 0.02 =
+the servo board's 20 ms pulse frame, with the virtual Uno's latch report).
 Topics (relative, under the node namespace, e.g. /hexa): cam_{top,side}/color/image_raw (rgb8),
 cam_{top,side}/color/camera_info, cam_{top,side}/aligned_depth_to_color/image_raw (16UC1 mm),
 cam_{top,side}/aligned_depth_to_color/camera_info (sensor-data QoS); sim/wrench_truth (WrenchStamped: force at the
@@ -82,11 +83,13 @@ def main(argv: list[str] | None = None) -> int:
             self.lead_in = float(p("lead_in", 0.0).value)
             self.start_delay = float(p("start_delay", 0.0).value)
             self.contact_model = str(p("contact_model", "scripted").value)
+            frame = float(p("servo_frame_period", -1.0).value)
             trajectory = str(p("trajectory", "").value) or None
             scenario = None if self.scenario in ("", "none") else self.scenario
             self.sim = Simulator(seed=self.seed, scenario=scenario, cameras=self.use_cams,
                                  randomize=self.randomize, lead_in=self.lead_in,
-                                 contact_model=self.contact_model, trajectory=trajectory)
+                                 contact_model=self.contact_model, trajectory=trajectory,
+                                 servo_frame_period=None if frame < 0 else frame)
             self.boards = VirtualBoards(self.sim, link_dir=self.link_dir).start() if self.use_boards else None
             self.clock_pub = self.create_publisher(Clock, "/clock", 10)
             self.cam_pubs = {}

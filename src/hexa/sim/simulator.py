@@ -161,14 +161,20 @@ class Simulator:
             visual) or "physical" (a capsule on a force-driven slide pushes the link through MuJoCo contacts; the
             ground truth is then MuJoCo's contact force and contact point, the force profile only approximately
             the scenario's).
+        servo_frame_period: overrides the description's `sim.servo.frame_period` (s; 0 = set-points at once).
     """
 
     def __init__(self, desc: Any = None, seed: int = 0, scenario: Any = None, cameras: bool = True,
                  pose: np.ndarray | None = None, drive: str | None = None, randomize: bool = False,
                  settle: float = 0.5, trajectory: str | None = None, lead_in: float = 0.0,
-                 contact_model: str = "scripted") -> None:
+                 contact_model: str = "scripted", servo_frame_period: float | None = None) -> None:
         self.desc = _desc_default(desc)
         self.config: SimConfig = sim_config_of(self.desc)
+        if servo_frame_period is not None:
+            if not (0.0 <= float(servo_frame_period) <= 0.1):
+                raise SimulatorError(f"servo_frame_period must be 0..0.1 s, got {servo_frame_period!r}")
+            self.config = dataclasses.replace(
+                self.config, servo=dataclasses.replace(self.config.servo, frame_period=float(servo_frame_period)))
         self.seed = int(seed)
         self._rng = np.random.default_rng(self.seed)
         self.collision: ScriptedCollision | None = None
