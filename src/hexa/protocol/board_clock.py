@@ -17,9 +17,12 @@ the real-time factor in simulation), the board time at host time t is the upper 
 which the least-delayed sample of a burst decides. Each command is stamped with b(t_send) when it is sent —
 provisionally: the samples still waiting in the port at that moment are not in the map yet, and the next read of the
 port raises the stamp to what they prove (`CommandTimeline.confirm`) — and each sample is paired with the latest
-command whose board stamp is not after the sample's board time (`CommandTimeline.at`). The servo's own delay (the
-Uno's serial latency, the 50 Hz pulse frame) is not part of this: it is the estimator's `command_delay`
-(hexa.estimation.ServoModel).
+command whose board stamp is not after the sample's board time (`CommandTimeline.at`).
+
+A hobby servo then takes the command only from its next pulse, once per 20 ms frame of the servo board (Uno). When
+the Uno reports its frames (LATCH, docs/protocol.md) the driver maps them onto the same board clock and gives each
+servo the set-point its last pulse carried (`ServoFrameTimeline`); without the reports that 0–20 ms is unknown. The
+rest of the servo's delay is the estimator's `command_delay` (hexa.estimation.ServoModel).
 """
 from __future__ import annotations
 

@@ -389,6 +389,8 @@ class UnoEmulator(_BoardEmulator):
             for latch in self.latch_source():
                 self._send(fr.LATCH, fr.pack_latch(latch))
                 self.latches_sent += 1
+            if len(self._history) > 1:      # the emulator's own frame model is not used: no history needed
+                del self._history[:-1]
             return
         now = self._now_us()
         behind = int(now // FRAME_US) - self._next_frame
@@ -411,6 +413,8 @@ class UnoEmulator(_BoardEmulator):
     def _poll_timeout(self) -> float:
         if not self.latch_report:
             return 0.01
+        if self.latch_source is not None:   # the source's frames are polled: its clock may not be this thread's
+            return 0.002
         return max(0.0, min(0.01, (self.latch_frame(self._next_frame)[1] - self._now_us()) * 1e-6))
 
     def _tick(self) -> None:
