@@ -20,7 +20,8 @@ CI_DURATION = 16.0
 
 
 def free_motion_run(trajectory: str, out_dir, domain: int, duration: float,
-                    real_time_factor: float | None = None, servo_frame_period: float | None = None) -> dict:
+                    real_time_factor: float | None = None, servo_frame_period: float | None = None,
+                    stream_rate_hz: int | None = None) -> dict:
     """Run the simulated graph with no collision scenario on `trajectory` for `duration` sim seconds; the collision
     events, the residual force (N), moment (N·m) and servo-torque (N·m) peaks the observer published, read from the
     recorded bag, and the samples over a threshold (plate axes or servo torques).
@@ -36,7 +37,8 @@ def free_motion_run(trajectory: str, out_dir, domain: int, duration: float,
     case = f"free_{trajectory}"
     demo_run.CASES.setdefault(case, ("none", trajectory, duration))  # run_case's table, extended in this process
     run = demo_run.run_case(case, out_dir, ros_env(domain), duration=duration, status_every=1e9,
-                            real_time_factor=real_time_factor, loop=True, servo_frame_period=servo_frame_period)
+                            real_time_factor=real_time_factor, loop=True, servo_frame_period=servo_frame_period,
+                            stream_rate_hz=stream_rate_hz)
     store = typestore()
     events, res, cmds = [], [], []
     for topic, msgtype, _t, data in read_bag(run.bag):
@@ -83,7 +85,7 @@ def test_free_motion_on_each_trajectory_raises_no_collision(trajectory, tmp_path
     assert r["rc"] == 0, r                   # the supervisor ended the graph normally (the simulator finished)
 
 
-if __name__ == "__main__":  # the 60 s measurement: python test/test_observer_node_free_motion.py 60 [DOMAIN [FRAME]]
+if __name__ == "__main__":  # the 60 s measurement: python test/test_observer_node_free_motion.py 60 [DOMAIN [FRAME [HZ]]]
     import json
     import tempfile
     from pathlib import Path
@@ -91,6 +93,8 @@ if __name__ == "__main__":  # the 60 s measurement: python test/test_observer_no
     dur = float(sys.argv[1]) if len(sys.argv) > 1 else 60.0
     dom = int(sys.argv[2]) if len(sys.argv) > 2 else 63
     frame = float(sys.argv[3]) if len(sys.argv) > 3 else None     # the servo board's pulse frame (s)
-    for traj in TRAJECTORIES:
-        print(json.dumps(free_motion_run(traj, Path(tempfile.mkdtemp()), dom, dur, servo_frame_period=frame)),
-              flush=True)
+    hz = int(sys.argv[4]) if len(sys.argv) > 4 else None          # the Mega's sample rate
+    trajs = sys.argv[5].split(",") if len(sys.argv) > 5 else TRAJECTORIES
+    for traj in trajs:
+        print(json.dumps(free_motion_run(traj, Path(tempfile.mkdtemp()), dom, dur, servo_frame_period=frame,
+                                         stream_rate_hz=hz)), flush=True)

@@ -91,12 +91,14 @@ LEAD_IN = 1.0
 def run_case(case: str, out_dir: Path, env: dict[str, str], ns: str = "/hexa", seed: int = 0,
              real_time_factor: float = REAL_TIME_FACTOR, record_images: bool = False, duration: float | None = None,
              params: Path = DEFAULT_PARAMS, status_every: float = 5.0, loop: bool = False,
-             contact_model: str = "scripted", servo_frame_period: float | None = None) -> CaseRun:
+             contact_model: str = "scripted", servo_frame_period: float | None = None,
+             stream_rate_hz: int | None = None) -> CaseRun:
     """Bring up the sim graph for `case`, record a bag until the scenario is over, stop everything.
 
     loop: the trajectory node restarts the trajectory at its end (free-motion runs longer than its 10 s);
     contact_model: the simulator's ("scripted" | "physical", hexa.sim.Simulator); servo_frame_period: the simulated
-    servo board's pulse frame (s; None = the description's)."""
+    servo board's pulse frame (s; None = the description's); stream_rate_hz: the Mega's sample rate (None = the
+    driver's configured one)."""
     scenario, trajectory, default_duration = CASES[case]
     sim_s = LEAD_IN + (default_duration if duration is None else duration)
     case_dir = out_dir / case
@@ -113,7 +115,8 @@ def run_case(case: str, out_dir: Path, env: dict[str, str], ns: str = "/hexa", s
                 "-p", f"contact_model:={contact_model}",
                 "-p", f"servo_frame_period:={-1.0 if servo_frame_period is None else float(servo_frame_period)}"],
         "driver": ["-p", f"uno_port:=/tmp/hexa_sim_{os.getpid()}/uno",
-                   "-p", f"mega_port:=/tmp/hexa_sim_{os.getpid()}/mega"],
+                   "-p", f"mega_port:=/tmp/hexa_sim_{os.getpid()}/mega"]
+                  + ([] if stream_rate_hz is None else ["-p", f"stream_rate_hz:={int(stream_rate_hz)}"]),
         "trajectory": ["-p", f"trajectory:={trajectory}", "-p", f"start_time:={LEAD_IN}",
                        "-p", f"loop:={'true' if loop else 'false'}"],
         "singularity": ["-p", "robot:=hexa"],
