@@ -23,7 +23,7 @@ from pathlib import Path
 import numpy as np
 
 
-def run(latch: bool, seconds: float, rtf: float, frame: float, domain: int) -> dict:
+def run(latch: bool, seconds: float, rtf: float, frame: float, domain: int, cameras: bool = False) -> dict:
     import rclpy
     from hexa_msgs.msg import MotorCurrents
     from rclpy.qos import QoSProfile, ReliabilityPolicy
@@ -38,7 +38,7 @@ def run(latch: bool, seconds: float, rtf: float, frame: float, domain: int) -> d
     env = ros_env(domain)
     os.environ.update(env)
     t_traj, poses, _, _ = sample("circle", 100.0)
-    sim = Simulator(cameras=False, servo_frame_period=frame, pose=poses[0])
+    sim = Simulator(cameras=cameras, servo_frame_period=frame, pose=poses[0])
     desc = sim.desc
     zetas = np.array([kin.inverse_kinematics(desc, p) for p in poses])
     link = Path(tempfile.mkdtemp())
@@ -77,12 +77,17 @@ def run(latch: bool, seconds: float, rtf: float, frame: float, domain: int) -> d
             time.sleep(0.01 / rtf)
         t0 = sim.time
         k_last = -1
+        next_render = t0
         wall0 = time.monotonic()
         while sim.time - t0 < seconds:
             k = int((sim.time - t0) * 100.0) % len(zetas)
             if k != k_last:
                 command(zetas[k])
                 k_last = k
+            if cameras and sim.time >= next_render:    # both cameras at 30 Hz: the sim clock stops meanwhile
+                for cam in ("cam_top", "cam_side"):
+                    sim.render(cam)
+                next_render += 1.0 / 30.0
             sim.step(1)
             sp = sim._setpoints.copy() if sim._latch_at is not None else sim._targets.copy()
             if not log or np.any(sp != log[-1][1]):
@@ -118,7 +123,7 @@ def run(latch: bool, seconds: float, rtf: float, frame: float, domain: int) -> d
         wrong_samples += int(err.any())
         wrong_servos += int(err.sum())
         n += 1
-    return {"latch_report": latch, "frame_s": frame, "samples": n,
+    return {"latch_report": latch, "frame_s": frame, "cameras": cameras, "samples": n,
             "samples_with_a_servo_off": round(wrong_samples / max(n, 1), 3),
             "servo_samples_off": round(wrong_servos / max(6 * n, 1), 3)}
 
@@ -130,16 +135,18 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--frame", type=float, default=0.02)
     ap.add_argument("--domain", type=int, default=77)
     ap.add_argument("--mode", choices=["latch", "commands", "both"], default="both")
+    ap.add_argument("--cameras", action="store_true", help="render both cameras at 30 Hz (the sim clock stops)")
     args = ap.parse_args(argv)
     modes = {"latch": [True], "commands": [False], "both": [True, False]}[args.mode]
     for latch in modes:   # one process per mode: rclpy is initialised once per process
         if len(modes) > 1:
             out = subprocess.run([sys.executable, __file__, "--mode", "latch" if latch else "commands",
                                   "--seconds", str(args.seconds), "--rtf", str(args.rtf), "--frame", str(args.frame),
-                                  "--domain", str(args.domain)], capture_output=True, text=True)
+                                  "--domain", str(args.domain)] + (["--cameras"] if args.cameras else []),
+                                 capture_output=True, text=True)
             sys.stdout.write(out.stdout or out.stderr[-3000:])
         else:
-            print(json.dumps(run(latch, args.seconds, args.rtf, args.frame, args.domain)), flush=True)
+            print(json.dumps(run(latch, args.seconds, args.rtf, args.frame, args.domain, args.cameras)), flush=True)
     return 0
 
 

@@ -173,7 +173,7 @@ def test_map_before_samples_and_bad_windows():
 def _frame_world(phase: float, t_end: float, send_period: float = 0.01, seed: int = 0):
     """Commands sent every `send_period` s (SEQ k, angles k·0.01 + servo index), pulse frames every 20 ms from
     `phase`, servo i's pulse 1.2-1.8 ms long after servo i-1's; a pulse carries the newest command sent before it
-    started. Returns the command times/angles, the frames (start, latch offsets, seqs) and the true set-point of
+    started (read at the start of the previous channel's slot). Returns the command times/angles, the frames (start, latch offsets, seqs) and the true set-point of
     each servo at any time."""
     rng = np.random.default_rng(seed)
     sends = np.arange(0.0, t_end, send_period) + rng.uniform(0.0, 0.002, int(np.ceil(t_end / send_period)))
@@ -184,7 +184,8 @@ def _frame_world(phase: float, t_end: float, send_period: float = 0.01, seed: in
     while start < t_end:
         widths = base + rng.uniform(-2e-5, 2e-5, 6)         # the servos move slowly: widths change by µs per frame
         pulse_start = start + np.concatenate([[0.0], np.cumsum(widths)[:-1]])
-        seqs = np.array([max(int(np.searchsorted(sends, ps, side="right")) - 1, 0) for ps in pulse_start])
+        read = np.concatenate([[start - 50e-6], pulse_start[:-1]])   # the firmware reads at the previous slot's start
+        seqs = np.array([max(int(np.searchsorted(sends, r, side="right")) - 1, 0) for r in read])
         frames.append((start, pulse_start - start, pulse_start - start + widths, seqs))
         start += 0.02
 

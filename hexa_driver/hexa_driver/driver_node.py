@@ -12,6 +12,7 @@ import signal
 import sys
 import threading
 import time
+from collections import deque
 
 import numpy as np
 import rclpy
@@ -80,11 +81,12 @@ class DriverNode(Node):
         self.board_clock = BoardClockMap(max_extrapolation=max_extrapolation)
         self.timeline = CommandTimeline()
         # with the Uno's latch report, each servo's set-point is the command its last pulse carried (the 20 ms pulse
-        # frame), its frames mapped from the Uno's clock through the host's onto the Mega's (board_clock)
+        # frame), its frames moved from the Uno's clock onto the Mega's (_on_latch)
         self.latch_report = bool(cfg["latch_report"])
-        self.uno_clock = BoardClockMap(max_extrapolation=0.05)
+        self.uno_clock = BoardClockMap(max_extrapolation=max_extrapolation)   # its clock stops as the Mega's does
         self.frames = ServoFrameTimeline()
         self._pulses_by_seq: dict[int, list[int]] = {}
+        self._uno_offsets: deque[float] = deque(maxlen=50)   # Uno board time − Mega board time, per LATCH (s)
         self.latches_unmapped = 0
         self._board_restarts = 0
         self._last_sample_time = 0.0
@@ -130,6 +132,7 @@ class DriverNode(Node):
                     self.timeline.rebase()
                 else:
                     self.uno_clock.reset()
+                self._uno_offsets.clear()
                 self.frames.reset()
         # separate call sites: rclpy refuses one call site logging at two severities
         if state == CONNECTED:
@@ -204,27 +207,31 @@ class DriverNode(Node):
     def _on_latch(self, latch: fr.Latch, t_rx: float) -> None:
         """A LATCH from the Uno (its link thread): the frame's pulses onto the Mega's clock, into the frame timeline.
 
-        The Uno sends it right after the frame's last pulse, so that pulse's end (board time) is what the Uno's clock
-        read, at the latest, when the report arrived at host time t_rx: it feeds the Uno's clock map like a Mega
-        sample does the Mega's."""
+        The Uno sends it right after the frame's last pulse, so that pulse's end is what the Uno's clock read, at the
+        latest, when the report arrived at host time t_rx, as the Mega's clock map says what the Mega's read then.
+        Their difference is the offset between the two board clocks plus the difference of the two delays; its
+        median over the last 50 frames (1 s) is the offset (crystals drift by ppm: constant over a second; in
+        simulation both clocks are sim time and stop together while a camera frame renders, which a single
+        mapping through the host's clock would read as a jump)."""
         with self._lock:
             widths = np.array([(self._pulses_by_seq.get(s) or [1500] * 6)[i] for i, s in enumerate(latch.seqs)],
                               dtype=float) * 1e-6
             starts = np.asarray(latch.offsets_us, dtype=float) * 1e-6
             end_us = (latch.frame_start_us + int(latch.offsets_us[5]) + int(round(widths[5] * 1e6))) & 0xFFFFFFFF
-            b_end = self.uno_clock.update(end_us, t_rx)
-            b_now = self.uno_clock.board_time_at(t_rx)
-            if b_now is None:
-                return
-            frame_start = b_end - starts[5] - widths[5]
-            t_frame = t_rx - (b_now - frame_start) / self.uno_clock.rate     # host time of the frame's start
-            mega_start = self.board_clock.board_time_at(t_frame)
-            if mega_start is None:
+            restarts = self.uno_clock.restarts
+            b_end = self.uno_clock.update(end_us, t_rx)     # unwrapped (µs counter wraps, board restarts)
+            if self.uno_clock.restarts != restarts:
+                self._uno_offsets.clear()
+                self.frames.reset()
+            mega_now = self.board_clock.board_time_at(t_rx)
+            if mega_now is None:
                 self.latches_unmapped += 1
                 return
-            scale = self.board_clock.rate / self.uno_clock.rate              # Uno seconds → Mega seconds
-            self.frames.add_frame(mega_start, starts * scale, (starts + widths) * scale, np.asarray(latch.seqs),
-                                  int(latch.mask), commands=self.timeline)
+            self._uno_offsets.append(b_end - mega_now)
+            offset = float(np.median(self._uno_offsets))
+            frame_start = b_end - starts[5] - widths[5] - offset     # on the Mega's clock
+            self.frames.add_frame(frame_start, starts, starts + widths, np.asarray(latch.seqs), int(latch.mask),
+                                  commands=self.timeline)
 
     def _publish_sample(self, sample: fr.Sample, command: np.ndarray | None, t_rx: float) -> None:
         currents = self.core.currents_from_counts(sample.counts)

@@ -222,6 +222,16 @@ class CommandTimeline:
         return found
 
 
+#: the servo board picks up channel 1's width this long (s) before the frame starts (firmware PREP_TICKS)
+FRAME_PREP = 50e-6
+
+
+def read_points(pulse_offsets: np.ndarray) -> np.ndarray:
+    """When (s after the frame's start) the servo board reads each channel's width from its newest command: channel 1
+    `FRAME_PREP` before the frame, channel i at the start of channel i−1's slot (uno_servo.ino's compare ISR)."""
+    return np.concatenate([[-FRAME_PREP], np.asarray(pulse_offsets, dtype=float)[:-1]])
+
+
 class ServoFrameTimeline:
     """The set-point each servo acts on, from the servo board's pulse frames (LATCH reports).
 
@@ -231,7 +241,8 @@ class ServoFrameTimeline:
     LATCH) — after the frame's last pulse, so the frames of the last ≈ 20 ms are not reported yet when their current
     samples arrive. Those are predicted: the frames are periodic, each pulse starts where it started in the newest
     reported frame (its width changes little from one frame to the next), and it carries the newest command the board
-    had when it started, which `commands` (the CommandTimeline of send times) approximates. A reported frame
+    had at its read point (`read_points`: the start of the previous channel's slot), which `commands` (the
+    CommandTimeline of send times) approximates. A reported frame
     replaces the prediction (`mismatches` counts the servos whose reported command differed from the predicted one).
 
     All times here are on one clock — the current board's (the driver maps the servo board's clock through the host's
@@ -248,7 +259,7 @@ class ServoFrameTimeline:
         self.period = float(period)
         self.horizon = float(horizon)
         self._by_seq: dict[int, np.ndarray] = {}            # SEQ -> the angles that SET_TARGETS carried
-        # (start, latch offsets, angles | nan, pulse start offsets)
+        # (start, latch offsets, angles | nan, read points)
         self._frames: deque[tuple[float, np.ndarray, np.ndarray, np.ndarray]] = deque()
         self.frames = 0
         self.unknown_seq = 0
@@ -268,7 +279,7 @@ class ServoFrameTimeline:
         offsets from the start (s), the SEQ each pulse carried and the bit mask of servos pulsed (others keep their
         set-point). With `commands`, counts the servos whose reported command differs from the one predicted."""
         offsets = np.asarray(latch_offsets, dtype=float).reshape(6)
-        starts = np.asarray(pulse_offsets, dtype=float).reshape(6)
+        starts = read_points(np.asarray(pulse_offsets, dtype=float).reshape(6))
         angles = np.full(6, np.nan)
         for i in range(6):
             if not (int(mask) >> i) & 1:
@@ -279,7 +290,7 @@ class ServoFrameTimeline:
                 continue
             angles[i] = zeta[i]
             if commands is not None:
-                predicted = commands.at(start + starts[i])
+                predicted = commands.at(start + starts[i])    # what the board had at the pulse's read point
                 if predicted is not None and abs(predicted[i] - zeta[i]) > 1e-9:
                     self.mismatches += 1
         if self._frames and start <= self._frames[-1][0] + 0.5 * self.period:

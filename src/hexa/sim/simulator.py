@@ -264,6 +264,7 @@ class Simulator:
         self._latch_at: np.ndarray | None = None   # sim time of each servo's next pulse end; None: frames not running
         self._target_tag = -1                 # tag of the newest targets (the servo board's SET_TARGETS seq)
         self._setpoint_tags = np.full(6, -1)  # tag of the targets each servo last latched
+        self._target_hist: deque[tuple[float, np.ndarray, int]] = deque(maxlen=64)   # (sim time set, targets, tag)
         self._latch_frames: deque[LatchFrame] = deque(maxlen=500)   # frames completed, for the virtual Uno's report
         self.data.ctrl[:6] = zeta0
         self._manual: _Contact | None = None
@@ -328,6 +329,7 @@ class Simulator:
         with self._lock:
             self._targets = z.copy()
             self._target_tag = int(tag)
+            self._target_hist.append((float(self.data.time), self._targets, self._target_tag))
             self.drive = "external"
 
     def pop_latch_frames(self) -> list[LatchFrame]:
@@ -362,15 +364,32 @@ class Simulator:
             self._latch_at = t - self._frame_phase + self._pulse_slot * np.arange(1, 7)
         due = self._latch_at <= t
         if due.any():
-            self._setpoints[due] = self._targets[due]
-            self._setpoint_tags[due] = self._target_tag
             frames = np.floor((t - self._latch_at[due]) / self._frame_period) + 1.0
-            if due[5]:   # the frame's last pulse: the frame is complete
-                start = float(self._latch_at[5] + (frames[-1] - 1.0) * self._frame_period - 6 * self._pulse_slot)
-                self._latch_frames.append(LatchFrame(start, self._pulse_slot * np.arange(6),
-                                                     self._setpoint_tags.copy()))
+            for i, n in zip(np.flatnonzero(due), frames):
+                end = float(self._latch_at[i] + (n - 1.0) * self._frame_period)   # the pulse's end (latch)
+                start = end - (i + 1) * self._pulse_slot                           # the frame's start
+                # the board read this channel's width at the start of the previous channel's slot (channel 1: just
+                # before the frame), as the firmware's compare ISR does
+                read = start + (i - 1) * self._pulse_slot if i > 0 else start - 50e-6
+                found = self._target_at(read)
+                if found is not None:        # else no target yet then: the servo keeps its set-point
+                    self._setpoints[i] = found[0][i]
+                    self._setpoint_tags[i] = found[1]
+                if i == 5:   # the frame's last pulse: the frame is complete
+                    self._latch_frames.append(LatchFrame(start, self._pulse_slot * np.arange(6),
+                                                         self._setpoint_tags.copy()))
             self._latch_at[due] += frames * self._frame_period
         return self._setpoints
+
+    def _target_at(self, t: float) -> tuple[np.ndarray, int] | None:
+        """The newest targets (and tag) set at or before sim time t; None when none was (or it is no longer kept:
+        then the oldest kept)."""
+        for t_set, target, tag in reversed(self._target_hist):
+            if t_set <= t:
+                return target, tag
+        if len(self._target_hist) == self._target_hist.maxlen:
+            return self._target_hist[0][1], self._target_hist[0][2]
+        return None
 
     def _step_once(self, use_schedule: bool, advance: bool = True) -> None:
         m, d = self.model, self.data
