@@ -102,3 +102,50 @@ def test_uno_targets_drive_the_simulated_servos_through_the_driver_calibration(r
     np.testing.assert_allclose(commanded, goal, atol=1.0 / 636.0)   # one microsecond of pulse resolution
     sim.step(500)
     np.testing.assert_allclose(sim.state().zeta, commanded, atol=0.02)
+
+
+def test_uno_reports_the_simulators_pulse_frames_and_none_without_them(tmp_path):
+    """With the pulse frame simulated, the virtual Uno's LATCH reports are the simulator's frames: 20 ms apart on the
+    board clock, each servo's SEQ the SET_TARGETS whose target the simulated servo took. Without the frame the Uno is
+    firmware without the report: SET_LATCH_REPORT is answered UNKNOWN_TYPE."""
+    desc = load_hexa()
+    for frame in (0.02, 0.0):
+        sim = Simulator(desc, cameras=False, seed=3, servo_frame_period=frame)
+        zeta0 = sim.state().zeta
+        with VirtualBoards(sim, link_dir=tmp_path / str(frame)) as boards:
+            fd = _open(boards.uno.port)
+            parser = fr.FrameParser()
+            try:
+                os.write(fd, fr.encode_frame(fr.SET_LATCH_REPORT, 1, fr.pack_latch_report(True)))
+                reply = [f for f in _read_frames(fd, parser, 0.3) if f.type in (fr.ACK, fr.ERROR)]
+                if frame == 0.0:
+                    assert reply and reply[0].type == fr.ERROR
+                    assert fr.unpack_error(reply[0].payload).code == fr.ERR_UNKNOWN_TYPE
+                    continue
+                assert reply and reply[0].type == fr.ACK
+                latches, taken = [], []
+                for k in range(40):                      # a command every 5 ms of sim time, SEQ 10..49
+                    z = zeta0 + 0.001 * k
+                    pulses = [s.pulse_from_angle(v) for s, v in zip(boards.servos, z)]
+                    os.write(fd, fr.encode_frame(fr.SET_TARGETS, 10 + k, fr.pack_targets(pulses)))
+                    deadline = time.monotonic() + 1.0
+                    while boards.uno.commands < k + 1 and time.monotonic() < deadline:
+                        time.sleep(0.001)
+                    for _ in range(5):
+                        sim.step(1)
+                        taken.append((sim.time, sim._setpoint_tags.copy()))
+                    latches += [fr.unpack_latch(f.payload) for f in _read_frames(fd, parser, 0.005)
+                                if f.type == fr.LATCH]
+                latches += [fr.unpack_latch(f.payload) for f in _read_frames(fd, parser, 0.2) if f.type == fr.LATCH]
+            finally:
+                os.close(fd)
+        assert len(latches) >= 8
+        starts = np.array([la.frame_start_us for la in latches], dtype=float)
+        np.testing.assert_allclose(np.diff(starts), 20_000, atol=2)
+        t_tag = np.array([t for t, _ in taken])
+        for la in latches:
+            assert la.mask == 0x3F and la.offsets_us == (0, 1500, 3000, 4500, 6000, 7500)
+            # the tags the simulated servos held right after the frame's last pulse
+            t_end = boards.uno.clock_zero + (la.frame_start_us + 7500 + 1500) * 1e-6
+            held = taken[int(np.searchsorted(t_tag, t_end + 0.0011))][1]   # a step (1 ms) after it
+            assert tuple(int(v) & 0xFF for v in held) == la.seqs, (la, held)

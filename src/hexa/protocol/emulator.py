@@ -151,6 +151,11 @@ class _BoardEmulator:
         """Board clock (us since the emulator was created, wraps at 2^32 like micros())."""
         return int((self._clock() - self._t0) * 1e6) & 0xFFFFFFFF
 
+    @property
+    def clock_zero(self) -> float:
+        """The emulator's clock reading at which its board clock read 0 (s)."""
+        return self._t0
+
     def board_time_us_at(self, t: float) -> int:
         """The board clock (µs, wrapping at 2³²) when the emulator's clock read `t` (s)."""
         return int(round((t - self._t0) * 1e6)) & 0xFFFFFFFF
@@ -270,6 +275,8 @@ class UnoEmulator(_BoardEmulator):
             since the last call. Mapping from hexa.sim's `Simulator.pop_latch_frames()` (LatchFrame): frame_start_us
             = board time of `start` in µs, offsets_us = `pulse_offsets` in µs, seqs = `tags` & 0xFF (the seq passed
             via `on_command`), mask = 0x3F (servos without a tag yet carry tag -1: leave their bit clear).
+        latch_capable: False = firmware without the latch report (SET_LATCH_REPORT answered UNKNOWN_TYPE), e.g.
+            for a simulator whose servos take set-points at once: there is no frame to report.
         link: optional stable symlink path for `.port`.
         tx_filter: optional function applied to every chunk the board sends (fault injection in tests).
     """
@@ -280,11 +287,12 @@ class UnoEmulator(_BoardEmulator):
                  link: str | os.PathLike | None = None, tx_filter: Callable[[bytes], bytes] | None = None,
                  clock: Callable[[], float] = time.monotonic,
                  on_command: Callable[[tuple[int, ...], int], None] | None = None,
-                 latch_source: Callable[[], Sequence[fr.Latch]] | None = None) -> None:
+                 latch_source: Callable[[], Sequence[fr.Latch]] | None = None, latch_capable: bool = True) -> None:
         super().__init__(link=link, tx_filter=tx_filter, clock=clock)
         self.on_targets = on_targets
         self.on_command = on_command
         self.latch_source = latch_source
+        self.latch_capable = bool(latch_capable)
         self.latches_sent = 0
         self.latch_skipped = 0
         self._reset_board()
@@ -310,8 +318,8 @@ class UnoEmulator(_BoardEmulator):
         return self.pulses_us
 
     def _accepts(self, msg_type: int) -> bool:
-        return super()._accepts(msg_type) or msg_type in (fr.SET_TARGETS, fr.SET_LIMITS, fr.SET_WATCHDOG,
-                                                          fr.SET_LATCH_REPORT)
+        return super()._accepts(msg_type) or msg_type in (fr.SET_TARGETS, fr.SET_LIMITS, fr.SET_WATCHDOG) or (
+            msg_type == fr.SET_LATCH_REPORT and self.latch_capable)
 
     def _now_us(self) -> float:
         return (self._clock() - self._t0) * 1e6

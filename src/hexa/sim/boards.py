@@ -5,7 +5,8 @@
   tagged with the frame's SEQ. With the simulator's pulse frame (`sim.servo.frame_period` > 0) the Uno's latch
   report (LATCH, when the host enables it) carries the simulator's own frames (`Simulator.pop_latch_frames`): when
   each servo's pulse started and which SET_TARGETS it carried — the frames the servos really acted on. (The simulator
-  hands a servo the newest target at its pulse's end, the firmware at its start: at most one pulse width apart.)
+  reads a servo's target at the start of the previous servo's slot, as the firmware does.) Without the pulse frame the
+  virtual Uno is firmware without the report (UNKNOWN_TYPE): the driver then dates set-points by the commands.
 - Mega (current board): each sample at board time t reads the simulated servo torques τ at the sim time of that
   sample and streams I = τ / K_t + I_0 through the ACS712-like sensor and the 10-bit ADC (hexa.protocol.sensor_model),
   with Gaussian ADC noise; I_0 is a per-channel zero offset drawn once from the seed (what the driver's zero-current
@@ -56,8 +57,9 @@ class VirtualBoards:
             Path(link_dir).mkdir(parents=True, exist_ok=True)
             uno_link, mega_link = Path(link_dir) / "uno", Path(link_dir) / "mega"
         clock = self._clock
+        framed = sim.config.servo.frame_period > 0   # without the pulse frame there is nothing to report
         self.uno = UnoEmulator(on_command=self._on_command, link=uno_link, clock=clock,
-                               latch_source=self._latches if sim.config.servo.frame_period > 0 else None)
+                               latch_source=self._latches if framed else None, latch_capable=framed)
         self.mega = MegaEmulator(current_source=self._currents, units="amps", sensor=self.sensor,
                                  noise_counts=sim.config.current_noise_counts, seed=seed, link=mega_link, clock=clock)
         self._t0 = self._clock()
@@ -77,7 +79,7 @@ class VirtualBoards:
         out = []
         for f in self.sim.pop_latch_frames():
             mask = sum(1 << i for i in range(6) if f.tags[i] >= 0)
-            if not mask:
+            if not mask or f.start < self.uno.clock_zero:   # no command yet, or before the board's clock began
                 continue
             out.append(fr.Latch(self.uno.board_time_us_at(f.start),
                                 tuple(int(round(o * 1e6)) for o in f.pulse_offsets),
