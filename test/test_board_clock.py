@@ -172,9 +172,9 @@ def test_map_before_samples_and_bad_windows():
 
 def _frame_world(phase: float, t_end: float, send_period: float = 0.01, seed: int = 0):
     """Commands sent every `send_period` s (SEQ k, angles k·0.01 + servo index), pulse frames every 20 ms from
-    `phase`, servo i's pulse 1.2-1.8 ms long after servo i-1's; a pulse carries the newest command sent before it
-    started (read at the start of the previous channel's slot). Returns the command times/angles, the frames (start, latch offsets, seqs) and the true set-point of
-    each servo at any time."""
+    `phase`, servo i's pulse 1-2 ms long after servo i-1's; a pulse carries the newest command sent before the board
+    read its width (at the start of the previous channel's slot). Returns the command times/angles, the frames
+    (start, pulse starts, latch offsets, seqs) and the true set-point of each servo at any time."""
     rng = np.random.default_rng(seed)
     sends = np.arange(0.0, t_end, send_period) + rng.uniform(0.0, 0.002, int(np.ceil(t_end / send_period)))
     angles = [np.arange(6) + 0.01 * k for k in range(len(sends))]

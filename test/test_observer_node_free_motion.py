@@ -85,7 +85,7 @@ def test_free_motion_on_each_trajectory_raises_no_collision(trajectory, tmp_path
     assert r["rc"] == 0, r                   # the supervisor ended the graph normally (the simulator finished)
 
 
-if __name__ == "__main__":  # the 60 s measurement: python test/test_observer_node_free_motion.py 60 [DOMAIN [FRAME [HZ]]]
+if __name__ == "__main__":  # 60 s: python test/test_observer_node_free_motion.py 60 [DOMAIN [FRAME [HZ [TRAJS]]]]
     import json
     import tempfile
     from pathlib import Path
