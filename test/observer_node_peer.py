@@ -24,7 +24,7 @@ def simulate(seed: int = 0) -> dict:
     from hexa.kinematics import hexa6rus as kin
     from hexa.sim import Simulator
 
-    sim = Simulator(cameras=False, trajectory="circle", drive="external")
+    sim = Simulator(cameras=False, trajectory="circle", drive="external", servo_frame_period=0.0)  # set-points = u
     desc = sim.desc
     rng = np.random.default_rng(seed)
     fn = trajectories.TRAJECTORIES["circle"]

@@ -16,7 +16,7 @@ def _run(duration: float, offset: float = 0.0, force: float = 0.0, seed: int = 0
     from hexa.kinematics import hexa6rus as kin
     from hexa.sim import Simulator
 
-    sim = Simulator(cameras=False, trajectory="circle", drive="external")
+    sim = Simulator(cameras=False, trajectory="circle", drive="external", servo_frame_period=0.0)  # set-points = u
     desc = sim.desc
     est = ZetaEstimator(desc, config=config)
     rng = np.random.default_rng(seed)
