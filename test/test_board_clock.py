@@ -170,11 +170,12 @@ def test_map_before_samples_and_bad_windows():
         BoardClockMap(envelope_window=0.0)
 
 
-def _frame_world(phase: float, t_end: float, send_period: float = 0.01, seed: int = 0):
+def _frame_world(phase: float, t_end: float, send_period: float = 0.01, seed: int = 0, delay: float = 0.0):
     """Commands sent every `send_period` s (SEQ k, angles k·0.01 + servo index), pulse frames every 20 ms from
     `phase`, servo i's pulse 1-2 ms long after servo i-1's; a pulse carries the newest command sent before the board
     read its width (at the start of the previous channel's slot). Returns the command times/angles, the frames
-    (start, pulse starts, latch offsets, seqs) and the true set-point of each servo at any time."""
+    (start, pulse starts, latch offsets, seqs) and the true set-point of each servo at any time. A command reaches the
+    board `delay` s after it was sent."""
     rng = np.random.default_rng(seed)
     sends = np.arange(0.0, t_end, send_period) + rng.uniform(0.0, 0.002, int(np.ceil(t_end / send_period)))
     angles = [np.arange(6) + 0.01 * k for k in range(len(sends))]
@@ -185,7 +186,7 @@ def _frame_world(phase: float, t_end: float, send_period: float = 0.01, seed: in
         widths = base + rng.uniform(-2e-5, 2e-5, 6)         # the servos move slowly: widths change by µs per frame
         pulse_start = start + np.concatenate([[0.0], np.cumsum(widths)[:-1]])
         read = np.concatenate([[start - 50e-6], pulse_start[:-1]])   # the firmware reads at the previous slot's start
-        seqs = np.array([max(int(np.searchsorted(sends, r, side="right")) - 1, 0) for r in read])
+        seqs = np.array([max(int(np.searchsorted(sends + delay, r, side="right")) - 1, 0) for r in read])
         frames.append((start, pulse_start - start, pulse_start - start + widths, seqs))
         start += 0.02
 
@@ -200,18 +201,19 @@ def _frame_world(phase: float, t_end: float, send_period: float = 0.01, seed: in
     return sends, angles, frames, truth
 
 
-def test_servo_frames_give_each_servo_the_command_its_last_pulse_carried():
+@pytest.mark.parametrize("delay", [0.0, 0.003])
+def test_servo_frames_give_each_servo_the_command_its_last_pulse_carried(delay):
     """Reported frames (each 12 ms after its start, after its last pulse) give the exact set-points; the 20 ms not
-    reported yet are predicted from the send times. With set-points taken from the commands alone (the old pairing)
-    a servo is off by up to two commands for ≈ half of the time."""
+    reported yet are predicted from the send times, shifted by the delivery delay the reports reveal. With set-points
+    taken from the commands alone (the old pairing) a servo is off by up to two commands for ≈ half of the time."""
     from hexa.protocol.board_clock import ServoFrameTimeline
 
-    sends, angles, frames, truth = _frame_world(phase=0.0073, t_end=1.0)
+    sends, angles, frames, truth = _frame_world(phase=0.0073, t_end=1.0, delay=delay)
     cmd = CommandTimeline()
     tl = ServoFrameTimeline()
     for k, (t, z) in enumerate(zip(sends, angles)):
         cmd.add(t, z)
-        tl.add_command(k & 0xFF, z)
+        tl.add_command(k & 0xFF, z, sent_at=t)
     errs_frames, errs_cmd, n = 0, 0, 0
     reported = 0
     for t in np.arange(0.1, 0.95, 0.0005):
@@ -226,9 +228,11 @@ def test_servo_frames_give_each_servo_the_command_its_last_pulse_carried():
         n += 1
     assert tl.frames == reported and tl.unknown_seq == 0
     # predictions miss only when a command arrived within the change of a pulse's start since the last report
-    assert errs_frames <= 0.04 * n, (errs_frames, n)   # measured 2 %: one command step, one frame
+    assert errs_frames <= 0.06 * n, (errs_frames, n)   # measured 2 % (no delay), 5 %: one command step, one frame
     assert errs_cmd >= 0.3 * n, (errs_cmd, n)
-    assert tl.mismatches == 0
+    assert tl.mismatches <= 0.06 * 6 * reported, tl.mismatches   # mostly before the delay is learned (10 frames)
+    # the delay lies between the bounds the reports give: within the commands' 0-2 ms send jitter of the truth
+    assert delay - 0.001 <= tl.delivery_delay <= delay + 0.0025, tl.delivery_delay
 
 
 def test_servo_frames_unknown_seq_repeats_and_fallback():

@@ -173,10 +173,10 @@ class DriverNode(Node):
             # stop's samples carried it (a rare failure of test_driver_node's stall test). Provisional: samples still
             # waiting in the Mega's port are not in the clock map yet (_on_samples)
             t_sent = time.monotonic()
-            self.timeline.add(self.board_clock.board_time_at(t_sent), self.core.commanded, sent_at=t_sent)
+            b_sent = self.timeline.add(self.board_clock.board_time_at(t_sent), self.core.commanded, sent_at=t_sent)
             seq = self.uno.last_targets_seq
             if sent and seq is not None:
-                self.frames.add_command(seq, self.core.commanded)
+                self.frames.add_command(seq, self.core.commanded, b_sent)
                 self._pulses_by_seq[seq] = pulses
             self._last_sent = now
         if not sent:
@@ -339,6 +339,7 @@ class DriverNode(Node):
                      ("latch_report", self.latch_report), ("latch_frames", self.frames.frames),
                      ("latch_unknown_seq", self.frames.unknown_seq),
                      ("latch_predicted_wrong", self.frames.mismatches),
+                     ("latch_delivery_delay_ms", f"{1e3 * self.frames.delivery_delay:.2f}"),
                      ("latch_unmapped", self.latches_unmapped),
                      ("uno_clock_rate", f"{self.uno_clock.rate:.4f}"),
                      ("board_watchdog_hold", bool(uno_status.flags & fr.FLAG_WATCHDOG_HOLD) if uno_status else "?")]

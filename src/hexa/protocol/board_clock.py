@@ -259,6 +259,13 @@ class ServoFrameTimeline:
         self.period = float(period)
         self.horizon = float(horizon)
         self._by_seq: dict[int, np.ndarray] = {}            # SEQ -> the angles that SET_TARGETS carried
+        self._sent_at: dict[int, float] = {}                # SEQ -> its send time on this clock
+        self._seq_order: deque[int] = deque(maxlen=256)     # SEQs in send order
+        # bounds on the delay from a command's send time to the board having it, from the reported frames: the SEQ
+        # a pulse carried was there at its read point (upper bound), the next one was not (lower bound)
+        self._delay_lo: deque[float] = deque(maxlen=200)
+        self._delay_hi: deque[float] = deque(maxlen=200)
+        self.delivery_delay = 0.0
         # (start, latch offsets, angles | nan, read points)
         self._frames: deque[tuple[float, np.ndarray, np.ndarray, np.ndarray]] = deque()
         self.frames = 0
@@ -269,9 +276,16 @@ class ServoFrameTimeline:
         """Forget the frames (the servo board or a clock restarted); the commands by SEQ stay valid."""
         self._frames.clear()
 
-    def add_command(self, seq: int, zeta: np.ndarray) -> None:
-        """A SET_TARGETS frame with header SEQ `seq` (0..255) carried the angles `zeta` (rad)."""
-        self._by_seq[int(seq) & 0xFF] = np.array(zeta, dtype=float)
+    def add_command(self, seq: int, zeta: np.ndarray, sent_at: float | None = None) -> None:
+        """A SET_TARGETS frame with header SEQ `seq` (0..255) carried the angles `zeta` (rad), sent at `sent_at` (s,
+        this timeline's clock; None: unknown) — the send times let the reported frames measure the delivery delay."""
+        seq = int(seq) & 0xFF
+        self._by_seq[seq] = np.array(zeta, dtype=float)
+        if sent_at is not None and math.isfinite(sent_at):
+            self._sent_at[seq] = float(sent_at)
+            if seq in self._seq_order:
+                self._seq_order.remove(seq)
+            self._seq_order.append(seq)
 
     def add_frame(self, start: float, pulse_offsets: np.ndarray, latch_offsets: np.ndarray, seqs: np.ndarray,
                   mask: int, commands: CommandTimeline | None = None) -> None:
@@ -289,8 +303,9 @@ class ServoFrameTimeline:
                 self.unknown_seq += 1
                 continue
             angles[i] = zeta[i]
-            if commands is not None:
-                predicted = commands.at(start + starts[i])    # what the board had at the pulse's read point
+            self._delay_bounds(int(seqs[i]) & 0xFF, start + starts[i])
+            if commands is not None:   # what the board had at the pulse's read point, as predicted
+                predicted = commands.at(start + starts[i] - self.delivery_delay)
                 if predicted is not None and abs(predicted[i] - zeta[i]) > 1e-9:
                     self.mismatches += 1
         if self._frames and start <= self._frames[-1][0] + 0.5 * self.period:
@@ -303,6 +318,26 @@ class ServoFrameTimeline:
         while len(self._frames) > 1 and self._frames[0][0] < start - self.horizon:
             self._frames.popleft()
 
+    def _delay_bounds(self, seq: int, read_at: float) -> None:
+        """SEQ `seq` was the newest command on the board at `read_at`: the delivery delay is at most read_at − its
+        send time, and more than read_at − the next command's send time. The estimate is the 98th percentile of the
+        recent lower bounds (a late delivery happens), kept below the 10th percentile of the upper bounds."""
+        sent = self._sent_at.get(seq)
+        if sent is None:
+            return
+        self._delay_hi.append(read_at - sent)
+        order = list(self._seq_order)
+        k = order.index(seq) if seq in order else -1
+        if 0 <= k < len(order) - 1:
+            nxt = self._sent_at.get(order[k + 1])
+            if nxt is not None and nxt < read_at:
+                self._delay_lo.append(read_at - nxt)
+        if len(self._delay_lo) >= 10:
+            d = float(np.percentile(self._delay_lo, 98))
+            if len(self._delay_hi) >= 10:
+                d = min(d, float(np.percentile(self._delay_hi, 10)))
+            self.delivery_delay = min(max(d, 0.0), self.period)
+
     def setpoints_at(self, t: float, commands: CommandTimeline) -> np.ndarray | None:
         """The six set-points the servos act on at time `t` (s); None before any reported frame (the caller falls
         back to `commands.at`). A servo's set-point comes from the latest pulse that ended at or before t: a
@@ -314,8 +349,9 @@ class ServoFrameTimeline:
         for i in range(6):
             # the latest pulse end of servo i at or before t, on the frame grid of the newest report
             k = math.floor((t - last_start - last_off[i]) / self.period + 1e-9)
-            if k > 0:     # a frame after the newest report: its pulse carries the command sent before it started
-                z = commands.at(last_start + k * self.period + last_pulse[i])
+            if k > 0:     # a frame after the newest report: its pulse carries the command the board had at its
+                # read point, i.e. sent a delivery delay earlier
+                z = commands.at(last_start + k * self.period + last_pulse[i] - self.delivery_delay)
                 if z is not None:
                     out[i] = z[i]
                     continue
