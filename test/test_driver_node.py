@@ -330,9 +330,12 @@ def test_each_servo_carries_the_set_point_its_last_pulse_latched(tmp_path, procs
         procs.start(driver_args(uno.port, mega.port, "max_speed:=0.0", "stream_rate_hz:=500",
                                 "diagnostics_period:=0.1"), ros_env)
         assert wait_for(lambda: len(probe.currents) >= 20, 30.0), "no motor_currents from the driver"
+        for k in range(60):       # commands at ~100 Hz: the clock maps' rates and the delivery delay are learnt
+            probe.command(zeta0 - 1e-4 * (60 - k))
+            time.sleep(0.01)
         probe.command(zeta0)
         assert wait_for(lambda: np.allclose(probe.states[-1][1].position, zeta0), 5.0)
-        time.sleep(0.6)                                    # the clock maps' rates are fitted over ≥ 0.2 s
+        time.sleep(0.2)
         probe.command(zeta1)
         assert wait_for(lambda: uno.pulses_us == pulses1, 2.0), "the Uno did not get the command"
         seq1 = uno.targets_seq
@@ -345,18 +348,20 @@ def test_each_servo_carries_the_set_point_its_last_pulse_latched(tmp_path, procs
                    for _, js in probe.states if (js.header.stamp.sec, js.header.stamp.nanosec) in by_stamp]
         k0 = int(handled // FRAME_US)
         margin = 2500                                      # µs: the two clock maps' errors
-        delays = []
+        receipt = handled + offset_us                      # when the Uno got it, Mega µs
         for i in range(6):
             k = next(k for k in range(k0, k0 + 4) if uno.latch_frame(k)[0].seqs[i] == seq1)
             latch = uno.latch_frame(k)[0]
             switch = latch.frame_start_us + latch.offsets_us[i] + pulses1[i] + offset_us    # pulse end, Mega µs
-            delays.append((switch - offset_us - handled) * 1e-3)
-            before = [p[i] for b, p in samples if switch - 60_000 <= b < switch - margin]
-            after = [p[i] for b, p in samples if switch + margin < b <= switch + 60_000]
-            assert len(before) >= 5 and np.allclose(before, zeta0[i]), (i, before)
-            assert len(after) >= 5 and np.allclose(after, zeta1[i]), (i, after)
-        assert all(0.0 <= d <= 23.0 for d in delays), delays   # ms from the Uno's receipt to each servo's latch
+            assert 0 <= switch - receipt <= 27_000, (i, switch - receipt)   # a frame + read point to pulse end (+ a thread)
+            seen = [(b, p[i]) for b, p in samples if receipt - 60_000 <= b <= switch + 60_000]
+            new = [b for b, v in seen if np.isclose(v, zeta1[i])]
+            assert new and all(np.isclose(v, zeta1[i]) for b, v in seen if b >= new[0]), (i, seen)  # switched once
+            # published switch: not before the board had the command; at the latch, or — a frame not reported yet
+            # is predicted from the send time and the learnt delivery delay, and the report comes ≈ 10 ms after
+            # the frame's start — up to a report later
+            assert receipt - margin <= new[0] <= switch + 12_000 + margin, (i, new[0] - receipt, switch - receipt)
         t_diag = time.monotonic()
         diag = kv(wait_for(lambda: probe.diag_status("servo board", since=t_diag), 5.0))
         assert int(diag["latch_frames"]) > 20 and diag["latch_report"] == "True"
-        assert int(diag["latch_unknown_seq"]) == 0
+        assert int(diag["latch_unknown_seq"]) <= 6     # at most the first frame's, before any command was recorded
