@@ -93,12 +93,12 @@ def test_servo_targets_are_reached_at_the_speed_limit(desc):
 
 
 def test_servos_take_a_new_target_only_at_their_pulse_in_the_boards_frame(desc):
-    """With the servo board's pulse frame simulated (sim.servo.frame_period 0.02, the default) each servo gets a
+    """With the servo board's pulse frame simulated (sim.servo.frame_period 0.02; off by default) each servo gets a
     new set-point only at the end of its pulse, once per 20 ms frame, one servo after the other (firmware
     uno_servo): the newest target when the board read its width — at the start of the previous servo's slot, for
     servo 1 just before the frame — so a target that arrives after that read waits a frame."""
-    assert Simulator(desc, cameras=False).config.servo.frame_period == 0.02    # default: the board's pulse frame
-    sim = Simulator(desc, cameras=False, seed=4)
+    assert Simulator(desc, cameras=False).config.servo.frame_period == 0.0     # default: set-points at once
+    sim = Simulator(desc, cameras=False, seed=4, servo_frame_period=0.02)
     z0 = sim.state().targets.copy()
     sim.set_servo_targets(z0 + 0.05)
     sim.step(1)
