@@ -29,7 +29,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--ns", default="/hexa")
     args = ap.parse_args(argv)
 
-    from hexa.dynamics.identification import ARM_NORMAL_MIN_GAIN, arm_surface_normal, friction_cone_direction
+    from hexa.dynamics.identification import arm_surface_normal, carry_observed_component
     from hexa.kinematics import hexa6rus as kin
     from hexa.report.collision_demo import compute_metrics
     from hexa.robots.hexa_description import load_hexa
@@ -78,21 +78,9 @@ def main(argv: list[str] | None = None) -> int:
                 z = zeta[int(np.argmin(np.abs(zt - t)))][1]
                 B = np.asarray(kin.elbows(desc, z), float)[k]
                 normal = arm_surface_normal(D, A, (B - A) / np.linalg.norm(B - A))
-                if model == "min_norm" or normal is None:
-                    g = None
-                elif model == "surface_normal":
-                    g = normal
-                elif model == "object_axis":
-                    g = push if push is not None else normal
-                else:
-                    mu = float(model.split("=")[1])
-                    g = normal if push is None else friction_cone_direction(push, normal, mu)
-                if g is not None and abs(g @ mdir) < ARM_NORMAL_MIN_GAIN and g is not normal:
-                    g = normal          # the node's fallback order: measured direction, then the normal
-                if g is None or abs(g @ mdir) < ARM_NORMAL_MIN_GAIN:
-                    forces.append(obs * mdir)
-                else:
-                    forces.append(obs / float(g @ mdir) * g)
+                name, mu = (model.split(" mu=")[0], float(model.split("=")[1])) if "=" in model else (model, 0.2)
+                force, _ = carry_observed_component(mdir, obs, name, normal, push, mu)
+                forces.append(obs * mdir if force is None else force)
             d2 = dataclasses.replace(data, wrench_force=np.array(forces))
             rmse = compute_metrics(d2).force_rmse
             row.append(" ".join(f"{v:.2f}" for v in rmse))

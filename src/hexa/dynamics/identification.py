@@ -152,6 +152,27 @@ def friction_cone_direction(push: NDArray, normal: NDArray, friction: float) -> 
     return math.cos(half) * n + math.sin(half) * (t / nt)
 
 
+def carry_observed_component(row: NDArray, value: float, arm_force_model: str, normal: NDArray | None,
+                             push: NDArray | None, friction: float = 0.2) -> tuple[NDArray | None, str]:
+    """An arm force whose only observed component is row·F = value, carried along the direction `arm_force_model`
+    assumes (module docstring): the measured push direction (unit `push`; "object_axis"), or it clamped into the
+    friction cone about the inward `normal` ("friction_cone"), falling back to the normal, then to nothing.
+    A direction qualifies when |row·n| ≥ ARM_NORMAL_MIN_GAIN·|row|. Returns (F, model) or (None, "min_norm")."""
+    candidates: list[tuple[str, NDArray | None]] = []
+    if arm_force_model == "object_axis":
+        candidates.append(("object_axis", push))
+    elif arm_force_model == "friction_cone" and push is not None and normal is not None:
+        candidates.append(("friction_cone", friction_cone_direction(push, normal, friction)))
+    if arm_force_model != "min_norm":
+        candidates.append(("surface_normal", normal))
+    row = np.asarray(row, dtype=float)
+    for name, n in candidates:
+        gain = None if n is None else float(row @ n)
+        if gain is not None and abs(gain) >= ARM_NORMAL_MIN_GAIN * float(np.linalg.norm(row)):
+            return (value / gain) * n, name
+    return None, "min_norm"
+
+
 def identify_contact_force(params: HexaDynamicParameters, state: MotionState, tau: NDArray, link: str,
                            chain: int, point: NDArray, rcond: float = 1e-3,
                            arm_force_model: str = "min_norm", push_direction: NDArray | None = None,
@@ -239,20 +260,11 @@ def identify_contact_force(params: HexaDynamicParameters, state: MotionState, ta
     x, rank, sv, cond, null, res = _lstsq(A, b, rcond)
     model = "measured" if rank == 3 else "min_norm"
     if link == "arm" and arm_force_model != "min_norm":
-        normal = arm_surface_normal(D, prm.A[k], geo[k][3:6])
-        push = push_direction_unit(push_direction)
-        candidates = []
-        if arm_force_model == "object_axis":
-            candidates.append(("object_axis", push))
-        elif arm_force_model == "friction_cone" and push is not None and normal is not None:
-            candidates.append(("friction_cone", friction_cone_direction(push, normal, float(friction))))
-        candidates.append(("surface_normal", normal))
-        for name, n in candidates:
-            gain = None if n is None else float(A[0] @ n)
-            if gain is not None and abs(gain) >= ARM_NORMAL_MIN_GAIN * float(np.linalg.norm(A[0])):
-                x = (float(b[0]) / gain) * n   # the observed component, carried by a push along n
-                model = name
-                break
+        assumed, name = carry_observed_component(A[0], float(b[0]), arm_force_model,
+                                                 arm_surface_normal(D, prm.A[k], geo[k][3:6]),
+                                                 push_direction_unit(push_direction), float(friction))
+        if assumed is not None:
+            x, model = assumed, name
     return ContactForceEstimate(force=x, link=link, chain=k + 1, point=D, rank=rank, singular_values=sv,
                                 condition=cond, observable=rank == 3, unobservable_directions=null,
                                 residual_norm=res, chain_forces=np.array(fC), force_model=model)
