@@ -1,12 +1,14 @@
 """How well the driver's `joint_states.position` matches the set-points the simulated servos really acted on, with the
 servo board's 20 ms pulse frame simulated: with the Uno's latch report (default) and without (commands as sent).
 
-    python scripts/latch_mapping_check.py [--seconds 6] [--rtf 0.3] [--frame 0.02]
+    python scripts/latch_mapping_check.py [--seconds 6] [--rtf 0.3] [--frame 0.02] [--cameras] [--no-sync]
 
 Runs the MuJoCo Hexa (no cameras) with the virtual boards and the real driver node (its own process, a private ROS
 domain on loopback), streams the circle trajectory's IK to `joint_commands` at 100 Hz of sim time, and compares each
 published sample's set-points with the simulator's own at the sample's board time (the Mega's board clock is sim
-time). Prints, per mode, the share of samples with some servo one command off and the servo-sample mismatches.
+time). Prints, per mode, the share of samples with some servo one command off, the servo-sample mismatches, and those
+of them more than 1 ms from a change of that servo's set-point (not a switch placed slightly early or late);
+LATCH_CHECK_DEBUG=1 lists those on stderr.
 """
 from __future__ import annotations
 
@@ -23,7 +25,8 @@ from pathlib import Path
 import numpy as np
 
 
-def run(latch: bool, seconds: float, rtf: float, frame: float, domain: int, cameras: bool = False) -> dict:
+def run(latch: bool, seconds: float, rtf: float, frame: float, domain: int, cameras: bool = False,
+        sync: bool = True) -> dict:
     import rclpy
     from hexa_msgs.msg import MotorCurrents
     from rclpy.qos import QoSProfile, ReliabilityPolicy
@@ -47,7 +50,8 @@ def run(latch: bool, seconds: float, rtf: float, frame: float, domain: int, came
     stop = threading.Event()
     driver = subprocess.Popen([str(Path(sys.executable).with_name("hexa-driver")), "--ros-args", "-r", "__ns:=/hexa",
                                "-p", f"uno_port:={link / 'uno'}", "-p", f"mega_port:={link / 'mega'}",
-                               "-p", f"latch_report:={'true' if latch else 'false'}"], env=env,
+                               "-p", f"latch_report:={'true' if latch else 'false'}",
+                               "-p", f"command_sync:={'true' if sync else 'false'}"], env=env,
                               stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
     rclpy.init()
     node = rclpy.create_node("latch_check")
@@ -106,7 +110,9 @@ def run(latch: bool, seconds: float, rtf: float, frame: float, domain: int, came
     by_stamp = {(m.header.stamp.sec, m.header.stamp.nanosec): m.board_time_us for m in currents}
     t_log = np.array([t for t, _ in log])
     sp_log = np.array([s for _, s in log])
-    wrong_samples = wrong_servos = n = 0
+    wrong_samples = wrong_servos = wrong_far = n = 0
+    # per servo, the sim times its set-point changed
+    changes = [t_log[1:][np.abs(np.diff(sp_log[:, j])) > 1e-9] for j in range(6)]
     for js in states:
         b = by_stamp.get((js.header.stamp.sec, js.header.stamp.nanosec))
         if b is None:
@@ -122,10 +128,21 @@ def run(latch: bool, seconds: float, rtf: float, frame: float, domain: int, came
         err = np.abs(sent - sp_log[i]) > 1e-6
         wrong_samples += int(err.any())
         wrong_servos += int(err.sum())
+        for j in np.nonzero(err)[0]:      # a set-point change placed a little early or late, or a wrong command?
+            near = changes[j][np.searchsorted(changes[j], t_sim - 0.001):np.searchsorted(changes[j], t_sim + 0.001)]
+            wrong_far += int(len(near) == 0)
+            if len(near) == 0 and os.environ.get("LATCH_CHECK_DEBUG"):
+                k_true = np.searchsorted(changes[j], t_sim)
+                print("far", round(t_sim, 4), j, round(float(sent[j]), 4), round(float(sp_log[i][j]), 4),
+                      "prev change", round(float(changes[j][k_true - 1]), 4) if k_true else None,
+                      "next change", round(float(changes[j][k_true]), 4) if k_true < len(changes[j]) else None,
+                      "values", [round(float(v), 4) for v in sp_log[max(i - 3, 0):i + 3, j]], file=sys.stderr)
         n += 1
-    return {"latch_report": latch, "frame_s": frame, "cameras": cameras, "samples": n,
+    return {"latch_report": latch, "command_sync": sync and latch, "frame_s": frame, "cameras": cameras, "samples": n,
             "samples_with_a_servo_off": round(wrong_samples / max(n, 1), 3),
-            "servo_samples_off": round(wrong_servos / max(6 * n, 1), 3)}
+            "servo_samples_off": round(wrong_servos / max(6 * n, 1), 3),
+            # off where the servo's set-point had not changed within 1 ms: a command the servo never had then
+            "servo_samples_off_far_from_a_change": round(wrong_far / max(6 * n, 1), 4)}
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -136,17 +153,20 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--domain", type=int, default=77)
     ap.add_argument("--mode", choices=["latch", "commands", "both"], default="both")
     ap.add_argument("--cameras", action="store_true", help="render both cameras at 30 Hz (the sim clock stops)")
+    ap.add_argument("--no-sync", action="store_true", help="driver command_sync:=false (commands sent as they come)")
     args = ap.parse_args(argv)
     modes = {"latch": [True], "commands": [False], "both": [True, False]}[args.mode]
     for latch in modes:   # one process per mode: rclpy is initialised once per process
         if len(modes) > 1:
             out = subprocess.run([sys.executable, __file__, "--mode", "latch" if latch else "commands",
                                   "--seconds", str(args.seconds), "--rtf", str(args.rtf), "--frame", str(args.frame),
-                                  "--domain", str(args.domain)] + (["--cameras"] if args.cameras else []),
+                                  "--domain", str(args.domain)] + (["--cameras"] if args.cameras else [])
+                                 + (["--no-sync"] if args.no_sync else []),
                                  capture_output=True, text=True)
             sys.stdout.write(out.stdout or out.stderr[-3000:])
         else:
-            print(json.dumps(run(latch, args.seconds, args.rtf, args.frame, args.domain, args.cameras)), flush=True)
+            print(json.dumps(run(latch, args.seconds, args.rtf, args.frame, args.domain, args.cameras,
+                                 sync=not args.no_sync)), flush=True)
     return 0
 
 

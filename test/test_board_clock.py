@@ -170,14 +170,18 @@ def test_map_before_samples_and_bad_windows():
         BoardClockMap(envelope_window=0.0)
 
 
-def _frame_world(phase: float, t_end: float, send_period: float = 0.01, seed: int = 0, delay: float = 0.0):
+def _frame_world(phase: float, t_end: float, send_period: float = 0.01, seed: int = 0, delay: float = 0.0,
+                 sends: np.ndarray | None = None, jitter: float = 0.0):
     """Commands sent every `send_period` s (SEQ k, angles k·0.01 + servo index), pulse frames every 20 ms from
-    `phase`, servo i's pulse 1-2 ms long after servo i-1's; a pulse carries the newest command sent before the board
-    read its width (at the start of the previous channel's slot). Returns the command times/angles, the frames
-    (start, pulse starts, latch offsets, seqs) and the true set-point of each servo at any time. A command reaches the
-    board `delay` s after it was sent."""
+    `phase`, servo i's pulse 1-2 ms long after servo i-1's; a pulse carries the newest command that reached the board
+    before it read its width (at the start of the previous channel's slot). Returns the command times/angles, the
+    frames (start, pulse starts, latch offsets, seqs) and the true set-point of each servo at any time. A command
+    reaches the board `delay` s after it was sent, plus up to `jitter` s (uniform). `sends` overrides the send
+    times."""
     rng = np.random.default_rng(seed)
-    sends = np.arange(0.0, t_end, send_period) + rng.uniform(0.0, 0.002, int(np.ceil(t_end / send_period)))
+    if sends is None:
+        sends = np.arange(0.0, t_end, send_period) + rng.uniform(0.0, 0.002, int(np.ceil(t_end / send_period)))
+    arrivals = np.maximum.accumulate(sends + delay + rng.uniform(0.0, jitter, len(sends)))   # a serial link: in order
     angles = [np.arange(6) + 0.01 * k for k in range(len(sends))]
     frames = []
     start = phase
@@ -186,7 +190,7 @@ def _frame_world(phase: float, t_end: float, send_period: float = 0.01, seed: in
         widths = base + rng.uniform(-2e-5, 2e-5, 6)         # the servos move slowly: widths change by µs per frame
         pulse_start = start + np.concatenate([[0.0], np.cumsum(widths)[:-1]])
         read = np.concatenate([[start - 50e-6], pulse_start[:-1]])   # the firmware reads at the previous slot's start
-        seqs = np.array([max(int(np.searchsorted(sends + delay, r, side="right")) - 1, 0) for r in read])
+        seqs = np.array([max(int(np.searchsorted(arrivals, r, side="right")) - 1, 0) for r in read])
         frames.append((start, pulse_start - start, pulse_start - start + widths, seqs))
         start += 0.02
 
@@ -233,6 +237,113 @@ def test_servo_frames_give_each_servo_the_command_its_last_pulse_carried(delay):
     assert tl.mismatches <= 0.06 * 6 * reported, tl.mismatches   # mostly before the delay is learned (10 frames)
     # the delay lies between the bounds the reports give: within the commands' 0-2 ms send jitter of the truth
     assert delay - 0.001 <= tl.delivery_delay <= delay + 0.0025, tl.delivery_delay
+
+
+def _frame_errors(sends, angles, frames, truth, t0=0.1, t1=0.95, recorded=None, aimed=None):
+    """Share of samples (every 0.5 ms) whose predicted set-points (ServoFrameTimeline, frames reported 12 ms after
+    their start) miss the truth on some servo, away from a set-point change (within 0.2 ms of a pulse's end the
+    prediction, on the newest report's pulse times, may be that early or late: the widths before it changed by up to
+    ±20 µs each since; harmless). `recorded`: the send times as the driver dated them (default the true ones);
+    `aimed`: the frame start each command was aimed at."""
+    from hexa.protocol.board_clock import ServoFrameTimeline
+
+    cmd = CommandTimeline()
+    tl = ServoFrameTimeline()
+    recorded = sends if recorded is None else recorded
+    errs, n, reported, added = 0, 0, 0, 0
+    for t in np.arange(t0 if aimed is None else 0.0, t1, 0.0005):
+        while added < len(sends) and recorded[added] <= t:      # the driver learns of its commands as it sends
+            z = angles[added]
+            cmd.add(recorded[added], z)
+            tl.add_command(added & 0xFF, z, sent_at=recorded[added], aimed_at=None if aimed is None else aimed[added])
+            added += 1
+        if t < t0:
+            continue
+        while reported < len(frames) and frames[reported][0] + 0.012 <= t:
+            s, pulse, off, seqs = frames[reported]
+            tl.add_frame(s, pulse, off, seqs & 0xFF, 0b111111, commands=cmd)
+            reported += 1
+        steady = np.abs(truth(t - 2e-4) - truth(t + 2e-4)) < 1e-9
+        errs += int(np.any((np.abs(tl.setpoints_at(t, cmd) - truth(t)) > 1e-9) & steady))
+        n += 1
+    return errs / n
+
+
+@pytest.mark.parametrize("delay", [0.0, 0.004])
+def test_commands_sent_in_the_quiet_gap_make_the_prediction_certain(delay):
+    """send_wait holds each command (ready every 10 ms) until it lands in the middle of the frame's quiet gap, after
+    the last read point and before the next frame's first: every servo then takes it from the next frame's pulse,
+    whichever way the delivery jitters (1.5 ms here) and however roughly the timeline has learnt the delivery delay.
+    The predicted set-points are then exact, where commands sent as they come are one step off now and then (the
+    read points they straddle)."""
+    from hexa.protocol.board_clock import ServoFrameTimeline
+
+    phase, guard, jitter = 0.0073, 0.002, 0.0015
+    _, _, frames, _ = _frame_world(phase=phase, t_end=1.0)            # the frame geometry (no commands needed)
+    plan = ServoFrameTimeline()
+    assert plan.send_wait(0.0, guard) is None                         # no frame reported: nothing to aim at
+    s0, pulse, off, _ = frames[0]
+    plan.add_frame(s0, pulse, off, np.zeros(6, dtype=int), 0)
+    plan.delivery_delay = delay                                       # as learnt from the reports
+    lo, hi = plan.quiet_gap(guard)
+    reads = np.concatenate([[-50e-6], pulse[:-1]])
+    assert lo == pytest.approx(reads.max() + guard) and hi == pytest.approx(0.02 - 50e-6 - guard)
+    ready = np.arange(0.0, 1.0, 0.01) + np.random.default_rng(1).uniform(0.0, 0.002, 100)
+    sends = []
+    for r in ready:
+        wait = plan.send_wait(r, guard)
+        assert 0.0 <= wait < 0.02
+        landing = (r + wait + delay - s0) % 0.02
+        assert abs(landing - (lo + hi) / 2) <= (hi - lo) / 4 + 1e-9  # it lands in the gap's middle half
+        if wait > 0:
+            assert landing == pytest.approx((lo + hi) / 2)            # ... in its middle when held
+        sends.append(r + wait)
+    # a command ready while the previous one is held replaces it (the driver coalesces): the newest ready by then
+    sends = np.array(sends)
+    keep = np.append(sends[1:] > sends[:-1] + 1e-9, True)
+    synced = _frame_world(phase=phase, t_end=1.0, delay=delay, sends=sends[keep], jitter=jitter)
+    as_sent = _frame_world(phase=phase, t_end=1.0, delay=delay, sends=ready, jitter=jitter)
+    err_synced = _frame_errors(*synced)
+    err_as_sent = _frame_errors(*as_sent)
+    assert err_synced == 0.0, err_synced
+    assert err_as_sent > 0.01, err_as_sent                            # the jitter straddles read points
+
+
+def test_a_command_aimed_at_a_frame_is_predicted_there_whatever_its_send_time_says():
+    """The driver dates a command by the board clock map, which runs up to its extrapolation limit ahead of the board
+    while the board's samples stall (the simulator's clock stops while a camera renders): a command dated up to 8 ms
+    late looks sent after the read points it beat. Commands aimed at a frame (`aim`) are predicted on that frame from
+    the aim, not the date."""
+    from hexa.protocol.board_clock import ServoFrameTimeline
+
+    phase, guard = 0.0073, 0.002
+    _, _, frames, _ = _frame_world(phase=phase, t_end=1.0)
+    plan = ServoFrameTimeline()
+    plan.add_frame(*frames[0][:3], np.zeros(6, dtype=int), 0)
+    ready = np.arange(0.0, 1.0, 0.01) + np.random.default_rng(2).uniform(0.0, 0.002, 100)
+    aims = [plan.aim(r, guard) for r in ready]
+    sends = np.array([r + w for r, (w, _) in zip(ready, aims)])
+    targets = np.array([a for _, a in aims])
+    for t_send, target in zip(sends, targets):              # the frame after the gap it lands in
+        n_frames = (target - frames[0][0]) / 0.02
+        assert 0.0 < target - t_send < 0.02 and abs(n_frames - round(n_frames)) < 1e-9
+    keep = np.append(sends[1:] > sends[:-1] + 1e-9, True)
+    sends, targets = sends[keep], targets[keep]
+    world = _frame_world(phase=phase, t_end=1.0, sends=sends, jitter=0.001)
+    late = np.maximum.accumulate(sends + np.random.default_rng(3).uniform(0.0, 0.008, len(sends)))
+    assert _frame_errors(*world, recorded=late, aimed=targets) == 0.0
+    assert _frame_errors(*world, recorded=late) > 0.01           # dated late, predicted a frame late now and then
+
+
+def test_quiet_gap_needs_room():
+    from hexa.protocol.board_clock import ServoFrameTimeline
+
+    tl = ServoFrameTimeline()
+    widths = np.full(6, 0.0025)                                       # the longest pulses: reads up to 10 ms
+    starts = np.concatenate([[0.0], np.cumsum(widths)[:-1]])
+    tl.add_frame(0.0, starts, starts + widths, np.zeros(6, dtype=int), 0)
+    assert tl.quiet_gap(0.005) is None and tl.send_wait(0.001, 0.005) is None   # 15 < 14.95
+    assert tl.quiet_gap(0.002) == pytest.approx((0.012, 0.01795))
 
 
 def test_servo_frames_unknown_seq_repeats_and_fallback():

@@ -88,6 +88,19 @@ class DriverNode(Node):
         self._pulses_by_seq: dict[int, list[int]] = {}
         self._uno_offsets: deque[float] = deque(maxlen=50)   # Uno board time − Mega board time, per LATCH (s)
         self.latches_unmapped = 0
+        # commands timed into the frame's quiet gap (ServoFrameTimeline.send_wait), once frames are reported
+        self.command_sync = bool(cfg["command_sync"]) and self.latch_report
+        self.sync_guard = float(cfg["command_sync_guard"])
+        if not (np.isfinite(self.sync_guard) and 0.0 <= self.sync_guard < 0.005):
+            raise ValueError(f"parameter command_sync_guard must be in [0, 0.005) s, got {cfg['command_sync_guard']}")
+        if self.command_sync:   # one command per frame: the slew allowance builds up over a frame
+            self.core.slew_period = max(self.core.slew_period, self.frames.period)
+        self._sync_timer: threading.Timer | None = None
+        self._aimed_at: float | None = None      # the frame (its start, Mega clock) the command being sent is for
+        self._sync_deferrals = 0          # of the pending command (a few at most, then it goes anyway)
+        self.sync_held = 0                # commands held for the quiet gap
+        self.sync_sent_in_gap = 0         # commands sent when aimed at the gap (held or not)
+        self.sync_unsynced = 0            # commands sent without a gap to aim at (no frame yet) or given up on
         self._board_restarts = 0
         self._last_sample_time = 0.0
         self._rate_mark = (time.monotonic(), 0)
@@ -118,6 +131,10 @@ class DriverNode(Node):
                                f"rate={cfg['stream_rate_hz']} Hz")
 
     def close(self) -> None:
+        with self._lock:
+            if self._sync_timer is not None:
+                self._sync_timer.cancel()
+                self._sync_timer = None
         self.uno.stop()
         self.mega.stop()
 
@@ -154,12 +171,53 @@ class DriverNode(Node):
         if time.monotonic() - self._last_sent >= self._min_interval:
             self._flush_command()
 
+    def _flush_synced(self) -> None:
+        """The quiet-gap timer (a threading.Timer): send the held command."""
+        with self._lock:
+            self._sync_timer = None
+        if self.context.ok():
+            self._flush_command()
+
+    def _hold_for_gap(self, now: float) -> bool:
+        """With command_sync: True (and a timer armed) when the pending command would reach the Uno outside the
+        frame's quiet gap; the timer sends it when it would land in the gap's middle. Called with the lock held."""
+        if not self.command_sync:
+            return False
+        if self._sync_timer is not None:          # already waiting for the gap
+            return True
+        board_now = self.board_clock.board_time_at(now)
+        aim = None if board_now is None else self.frames.aim(board_now, self.sync_guard)
+        wait = None if aim is None else aim[0]
+        if wait is None or self._sync_deferrals >= 3:   # no gap known, or the clocks disagree: send now
+            if wait is None:
+                self.sync_unsynced += 1
+            elif wait > 0:
+                self.sync_unsynced += 1
+            return False
+        if wait <= 0:
+            self.sync_sent_in_gap += 1
+            self._aimed_at = aim[1]
+            return False
+        self._sync_deferrals += 1
+        if self._sync_deferrals == 1:
+            self.sync_held += 1
+        # board seconds to host seconds (sim time runs slower than the host's in simulation)
+        host_wait = wait / max(self.board_clock.rate, 1e-3)
+        self._sync_timer = threading.Timer(min(host_wait, 1.0), self._flush_synced)
+        self._sync_timer.daemon = True
+        self._sync_timer.start()
+        return True
+
     def _flush_command(self) -> None:
         with self._lock:
-            zeta, self._pending = self._pending, None
-            if zeta is None:
+            if self._pending is None:
                 return
             now = time.monotonic()
+            self._aimed_at = None
+            if self._hold_for_gap(now):
+                return
+            self._sync_deferrals = 0
+            zeta, self._pending = self._pending, None
             # the slew limit runs on the robot's time — the Mega's clock, sim time in simulation, where the ROS clock
             # moves in 4 ms /clock steps — its allowance never more than one command period: after a stall the
             # servos catch up at max_speed instead of jumping (docs/driver.md, "Catching up after a stall")
@@ -176,7 +234,7 @@ class DriverNode(Node):
             b_sent = self.timeline.add(self.board_clock.board_time_at(t_sent), self.core.commanded, sent_at=t_sent)
             seq = self.uno.last_targets_seq
             if sent and seq is not None:
-                self.frames.add_command(seq, self.core.commanded, b_sent)
+                self.frames.add_command(seq, self.core.commanded, b_sent, aimed_at=self._aimed_at)
                 self._pulses_by_seq[seq] = pulses
             self._last_sent = now
         if not sent:
@@ -342,6 +400,9 @@ class DriverNode(Node):
                      ("latch_delivery_delay_ms", f"{1e3 * self.frames.delivery_delay:.2f}"),
                      ("latch_unmapped", self.latches_unmapped),
                      ("uno_clock_rate", f"{self.uno_clock.rate:.4f}"),
+                     ("command_sync", self.command_sync), ("commands_held_for_gap", self.sync_held),
+                     ("commands_sent_in_gap", self.sync_sent_in_gap),
+                     ("commands_sent_unsynced", self.sync_unsynced),
                      ("board_watchdog_hold", bool(uno_status.flags & fr.FLAG_WATCHDOG_HOLD) if uno_status else "?")]
         mega = self._link_status("current board (Mega)", self.mega, mega_extra)
         if mega.level == OK and age > float(self.cfg["stale_timeout"]):

@@ -227,7 +227,7 @@ class DriverCore:
 SCALAR_KEYS = ("uno_port", "mega_port", "baud", "stream_rate_hz", "stale_timeout", "drop_after", "reconnect_period",
                "hello_timeout", "boot_delay", "command_rate_hz", "max_speed",
                "board_clock_max_extrapolation", "watchdog_ms", "diagnostics_period", "calibration_duration",
-               "rest_quiet_time", "frame_id", "latch_report")
+               "rest_quiet_time", "frame_id", "latch_report", "command_sync", "command_sync_guard")
 REQUIRED_KEYS = SCALAR_KEYS + ("joint_names", "sensor", "current_offsets", "servos")
 
 
