@@ -88,7 +88,7 @@ class DriverNode(Node):
         self._pulses_by_seq: dict[int, list[int]] = {}
         self._uno_offsets: deque[float] = deque(maxlen=50)   # Uno board time − Mega board time, per LATCH (s)
         self.latches_unmapped = 0
-        # commands timed into the frame's quiet gap (ServoFrameTimeline.send_wait), once frames are reported
+        # commands timed into the frame's quiet gap (ServoFrameTimeline.aim), once frames are reported
         self.command_sync = bool(cfg["command_sync"]) and self.latch_report
         self.sync_guard = float(cfg["command_sync_guard"])
         if not (np.isfinite(self.sync_guard) and 0.0 <= self.sync_guard < 0.005):
@@ -96,7 +96,7 @@ class DriverNode(Node):
         if self.command_sync:   # one command per frame: the slew allowance builds up over a frame
             self.core.slew_period = max(self.core.slew_period, self.frames.period)
         self._sync_timer: threading.Timer | None = None
-        self._aimed_at: float | None = None      # the frame (its start, Mega clock) the command being sent is for
+        self._aim_frame: float | None = None      # the frame (its start, Mega clock) the command being sent is for
         self._sync_deferrals = 0          # of the pending command (a few at most, then it goes anyway)
         self.sync_held = 0                # commands held for the quiet gap
         self.sync_sent_in_gap = 0         # commands sent when aimed at the gap (held or not)
@@ -188,15 +188,15 @@ class DriverNode(Node):
         board_now = self.board_clock.board_time_at(now)
         aim = None if board_now is None else self.frames.aim(board_now, self.sync_guard)
         wait = None if aim is None else aim[0]
-        if wait is None or self._sync_deferrals >= 3:   # no gap known, or the clocks disagree: send now
-            if wait is None:
-                self.sync_unsynced += 1
-            elif wait > 0:
-                self.sync_unsynced += 1
+        if wait is None:                          # no frame reported yet: nothing to aim at
+            self.sync_unsynced += 1
             return False
         if wait <= 0:
             self.sync_sent_in_gap += 1
-            self._aimed_at = aim[1]
+            self._aim_frame = aim[1]
+            return False
+        if self._sync_deferrals >= 3:             # the timer keeps missing the gap (the clocks disagree): send now
+            self.sync_unsynced += 1
             return False
         self._sync_deferrals += 1
         if self._sync_deferrals == 1:
@@ -213,7 +213,7 @@ class DriverNode(Node):
             if self._pending is None:
                 return
             now = time.monotonic()
-            self._aimed_at = None
+            self._aim_frame = None
             if self._hold_for_gap(now):
                 return
             self._sync_deferrals = 0
@@ -234,7 +234,7 @@ class DriverNode(Node):
             b_sent = self.timeline.add(self.board_clock.board_time_at(t_sent), self.core.commanded, sent_at=t_sent)
             seq = self.uno.last_targets_seq
             if sent and seq is not None:
-                self.frames.add_command(seq, self.core.commanded, b_sent, aimed_at=self._aimed_at)
+                self.frames.add_command(seq, self.core.commanded, b_sent, aimed_at=self._aim_frame)
                 self._pulses_by_seq[seq] = pulses
             self._last_sent = now
         if not sent:
