@@ -82,7 +82,7 @@ if ! fresh msgs "$h" || ! "$VENV/bin/python" -c 'import hexa_msgs.msg' 2>/dev/nu
 fi
 
 # 6. Our Python packages (editable): the ROS-free core and the ROS packages' nodes and entry points.
-PKGS=(. hexa_bringup hexa_dynamics hexa_vision hexa_driver)
+PKGS=(. src/hexa_ros hexa_bringup hexa_dynamics hexa_vision hexa_driver)
 h=$(for p in "${PKGS[@]}"; do cat "$p/setup.py" "$p/pyproject.toml" 2>/dev/null || true; done | sha256sum | cut -c1-16)
 if ! fresh pkgs "$h"; then
   log "installing hexa packages (editable)"

@@ -1,0 +1,83 @@
+"""Message fields <-> the core's numpy values: joint vectors, poses (plain numpy on message fields)."""
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+
+from hexa.rotations import matrix_from_quaternion, quaternion_from_matrix
+
+#: the Hexa's servo (arm) joints, in the description's chain order
+JOINT_NAMES = tuple(f"arm_{i}" for i in range(1, 7))
+#: the 3UPS+RPU's prismatic limbs
+UPSRPU_JOINTS = ("limb_1", "limb_2", "limb_3", "limb_4")
+
+
+def ordered_joints(msg: Any, field: str, names: tuple[str, ...] = JOINT_NAMES) -> np.ndarray | None:
+    """The values of `field` of a sensor_msgs/JointState ordered as `names` by msg.name (in message order when the
+    message has no names); None when the names or lengths do not fit."""
+    vals = getattr(msg, field)
+    if len(vals) != len(names):
+        return None
+    msg_names = msg.name
+    if not msg_names:
+        return np.asarray(vals, dtype=float)
+    if len(msg_names) == len(names) and tuple(msg_names) == names:
+        return np.asarray(vals, dtype=float)
+    if len(msg_names) != len(names) or set(msg_names) != set(names):
+        return None
+    idx = {n: k for k, n in enumerate(msg_names)}
+    return np.asarray([vals[idx[n]] for n in names], dtype=float)
+
+
+def transform_from_pose_msg(pose: Any) -> np.ndarray:
+    """4x4 transform of a geometry_msgs/Pose.
+
+    Raises:
+        ValueError: the orientation is zero or not finite.
+    """
+    o, p = pose.orientation, pose.position
+    T = np.eye(4)
+    T[:3, :3] = matrix_from_quaternion(o.x, o.y, o.z, o.w)
+    T[:3, 3] = (p.x, p.y, p.z)
+    return T
+
+
+def fill_pose_msg(pose: Any, R: np.ndarray, t: np.ndarray) -> Any:
+    """Write rotation R and translation t into a geometry_msgs/Pose and return it."""
+    q = quaternion_from_matrix(R)
+    pose.position.x, pose.position.y, pose.position.z = (float(v) for v in t)
+    pose.orientation.x, pose.orientation.y, pose.orientation.z, pose.orientation.w = (float(v) for v in q)
+    return pose
+
+
+def hexa_pose_from_msg(pose: Any) -> np.ndarray:
+    """Hexa pose (x, y, z, α, β, γ) (Z-Y-X, seed 000 eq 38) of a geometry_msgs/Pose.
+
+    Raises:
+        ValueError: the orientation is zero or not finite.
+    """
+    from hexa.rotations import pose6_from_transform
+
+    return pose6_from_transform(transform_from_pose_msg(pose))
+
+
+def upsrpu_pose_to_msg_fields(X: np.ndarray) -> tuple[tuple[float, float, float], tuple[float, float, float, float]]:
+    """(position, quaternion) of the 3UPS+RPU pose X = (x_m, z_m, θ, ψ) in the fixed frame."""
+    from hexa.kinematics.upsrpu import rotation_yz
+
+    q = quaternion_from_matrix(rotation_yz(X[2], X[3]))
+    return (float(X[0]), 0.0, float(X[1])), (float(q[0]), float(q[1]), float(q[2]), float(q[3]))
+
+
+def upsrpu_pose_from_msg(pose: Any) -> np.ndarray:
+    """X = (x_m, z_m, θ, ψ) of a geometry_msgs/Pose (projected on the robot's four DOF)."""
+    from hexa.srm.tracking import pose_from_transform
+
+    T = transform_from_pose_msg(pose)
+    return pose_from_transform(T[:3, :3], T[:3, 3])
+
+
+def points_from_pose_array(msg: Any) -> np.ndarray:
+    """(N, 3) marker positions of a geometry_msgs/PoseArray (orientations ignored)."""
+    return np.array([[p.position.x, p.position.y, p.position.z] for p in msg.poses], dtype=float).reshape(-1, 3)

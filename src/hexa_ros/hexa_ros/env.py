@@ -1,0 +1,49 @@
+"""The ROS environment every hexa process runs in: rmw_fastrtps with hexa's Fast DDS profile."""
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+PROFILE = Path(__file__).resolve().parent / "config" / "fastdds_profile.xml"
+RMW = "rmw_fastrtps_cpp"
+
+
+def defaults() -> dict[str, str]:
+    """The variables hexa sets when they are unset: RMW implementation and the Fast DDS profile file."""
+    return {
+        "RMW_IMPLEMENTATION": RMW,
+        "FASTRTPS_DEFAULT_PROFILES_FILE": str(PROFILE),
+        "FASTDDS_DEFAULT_PROFILES_FILE": str(PROFILE),
+        "RCUTILS_COLORIZED_OUTPUT": "0",
+    }
+
+
+def apply_defaults() -> None:
+    """Set the defaults in os.environ (keeping anything the user set). Call before rclpy.init()."""
+    for key, value in defaults().items():
+        os.environ.setdefault(key, value)
+
+
+def ros_env(domain_id: int | None = None, localhost_only: bool = True, base: dict[str, str] | None = None
+            ) -> dict[str, str]:
+    """A copy of the environment for a child ROS process.
+
+    Args:
+        domain_id: ROS_DOMAIN_ID to use (0..101 are safe with default ports); None keeps the current one.
+        localhost_only: restrict discovery to this host (ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST).
+        base: environment to start from (default os.environ).
+
+    Returns:
+        The environment dict with hexa's defaults applied.
+    """
+    env = dict(os.environ if base is None else base)
+    for key, value in defaults().items():
+        env.setdefault(key, value)
+    if domain_id is not None:
+        if not 0 <= int(domain_id) <= 232:
+            raise ValueError(f"ROS_DOMAIN_ID must be in 0..232, got {domain_id}")
+        env["ROS_DOMAIN_ID"] = str(int(domain_id))
+    if localhost_only:
+        env["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "LOCALHOST"
+    env.setdefault("PYTHONUNBUFFERED", "1")
+    return env
