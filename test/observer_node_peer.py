@@ -70,7 +70,7 @@ def main() -> int:
     from sensor_msgs.msg import JointState
 
     from hexa_dynamics.conversions import quaternion_from_matrix
-    from hexa_dynamics.observer_node import stamp_from_seconds, stamp_seconds
+    from hexa_ros.stamps import to_sec as stamp_seconds, to_stamp as stamp_from_seconds
     from hexa.kinematics.hexa6rus import rotation_zyx
 
     rclpy.init()

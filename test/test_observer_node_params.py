@@ -77,20 +77,21 @@ def test_runtime_parameters_reach_the_detector_and_the_estimator(rcl):
                                Parameter("gains", value=[50.0] * 6), Parameter("camera_sigma", value=0.01),
                                Parameter("min_duration", value=0.025)])
     assert all(r.successful for r in res)
-    assert node.observer.detector.thresholds.tolist() == [3.0, 3.0, 4.0, 0.3, 0.3, 0.5]
-    assert node.observer.detector.config.min_duration == 0.025
-    assert node.observer._K.tolist() == [50.0] * 6
-    assert node.estimator.config.camera_sigma == 0.01
+    assert node.monitor.observer.detector.thresholds.tolist() == [3.0, 3.0, 4.0, 0.3, 0.3, 0.5]
+    assert node.monitor.observer.detector.config.min_duration == 0.025
+    assert node.monitor.observer._K.tolist() == [50.0] * 6
+    assert node.monitor.estimator.config.camera_sigma == 0.01
     bad = node.set_parameters([Parameter("thresholds", value=[3.0, -1.0, 4.0, 0.3, 0.3, 0.5])])
     assert not bad[0].successful and "thresholds" in bad[0].reason
-    assert node.observer.detector.thresholds[1] == 3.0          # unchanged
+    assert node.monitor.observer.detector.thresholds[1] == 3.0          # unchanged
     res = node.set_parameters([Parameter("servo_thresholds", value=[0.5, 0.5, 0.5, 0.0, 0.5, 0.6])])
-    assert res[0].successful and node.observer.detector.servo_thresholds.tolist() == [0.5, 0.5, 0.5, 0.0, 0.5, 0.6]
+    servo = node.monitor.observer.detector.servo_thresholds.tolist()
+    assert res[0].successful and servo == [0.5, 0.5, 0.5, 0.0, 0.5, 0.6]
     bad = node.set_parameters([Parameter("servo_thresholds", value=[0.5, 0.5, -0.5, 0.0, 0.5, 0.6])])
     assert not bad[0].successful and "servo_thresholds" in bad[0].reason
-    assert node.observer.detector.servo_thresholds[2] == 0.5    # unchanged
+    assert node.monitor.observer.detector.servo_thresholds[2] == 0.5    # unchanged
     ro = node.set_parameters([Parameter("zeta_source", value="measured")])
-    assert not ro[0].successful and node.zeta_source == "estimator"
+    assert not ro[0].successful and node.monitor.config.zeta_source == "estimator"
 
 
 def test_reset_with_recalibrate_removes_a_rest_offset(rcl):
@@ -103,11 +104,11 @@ def test_reset_with_recalibrate_removes_a_rest_offset(rcl):
 
     node = ObserverNode()
     rcl.append(node)
-    node.calibration_duration = 0.5
+    node.set["calibration_duration"] = 0.5
     sim = Simulator(cameras=False)
     s = sim.state()
-    node.observer.update_pose(0.0, s.pose)
-    node.estimator.update_camera(0.0, s.pose)
+    node.monitor.observer.update_pose(0.0, s.pose)
+    node.monitor.estimator.update_camera(0.0, s.pose)
     u = s.zeta.copy()
     outs = []
 
@@ -116,9 +117,9 @@ def test_reset_with_recalibrate_removes_a_rest_offset(rcl):
         while t < t1:
             sim.step(5)
             st = sim.state()
-            node._on_sample(t, u, st.tau + 0.05, None)
-            if node._last_out is not None:
-                outs.append((t, node._last_out.wrench.copy()))
+            out = node.monitor._sample(t, u, st.tau + 0.05, None)
+            if out is not None:
+                outs.append((t, out.residual.wrench.copy()))
             t += 0.005
 
     run(0.005, 1.0)
@@ -128,4 +129,4 @@ def test_reset_with_recalibrate_removes_a_rest_offset(rcl):
     run(1.0, 2.5)
     after = np.abs(outs[-1][1][:3]).max()
     assert before > 0.5                                # N: the wrong I₀ is visible
-    assert after < 0.1 and np.abs(node.observer.offset[:3]).max() > 0.5
+    assert after < 0.1 and np.abs(node.monitor.observer.offset[:3]).max() > 0.5

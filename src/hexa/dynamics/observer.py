@@ -371,6 +371,14 @@ class ResidualObserver:
         self.r = np.zeros(6)
         self.detector.reset()
 
+    def set_config(self, config: ObserverConfig) -> None:
+        """Take new gains, thresholds and detector timing at run time; the residual and the pose tracking go on."""
+        self.config = config
+        self._K = np.asarray(config.gains, dtype=float)
+        self.detector.config = config
+        self.detector.set_thresholds(config.thresholds)
+        self.detector.set_servo_thresholds(config.servo_thresholds)
+
     def start_calibration(self) -> None:
         """Start averaging the instantaneous wrench estimate (robot at rest, nothing touching it)."""
         self._calib = []

@@ -1,0 +1,274 @@
+"""The live collision monitor of the Hexa: board-clocked current samples → ζ estimator → residual observer (seed 000
+§3.1, eqs 23-26) → residual and collision events, with the camera's plate pose folded in.
+
+One object holds the whole per-sample pipeline the observer node runs, so that it can be tested, replayed and
+benchmarked without ROS: `push_currents`, `push_states` and `push_pose` take the three input streams in any
+delivery order and return the samples they complete, each already through the estimator and the observer.
+"""
+from __future__ import annotations
+
+import dataclasses
+import math
+from collections import deque
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from hexa.dynamics.observer import ObserverConfig, ObserverError, ResidualObserver, ResidualSample
+from hexa.estimation import EstimatorConfig, SampleSequencer, ServoModel, ZetaEstimator
+
+ZETA_SOURCES = ("estimator", "measured")
+#: estimator settings the monitor takes at run time
+ESTIMATOR_KEYS = ("accel_sigma", "torque_sigma", "camera_sigma", "bias_walk", "saturation", "stall_sigma")
+
+
+class SampleClock:
+    """Sample times from the current board's microsecond clock (wraps at 2³²) on the ROS time axis.
+
+    `fixed_offset` given (the simulator's boards run on sim time): t = unwrapped board time + fixed_offset. Otherwise
+    t = offset + unwrapped board time, the offset following the mean of (stamp − board time) with time constant `tau`
+    (receive latency, host/board clock drift), re-anchored when they disagree by more than `jump` s (board reset).
+    Host receive stamps jitter by milliseconds (USB, scheduling; in sim mode they are quantized by /clock), which at
+    200-1000 Hz would corrupt the observer's Δt; the board's clock does not. A repeated or older board time returns
+    None and counts in `backwards`."""
+
+    def __init__(self, tau: float = 10.0, jump: float = 0.5, fixed_offset: float | None = None) -> None:
+        self.tau, self.jump, self.fixed_offset = tau, jump, fixed_offset
+        self._raw: int | None = None
+        self._board = 0.0
+        self._offset = 0.0
+        self.backwards = 0
+
+    def time(self, stamp: float, board_us: int) -> float | None:
+        """The sample time (s) of a sample received at host time `stamp` with board time `board_us` (µs)."""
+        raw = int(board_us) & 0xFFFFFFFF
+        if self._raw is not None:
+            d = (raw - self._raw) & 0xFFFFFFFF
+            if d == 0 or d >= 1 << 31:
+                self.backwards += 1
+                return None
+        if self.fixed_offset is not None:
+            self._board = raw * 1e-6 if self._raw is None else self._board + d * 1e-6
+            self._raw = raw
+            return self._board + self.fixed_offset
+        if self._raw is None:
+            self._raw, self._board, self._offset = raw, 0.0, stamp
+            return stamp
+        dt = d * 1e-6
+        self._raw = raw
+        self._board += dt
+        err = stamp - (self._offset + self._board)
+        if abs(err) > self.jump:
+            self._offset = stamp - self._board
+        else:
+            self._offset += err * min(1.0, dt / self.tau)
+        return self._offset + self._board
+
+
+@dataclass(frozen=True)
+class MonitorConfig:
+    """Settings of the monitor beside the observer's and the estimator's.
+
+    zeta_source: "estimator" (hobby servos: the arm samples carry the commanded angle) or "measured" (they carry the
+    measured angle and velocity); time_source: "auto" | "board" | "stamp" (hexa.estimation.SampleSequencer);
+    sim_clock: board time is sim time (the simulator's virtual boards); pose_delay (s): camera poses enter at sample
+    time image stamp + pose_delay; reseed_distance (m): a camera pose re-seeds the observer's pose tracking when this
+    far from it; command_delay (s): the servo model's command latency."""
+
+    zeta_source: str = "estimator"
+    time_source: str = "auto"
+    sim_clock: bool = False
+    pose_delay: float = 0.5
+    reseed_distance: float = 0.005
+    command_delay: float = 0.0
+
+    def __post_init__(self) -> None:
+        if self.zeta_source not in ZETA_SOURCES:
+            raise ValueError(f"zeta_source must be 'estimator' or 'measured', got {self.zeta_source!r}")
+        if self.time_source not in ("auto", "board", "stamp"):
+            raise ValueError(f"time_source must be 'auto', 'board' or 'stamp', got {self.time_source!r}")
+        if not (math.isfinite(self.pose_delay) and 0.0 <= self.pose_delay <= 0.9):
+            raise ValueError(f"pose_delay must be in [0, 0.9] s (estimator history 1 s), got {self.pose_delay!r}")
+        if not (math.isfinite(self.reseed_distance) and self.reseed_distance > 0):
+            raise ValueError(f"reseed_distance must be > 0 m, got {self.reseed_distance!r}")
+
+
+@dataclass(frozen=True)
+class MonitorSample:
+    """One monitored sample: the observer's output, ζ and ζ̇ it used (rad, rad/s) and the measured τ (N·m)."""
+
+    time: float
+    residual: ResidualSample
+    zeta: NDArray
+    zeta_dot: NDArray | None
+    tau: NDArray
+
+
+class CollisionMonitor:
+    """Estimator + residual observer + collision detector on the driver's sample streams (module docstring).
+
+    Usage:
+        mon = CollisionMonitor(desc)
+        for s in mon.push_currents(stamp, board_time_us, currents): publish(s.residual, ...)
+        for s in mon.push_states(stamp, commanded, velocity, effort): ...
+        for s in mon.push_pose(image_stamp, pose): ...
+
+    Raises (constructor, configure):
+        ValueError (ObserverError, EstimationError): a setting out of range, naming it.
+    """
+
+    def __init__(self, desc: Any, config: MonitorConfig | None = None, observer: ObserverConfig | None = None,
+                 estimator: EstimatorConfig | None = None) -> None:
+        from hexa.dynamics.lagrange import HexaDynamicParameters
+
+        self.desc = desc
+        self.config = config or MonitorConfig()
+        self.k_t = float(desc.K_t)
+        self.observer = ResidualObserver(HexaDynamicParameters.from_description(desc), observer or ObserverConfig())
+        self.estimator = ZetaEstimator(desc, ServoModel.from_description(desc, command_delay=self.config.command_delay),
+                                       estimator or EstimatorConfig())
+        self.clock = SampleClock(fixed_offset=0.0 if self.config.sim_clock else None)
+        self.sequencer = SampleSequencer(self.config.time_source, pose_delay=self.config.pose_delay)
+        self.rejects = {"bad_currents": 0, "board_time": 0, "bad_joint_names": 0, "bad_pose": 0, "estimator": 0,
+                        "observer": 0}
+        self.settling = 0
+        self.log: list[str] = []   # what the owner should log (calibration results)
+        self._tracking = False
+        self._pose_hist: deque[tuple[float, NDArray]] = deque()   # (t, tracked plate pose) for the re-seed test
+        self._calib_until: float | None = None
+        self.t = -math.inf
+
+    # ------------------------------------------------------------------ settings and control
+    def configure(self, observer: ObserverConfig | None = None, estimator: EstimatorConfig | None = None,
+                  reseed_distance: float | None = None) -> None:
+        """Apply new settings at run time (the detector's thresholds take effect at the next sample)."""
+        if reseed_distance is not None:
+            self.config = dataclasses.replace(self.config, reseed_distance=float(reseed_distance))
+        if observer is not None:
+            self.observer.set_config(observer)
+        if estimator is not None:
+            self.estimator.config = estimator
+
+    def reset(self, recalibrate: bool = False, duration: float = 1.0) -> str:
+        """Re-zero the observer and restart the estimator; with `recalibrate`, average the rest offset over the next
+        `duration` s of samples (robot at rest, untouched). Returns what was done."""
+        self.observer.reset()
+        self.estimator.reset()
+        self._tracking = False
+        self._pose_hist.clear()
+        if not recalibrate:
+            return "reset"
+        self.observer.start_calibration()
+        self._calib_until = (self.t if math.isfinite(self.t) else 0.0) + float(duration)
+        return f"reset; recalibrating the rest offset over {float(duration):g} s"
+
+    @property
+    def board_seen(self) -> bool:
+        """True once the sample times come from the current board's clock."""
+        return self.sequencer.board
+
+    # ------------------------------------------------------------------ inputs
+    def push_currents(self, stamp: float, board_us: int, currents: Any) -> list[MonitorSample]:
+        """A current sample (A) received at host time `stamp` with board time `board_us` (µs)."""
+        cur = np.asarray(currents, dtype=float)
+        if cur.shape != (6,):
+            self.rejects["bad_currents"] += 1
+            return []
+        t = self.clock.time(stamp, board_us)
+        if t is None:
+            self.rejects["board_time"] += 1
+            return []
+        return self._run(self.sequencer.push_currents(stamp, t, self.k_t * cur))
+
+    def push_states(self, stamp: float, position: NDArray | None, velocity: NDArray | None,
+                    effort: NDArray | None) -> list[MonitorSample]:
+        """A joint_states sample: commanded (or measured) ζ, velocity and effort (None when absent)."""
+        if position is None:
+            self.rejects["bad_joint_names"] += 1
+            return []
+        if effort is None and not self.sequencer.board:
+            self.rejects["bad_joint_names"] += 1
+        return self._run(self.sequencer.push_states(stamp, position, velocity, effort))
+
+    def push_pose(self, stamp: float, pose: NDArray) -> list[MonitorSample]:
+        """A camera plate pose [x y z α β γ] (Z-Y-X, m, rad) at image time `stamp`."""
+        pose = np.asarray(pose, dtype=float)
+        if pose.shape != (6,) or not np.all(np.isfinite(pose)):
+            self.rejects["bad_pose"] += 1
+            return []
+        return self._run(self.sequencer.push_pose(stamp, pose))
+
+    # ------------------------------------------------------------------ the pipeline
+    def _run(self, items: list[tuple]) -> list[MonitorSample]:
+        out = []
+        for item in items:
+            if item[0] == "sample":
+                s = self._sample(*item[1:])
+                if s is not None:
+                    out.append(s)
+            else:
+                self._camera(item[1], item[2])
+        return out
+
+    def _camera(self, t: float, pose: NDArray) -> None:
+        """A camera pose (image time t), released by the sequencer at sample time t + pose_delay."""
+        if self.config.zeta_source == "estimator":
+            self.estimator.update_camera(t, pose)
+        tracked = self._tracked_pose_at(t)
+        if tracked is None or float(np.max(np.abs(tracked[:3] - pose[:3]))) > self.config.reseed_distance:
+            # the observer takes a camera seed only when it is not older than its tracked pose
+            self.observer.update_pose(max(t, self.t), pose)
+
+    def _tracked_pose_at(self, t: float) -> NDArray | None:
+        if not self._tracking:
+            return None
+        for ts, p in reversed(self._pose_hist):
+            if ts <= t:
+                return p
+        return None
+
+    def _sample(self, t: float, pos: NDArray, tau: NDArray, vel: NDArray | None) -> MonitorSample | None:
+        if self.config.zeta_source == "estimator":
+            e = self.estimator.update(t, pos, tau)
+            if e is None:
+                self.rejects["estimator"] += 1
+                return None
+            if not e.settled:  # ζ̇ still converging after a (re)start: the observer restarts after it
+                self.settling += 1
+                return None
+            zeta, zeta_dot = e.zeta, e.zeta_dot
+        else:
+            zeta, zeta_dot = pos, vel
+        out = self.observer.update_arm(t, zeta, tau, zeta_dot)
+        self._tracking = out is not None
+        if out is None:
+            self.rejects["observer"] += 1
+            return None
+        self.t = t
+        self._pose_hist.append((t, np.asarray(out.pose, dtype=float)))
+        while self._pose_hist and self._pose_hist[0][0] < t - 1.0:
+            self._pose_hist.popleft()
+        if self._calib_until is not None and t >= self._calib_until:
+            self._calib_until = None
+            try:
+                off = self.observer.finish_calibration()
+                self.log.append(f"observer offset recalibrated: {np.round(off, 4).tolist()}")
+            except ObserverError as exc:
+                self.log.append(f"recalibration failed: {exc}")
+        return MonitorSample(t, out, zeta, zeta_dot, tau)
+
+    def counters(self) -> dict[str, Any]:
+        """Counters for diagnostics: accepted samples, events, rejects by reason of each stage."""
+        obs, est, seq = self.observer, self.estimator, self.sequencer
+        values: dict[str, Any] = {"accepted": obs.accepted, "collisions": obs.detector.count,
+                                  "in_collision": obs.detector.active, "servo_saturated_samples": est.saturated,
+                                  "camera_accepted": est.camera_accepted, "late_poses": seq.late_poses,
+                                  "unpaired_samples": seq.unpaired,
+                                  "time_source": "board" if seq.board else "stamp",
+                                  "estimator_settling_samples": self.settling}
+        values.update({f"reject_node_{k}": v for k, v in self.rejects.items()})
+        values.update({f"reject_observer_{k}": v for k, v in obs.rejected.items()})
+        values.update({f"reject_estimator_{k}": v for k, v in est.rejected.items()})
+        return values
