@@ -30,6 +30,13 @@ NODES: list[tuple[str, str, bool, tuple[str, ...]]] = [
     ("srm", "hexa_dynamics.srm_node", True, ("upsrpu",)),
 ]
 MODES = ("sim", "robot", "replay", "upsrpu")
+#: the node class of each module (for composition: hexa_ros.compose builds it)
+NODE_CLASSES = {"hexa_vision.pose_node": "PoseNode", "hexa_vision.isolation_node": "IsolationNode",
+                "hexa_dynamics.observer_node": "ObserverNode", "hexa_dynamics.rnea_node": "RneaNode",
+                "hexa_dynamics.singularity_node": "SingularityNode"}
+#: `--compose`: the processes that hold several nodes each. Vision (pose + isolation) and dynamics (observer + rnea +
+#: singularity) stay apart: the observer's per-sample latency must not wait for a camera frame's marker fit.
+COMPOSED = {"vision": ("pose", "isolation"), "dynamics": ("observer", "rnea", "singularity")}
 
 
 def module_available(module: str) -> bool:
@@ -51,8 +58,11 @@ def ros_args(name: str, namespace: str, params: Path | None, sim_time: bool, ext
 
 
 def build_graph(mode: str, namespace: str = "/hexa", params: Path | None = DEFAULT_PARAMS,
-                node_args: dict[str, list[str]] | None = None) -> list[NodeSpec]:
+                node_args: dict[str, list[str]] | None = None, compose: bool = False) -> list[NodeSpec]:
     """NodeSpecs for `mode` in MODES ("sim", "robot", "replay" for the Hexa; "upsrpu" for the 3UPS+RPU).
+
+    compose: the nodes of each COMPOSED group that take no extra arguments run in one process
+    (hexa_ros.compose), named after the group; the others keep a process each.
 
     Raises:
         SupervisorError: a required node's module is not installed (names it and the package to build).
@@ -76,7 +86,26 @@ def build_graph(mode: str, namespace: str = "/hexa", params: Path | None = DEFAU
         raise SupervisorError(f"cannot bring up '{mode}': required node module(s) not installed: "
                               f"{', '.join(missing)}. Run `make setup`; if the module does not exist in this "
                               f"checkout, that node is not written yet (see README, Status).")
-    return specs
+    return _composed(specs, mode, namespace, params, node_args or {}) if compose else specs
+
+
+def _composed(specs: list[NodeSpec], mode: str, namespace: str, params: Path | None,
+              node_args: dict[str, list[str]]) -> list[NodeSpec]:
+    """`specs` with each COMPOSED group's nodes (those without extra arguments) in one hexa_ros.compose process."""
+    modules = {name: module for name, module, _r, modes in NODES if mode in modes}
+    present = {s.name: s for s in specs}
+    out, grouped = [], set()
+    for group, members in COMPOSED.items():
+        names = [n for n in members if n in present and not node_args.get(n) and modules[n] in NODE_CLASSES]
+        if len(names) < 2:
+            continue
+        parts = [f"{n}={modules[n]}:{NODE_CLASSES[modules[n]]}" for n in names]
+        args = ros_args(group, namespace, params, mode in ("sim", "replay"))
+        del args[3:5]              # no global "-r __node:=": each composed node is renamed on its own
+        cmd = [sys.executable, "-m", "hexa_ros.compose", *parts] + args
+        out.append(NodeSpec(group, cmd, required=any(present[n].required for n in names)))
+        grouped.update(names)
+    return [s for s in specs if s.name not in grouped] + out
 
 
 def load_graph_file(path: str | Path) -> list[NodeSpec]:

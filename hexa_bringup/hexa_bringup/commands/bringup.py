@@ -26,6 +26,9 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="the trajectory node first moves the arms from the camera's plate pose to the trajectory's "
                         "start at most this fast (rad/s); 0 = off (first command at full servo speed). "
                         f"Default {ROBOT_APPROACH_SPEED} in robot mode, 0 in sim (the simulator starts there)")
+    p.add_argument("--compose", action="store_true",
+                   help="run pose + isolation in one process and observer + rnea + singularity in another "
+                        "(hexa_ros.compose; fewer processes, one interpreter per group)")
     p.add_argument("--rate", type=float, default=1.0, help="replay: playback rate")
     p.add_argument("--log-dir", default=None, help="write each node's output to DIR/<node>.log")
     p.add_argument("--duration", type=float, default=0.0, help="stop after this many seconds (0 = until Ctrl-C)")
@@ -74,7 +77,7 @@ def run(args: argparse.Namespace) -> int:
             node_args = mode_node_args(args)
             params = Path(args.params) if args.params else DEFAULT_PARAMS
             ns = args.ns or ("/upsrpu" if args.mode == "upsrpu" else "/hexa")
-            specs = build_graph(args.mode, ns, params, node_args)
+            specs = build_graph(args.mode, ns, params, node_args, compose=args.compose)
             if args.mode == "replay":
                 if not args.bag:
                     raise SupervisorError("replay mode needs a BAG argument")
