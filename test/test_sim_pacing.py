@@ -1,4 +1,4 @@
-"""The simulator's real-time pacing (hexa_bringup.pacing.Pacer) on a fake wall clock: after a stall (a camera render)
+"""The simulator's real-time pacing (hexa.sim.pacing.Pacer) on a fake wall clock: after a stall (a camera render)
 the loop does not catch up in a burst, so sim time never runs faster than the requested real-time factor."""
 from __future__ import annotations
 
@@ -6,7 +6,7 @@ import math
 
 import pytest
 
-from hexa_bringup.pacing import Pacer
+from hexa.sim.pacing import Pacer
 
 
 class FakeWall:
@@ -81,3 +81,47 @@ def test_factor_zero_never_sleeps_and_bad_values_are_refused():
         Pacer(0.3, float("nan"))
     with pytest.raises(ValueError, match="real_time_factor"):
         Pacer(float("inf"))
+
+
+def test_sim_runner_publishes_clock_truth_and_cameras_at_their_sim_rates():
+    from hexa.sim.pacing import SimRunner
+
+    class Sim:
+        timestep = 0.001
+
+        def __init__(self) -> None:
+            self.time = 0.0
+
+        def step(self, n: int) -> None:
+            self.time += n * self.timestep
+
+    class Out:
+        def __init__(self, sim: Sim) -> None:
+            self.sim, self.log = sim, []
+
+        def clock(self) -> None:
+            self.log.append(("clock", round(self.sim.time, 6)))
+
+        def truth(self) -> None:
+            self.log.append(("truth", round(self.sim.time, 6)))
+
+        def cameras(self) -> None:
+            self.log.append(("cameras", round(self.sim.time, 6)))
+
+        def spin(self) -> None:
+            self.log.append(("spin", round(self.sim.time, 6)))
+
+    wall = FakeWall()
+    sim = Sim()
+    runner = SimRunner(sim, Pacer(1.0, clock=wall.clock, sleep=wall.sleep), clock_rate=250, truth_rate=100,
+                       camera_rate=30, duration=1.0, start_delay=1.2, clock=wall.clock, sleep=wall.sleep)
+    out = Out(sim)
+    runner.run(out, lambda: True)
+    held = [e for e in out.log if e[1] == 0.0]
+    stepped = [e for e in out.log if e[1] > 0.0]
+    assert sum(1 for k, _ in held if k == "spin") == 3                    # 1.2 s held in 0.5 s sleeps
+    count = {k: sum(1 for kk, _ in stepped if kk == k) for k in ("clock", "truth", "cameras", "spin")}
+    assert count == {"clock": 250, "truth": 100, "cameras": 30, "spin": 19}
+    cams = [t for k, t in stepped if k == "cameras"]
+    assert cams[0] == pytest.approx(1 / 30, abs=1e-3) and all(b - a < 0.035 for a, b in zip(cams, cams[1:]))
+    assert sim.time == pytest.approx(1.0) and wall.t == pytest.approx(1.2 + 1.0, abs=0.01)

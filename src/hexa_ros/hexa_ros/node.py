@@ -29,6 +29,12 @@ def _raise_keyboard_interrupt(_signum: int, _frame: Any) -> None:
     raise KeyboardInterrupt
 
 
+def install_signal_handlers() -> None:
+    """SIGINT and SIGTERM raise KeyboardInterrupt in the main thread (rclpy's own handler stays off)."""
+    signal.signal(signal.SIGINT, _raise_keyboard_interrupt)
+    signal.signal(signal.SIGTERM, _raise_keyboard_interrupt)
+
+
 def make_executor(kind: str, context: Any = None) -> Any:
     """An executor of `kind` ("events": rclpy.experimental.EventsExecutor; "single": SingleThreadedExecutor).
 
@@ -84,8 +90,7 @@ def run(factories: Sequence[Callable[..., Any]], name: str, argv: list[str] | No
     from hexa_ros.env import apply_defaults
 
     apply_defaults()
-    signal.signal(signal.SIGINT, _raise_keyboard_interrupt)
-    signal.signal(signal.SIGTERM, _raise_keyboard_interrupt)
+    install_signal_handlers()
     rclpy.init(args=argv if argv is not None else sys.argv, signal_handler_options=SignalHandlerOptions.NO)
     nodes: list[Any] = []
     try:
