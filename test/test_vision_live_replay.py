@@ -1,9 +1,9 @@
-"""Live-graph regression for the collision isolation (issues 7/8): a short bag recorded from the simulator (the plate
-scenario of `hexa demo` with a 1 s lead-in, the border point moved to -100 deg so that the pushing capsule clears the
-rods: the nominal -77 deg lies 5 mm from rod 5's joint and the scripted capsule passes through rod 5) is replayed in
-receive order
-the way the isolation node sees it — camera frames on time, `plate_pose` 0.3 s late, as the pose node delivers it
-under load — and the frame pair at the collision is isolated with the pose of its own stamp (PoseBuffer).
+"""Live-graph regression for the collision isolation: a short bag recorded from the simulator (the plate scenario of
+`hexa demo` with a 1 s lead-in, the border point moved to -100 deg so that the pushing capsule clears the rods: the
+nominal -77 deg lies 5 mm from rod 5's joint and the scripted capsule passes through rod 5) is replayed in receive
+order through the isolation node's core (hexa.vision.isolation_scheduler, receive time as the wall clock) the way
+the node sees it — camera frames on time, `plate_pose` 0.3 s late, as the pose node delivers it under load — and
+the onset pair is isolated with the pose of its own stamp (PoseBuffer), not with the stale newest pose.
 
 Also: PoseBuffer invariants (interpolation hits the stored poses, `covers` semantics) with hypothesis.
 """
@@ -137,63 +137,63 @@ def _record_bag(path, seed: int = 0, position_deg: float = -100.0) -> dict:
 
 @pytest.mark.skipif(not os.environ.get("MUJOCO_GL"), reason="needs a headless MuJoCo renderer (MUJOCO_GL=egl)")
 def test_live_replay_isolates_the_plate_corner_contact(tmp_path) -> None:
-    from hexa.vision.isolation import LINK_PLATE, CollisionIsolator, RobotGeometry
+    import math
+
+    from scipy.spatial.transform import Rotation
+
+    from hexa.vision.isolation import LINK_PLATE, RobotGeometry
+    from hexa.vision.isolation_scheduler import BACKGROUND, ContactLocator, IsolationScheduler
     from hexa.vision.markers import pose_from_transform
-    from hexa.vision.sync import FrameAssembler
+    from hexa.vision.sync import RawImage
     from hexa_bringup.bag import read_bag, typestore
 
     rec = _record_bag(tmp_path / "bag")
     cams = rec["cameras"]
     store = typestore()
-    iso = CollisionIsolator(cams)
-    asm = {c: FrameAssembler(c, cams[c].T_base_camera) for c in cams}
-    for c, a in asm.items():
+    sched = IsolationScheduler(tuple(cams), background_delay=0.0)
+    locator = ContactLocator(rec["desc"], cams)
+    for c, a in locator.assemblers.items():
         a.set_camera_info(cams[c].width, cams[c].height, cams[c].K.reshape(-1).tolist(), [0.0] * 5)
-    poses = PoseBuffer()
-    frames: dict[str, list] = {c: [] for c in cams}
     stale_pose_at_event = None
-    pending = None
     results = []
     for topic, mt, t_ns, data in read_bag(tmp_path / "bag"):
-        t_recv = t_ns * 1e-9
+        now = t_ns * 1e-9                                    # receive time is the wall clock of the replay
         m = store.deserialize_cdr(data, mt)
         stamp = m.header.stamp.sec + m.header.stamp.nanosec * 1e-9
         if topic.endswith("plate_pose"):
             p, q = m.pose.position, m.pose.orientation
-            from scipy.spatial.transform import Rotation
-
             T = np.eye(4)
             T[:3, :3] = Rotation.from_quat([q.x, q.y, q.z, q.w]).as_matrix()
             T[:3, 3] = [p.x, p.y, p.z]
-            poses.add(stamp, T)
+            sched.add_pose(stamp, T)
         else:
             cam = topic.split("/")[2]
-            args = (stamp, m.height, m.width, m.encoding, m.is_bigendian, m.step, bytes(m.data))
-            f = asm[cam].add_depth(*args) if "depth" in topic else asm[cam].add_color(*args)
-            if f is not None:
-                frames[cam].append(f)
-                if cam not in iso.backgrounds:
-                    iso.set_background(cam, f.rgb, f.depth)
-        if pending is None and t_recv >= rec["t_event"] and all(frames.values()):
-            # the collision START: the pair nearest the onset; the newest pose at this moment is POSE_LAG old
-            pending = {c: min(fs, key=lambda f: abs(f.stamp - rec["t_event"])) for c, fs in frames.items()}
-            stale_pose_at_event = poses._poses[-1]
-        if pending is not None and not results:
-            s = max(f.stamp for f in pending.values())
-            if poses.covers(s):
-                T = poses.at(s, 0.2)
-                geom = RobotGeometry.from_state(rec["desc"], pose_from_transform(T))
-                results.append((s, iso.isolate({c: (f.rgb, f.depth) for c, f in pending.items()}, geom)))
-    assert pending is not None and results, "the replay never reached the collision with a covering pose"
+            raw = RawImage(stamp, m.height, m.width, m.encoding, m.is_bigendian, m.step, m.data)
+            sched.add_image(cam, raw, "depth" not in topic, now)
+        if stale_pose_at_event is None and now >= rec["t_event"] and all(sched.frames.values()):
+            # the collision START: the newest pose at this moment is POSE_LAG old
+            stale_pose_at_event = sched.poses.before(math.inf)
+            sched.collision_start(1, rec["t_event"], now)
+        for work in sched.due(now):
+            if work.kind == BACKGROUND:
+                if locator.take_background(work):
+                    sched.background_taken(next(iter(work.frames)))
+            elif not results:
+                assert work.debug and not work.coarse      # the onset pair, with a camera pose of its stamp
+                results.append(locator.locate(work))
+    assert stale_pose_at_event is not None and results and results[0] is not None, \
+        f"the replay never isolated the onset pair: {dict(sched.counters)} {dict(locator.all_counters())}"
+    found = results[0]
+    s = found.work.stamp
     # the newest pose at the START belongs to an earlier frame: the reason the node waits
-    assert stale_pose_at_event[0] < max(f.stamp for f in pending.values()) - 0.2
-    s, est = results[0]
+    assert stale_pose_at_event[0] < s - 0.2
+    est = found.estimate
     link, chain, point, in_contact = rec["truth"][min(rec["truth"], key=lambda k: abs(k - s))]
     assert in_contact and link == "plate"
     assert est.link == LINK_PLATE and est.chain == 0, est.per_camera
     assert np.linalg.norm(est.point - point) <= 0.010
-    # what the node did before: the robot drawn from the newest pose at the START (0.3 s stale) is not where the
-    # frame shows it, and the uncovered robot pixels read as an object touching a link
-    stale = iso.isolate({c: (f.rgb, f.depth) for c, f in pending.items()},
-                        RobotGeometry.from_state(rec["desc"], pose_from_transform(stale_pose_at_event[1])))
+    # the robot drawn from the newest pose at the START (0.3 s stale) is not where the frame shows it, and the
+    # uncovered robot pixels read as an object touching a link
+    stale = locator.isolator.isolate({c: (f.rgb, f.depth) for c, f in found.frames.items()},
+                                     RobotGeometry.from_state(rec["desc"], pose_from_transform(stale_pose_at_event[1])))
     assert stale.link != LINK_PLATE or np.linalg.norm(stale.point - point) > 0.010

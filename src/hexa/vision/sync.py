@@ -1,4 +1,5 @@
-"""Pairing of colour, depth and camera_info by stamp (no message_filters here), with reject counters."""
+"""Pairing of colour, depth and camera_info by stamp (no message_filters here), with reject counters; decoding on
+demand (`ImagePairer` pairs undecoded images, `FrameAssembler.assemble` decodes a pair when it is needed)."""
 from __future__ import annotations
 
 from collections import Counter, deque
@@ -21,6 +22,56 @@ class RGBDFrame:
     camera: CameraModel
 
 
+@dataclass(frozen=True)
+class RawImage:
+    """The fields of a sensor_msgs/Image, not decoded: stamp (s) and `data` as any buffer (a zero-copy numpy view of
+    the message's data keeps the message's memory alive and copies nothing)."""
+
+    stamp: float
+    height: int
+    width: int
+    encoding: str
+    is_bigendian: int
+    step: int
+    data: Any
+
+
+@dataclass(frozen=True)
+class RawFrame:
+    """A colour and a depth image of one camera with matching stamps, not decoded (`FrameAssembler.assemble`)."""
+
+    stamp: float
+    color: RawImage
+    depth: RawImage
+
+
+class ImagePairer:
+    """Pairs the colour and depth images of one camera by stamp without decoding them.
+
+    Args:
+        tolerance: largest colour/depth stamp difference (s) to pair.
+        keep: how many unpaired images of each kind to keep.
+    """
+
+    def __init__(self, tolerance: float = 0.005, keep: int = 5) -> None:
+        self.tolerance = tolerance
+        self._color: deque[RawImage] = deque(maxlen=keep)
+        self._depth: deque[RawImage] = deque(maxlen=keep)
+        self.frames = 0
+
+    def add(self, image: RawImage, color: bool) -> RawFrame | None:
+        """Store a colour (`color` True) or depth image; the pair it completes, or None."""
+        mine, other = (self._color, self._depth) if color else (self._depth, self._color)
+        for j, partner in enumerate(other):
+            if abs(partner.stamp - image.stamp) <= self.tolerance:
+                del other[j]
+                self.frames += 1
+                c, d = (image, partner) if color else (partner, image)
+                return RawFrame(c.stamp, c, d)
+        mine.append(image)
+        return None
+
+
 class FrameAssembler:
     """Collects colour, depth and camera_info fields of one camera and emits RGB-D frames whose stamps match.
 
@@ -39,32 +90,65 @@ class FrameAssembler:
         self.T = np.asarray(T_base_camera, float)
         self.tolerance = tolerance
         self.camera: CameraModel | None = None
+        self._info: tuple = ()
         self._color: deque[tuple[float, np.ndarray]] = deque(maxlen=keep)
         self._depth: deque[tuple[float, np.ndarray]] = deque(maxlen=keep)
         self.rejects: Counter[str] = Counter()
         self.frames = 0
 
     def set_camera_info(self, width: int, height: int, k: Any, d: Any = None) -> None:
-        """Update the intrinsics from CameraInfo fields (bad ones are counted and ignored)."""
+        """Update the intrinsics from CameraInfo fields (bad ones are counted and ignored; a repeat of the current
+        ones costs a comparison)."""
+        key = (int(width), int(height), tuple(k), tuple(d) if d is not None else ())
+        if self.camera is not None and key == self._info:
+            return
         try:
             self.camera = CameraModel.from_camera_info(width, height, k, d, self.T, self.name,
                                                        self.name + "_color_optical_frame")
+            self._info = key
         except CameraModelError:
             self.rejects["bad camera_info"] += 1
 
     def add_color(self, stamp: float, height: int, width: int, encoding: str, is_bigendian: int, step: int,
                   data: Any) -> RGBDFrame | None:
-        try:
-            rgb = np.ascontiguousarray(to_rgb(image_to_numpy(height, width, encoding, is_bigendian, step, data),
-                                              encoding))
-        except ImageConversionError:
-            self.rejects["bad colour image"] += 1
+        rgb = self._rgb(height, width, encoding, is_bigendian, step, data)
+        if rgb is None:
             return None
         self._color.append((stamp, rgb))
         return self._match()
 
     def add_depth(self, stamp: float, height: int, width: int, encoding: str, is_bigendian: int, step: int,
                   data: Any) -> RGBDFrame | None:
+        depth = self._depth_m(height, width, encoding, is_bigendian, step, data)
+        if depth is None:
+            return None
+        self._depth.append((stamp, depth))
+        return self._match()
+
+    def assemble(self, raw: RawFrame) -> RGBDFrame | None:
+        """Decode a paired colour/depth frame (bad input is counted in `rejects` like `add_color`/`add_depth`;
+        without camera_info nothing is decoded)."""
+        if self.camera is None:
+            self.rejects["no camera_info"] += 1
+            return None
+        c, d = raw.color, raw.depth
+        rgb = self._rgb(c.height, c.width, c.encoding, c.is_bigendian, c.step, c.data)
+        depth = self._depth_m(d.height, d.width, d.encoding, d.is_bigendian, d.step, d.data)
+        if rgb is None or depth is None:
+            return None
+        return self._emit(raw.stamp, rgb, depth)
+
+    def _rgb(self, height: int, width: int, encoding: str, is_bigendian: int, step: int, data: Any
+             ) -> np.ndarray | None:
+        try:
+            return np.ascontiguousarray(to_rgb(image_to_numpy(height, width, encoding, is_bigendian, step, data),
+                                               encoding))
+        except ImageConversionError:
+            self.rejects["bad colour image"] += 1
+            return None
+
+    def _depth_m(self, height: int, width: int, encoding: str, is_bigendian: int, step: int, data: Any
+                 ) -> np.ndarray | None:
         try:
             depth = depth_to_meters(image_to_numpy(height, width, encoding, is_bigendian, step, data), encoding)
         except ImageConversionError:
@@ -73,8 +157,7 @@ class FrameAssembler:
         if not np.any(np.isfinite(depth)):
             self.rejects["empty depth"] += 1
             return None
-        self._depth.append((stamp, depth))
-        return self._match()
+        return depth
 
     def _match(self) -> RGBDFrame | None:
         for i, (tc, rgb) in enumerate(self._color):
@@ -132,6 +215,13 @@ class PoseBuffer:
     def latest(self) -> float | None:
         """Stamp of the newest pose, or None."""
         return self._poses[-1][0] if self._poses else None
+
+    def before(self, stamp: float) -> tuple[float, np.ndarray] | None:
+        """The newest pose at or before `stamp` as (stamp, 4x4), or None."""
+        for t, T in reversed(self._poses):
+            if t <= stamp:
+                return t, T
+        return None
 
     def covers(self, stamp: float, tolerance: float = 1e-3) -> bool:
         """True when a pose at or after `stamp` (less `tolerance` s) has arrived."""
