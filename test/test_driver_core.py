@@ -94,11 +94,27 @@ def test_the_slew_allowance_builds_up_over_one_command_period_at_most(core, desc
                    slew_period=-0.01)
 
 
-@pytest.mark.parametrize("key, value", [("max_speed", -1.0), ("max_speed", float("nan")), ("command_rate_hz", 0.0)])
+@pytest.mark.parametrize("key, value", [("max_speed", -1.0), ("max_speed", float("nan")), ("command_rate_hz", 0.0),
+                                        ("stream_rate_hz", 0), ("stream_rate_hz", 5000)])
 def test_a_bad_speed_limit_or_command_rate_is_refused_naming_it(desc, key, value):
     cfg = dict(load_driver_config(), **{key: value})
     with pytest.raises(DriverConfigError, match=key):
         driver_core_from_config(cfg, desc.zeta_min, desc.zeta_max, desc.K_t)
+
+
+def test_the_links_of_a_config_carry_its_ports_limits_and_latch_report(core):
+    from hexa.protocol.driver_core import driver_links_from_config
+
+    states = []
+    cfg = dict(load_driver_config(), uno_port="/dev/null/uno", mega_port="/dev/null/mega", stream_rate_hz=500)
+    uno, mega = driver_links_from_config(cfg, core, print, on_latch=print, on_state=lambda *a: states.append(a))
+    assert (uno.port, mega.port, mega.rate_hz) == ("/dev/null/uno", "/dev/null/mega", 500)
+    assert uno.min_us == tuple(s.min_us for s in core.servos) and uno.on_latch is print
+    uno.on_state("CONNECTED")
+    mega.on_state("STALE")
+    assert states == [("uno", "CONNECTED"), ("mega", "STALE")]
+    uno, _ = driver_links_from_config(dict(cfg, latch_report=False), core, print, on_latch=print)
+    assert uno.on_latch is None
 
 
 def test_currents_torques_and_zero_current_calibration(core, desc):

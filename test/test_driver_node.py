@@ -310,13 +310,13 @@ def test_a_stopped_driver_dates_its_next_command_after_the_samples_that_waited_i
 def test_driver_refuses_a_negative_board_clock_extrapolation(procs, ros_env):
     p = procs.start([DRIVER, "--ros-args", "-p", "board_clock_max_extrapolation:=-1.0"], ros_env)
     _out, err = p.communicate(timeout=60)
-    assert p.returncode == 1 and "board_clock_max_extrapolation" in err, err
+    assert p.returncode == 2 and "board_clock_max_extrapolation" in err, err
 
 
 def test_driver_refuses_a_bad_command_sync_guard(procs, ros_env):
     p = procs.start([DRIVER, "--ros-args", "-p", "command_sync_guard:=0.01"], ros_env)
     _out, err = p.communicate(timeout=60)
-    assert p.returncode == 1 and "command_sync_guard" in err, err
+    assert p.returncode == 2 and "command_sync_guard" in err, err
 
 
 def test_each_servo_carries_the_set_point_its_last_pulse_latched(tmp_path, procs, ros_env, probe):

@@ -17,7 +17,7 @@ from typing import Sequence
 import numpy as np
 import yaml
 
-from hexa.protocol.frames import PULSE_MAX_US, PULSE_MIN_US
+from hexa.protocol.frames import MAX_RATE_HZ, MIN_RATE_HZ, PULSE_MAX_US, PULSE_MIN_US
 from hexa.protocol.sensor_model import CurrentSensorModel
 
 N_JOINTS = 6
@@ -302,8 +302,34 @@ def driver_core_from_config(cfg: dict, zeta_min, zeta_max, k_t,
     rate = float(cfg["command_rate_hz"])
     if not (math.isfinite(rate) and rate > 0):
         raise DriverConfigError(f"command_rate_hz must be > 0, got {cfg['command_rate_hz']}")
+    if not MIN_RATE_HZ <= int(cfg["stream_rate_hz"]) <= MAX_RATE_HZ:
+        raise DriverConfigError(f"stream_rate_hz must be in {MIN_RATE_HZ}..{MAX_RATE_HZ}, got {cfg['stream_rate_hz']}")
     return DriverCore(servos=servos, zeta_min=zeta_min, zeta_max=zeta_max,
                       k_t=k_t, sensor=CurrentSensorModel.from_dict(cfg["sensor"]),
                       max_speed=float(cfg["max_speed"]), slew_period=1.0 / rate,
                       joint_names=tuple(cfg["joint_names"]),
                       offsets=np.asarray(cfg["current_offsets"], dtype=float))
+
+
+def driver_links_from_config(cfg: dict, core: DriverCore, on_samples, on_latch=None, on_state=None):
+    """The (ServoLink, CurrentLink) of a driver config, not started (hexa.protocol.link).
+
+    Args:
+        cfg: the driver configuration (ports, baud, link supervision, watchdog, stream rate).
+        core: its servos' pulse limits go to the Uno (SET_LIMITS).
+        on_samples: `CurrentLink.on_samples`, called with each read's samples.
+        on_latch: `ServoLink.on_latch`, used with `latch_report` (else, or None, the Uno's latch report stays off).
+        on_state: called as `on_state(board, state)` with board "uno" or "mega".
+    """
+    from hexa.protocol.link import CurrentLink, ServoLink
+
+    common = dict(baud=int(cfg["baud"]), stale_timeout=float(cfg["stale_timeout"]),
+                  drop_after=float(cfg["drop_after"]), reconnect_period=float(cfg["reconnect_period"]),
+                  hello_timeout=float(cfg["hello_timeout"]), boot_delay=float(cfg["boot_delay"]))
+    state = (lambda board: None) if on_state is None else (lambda board: lambda s: on_state(board, s))
+    uno = ServoLink(str(cfg["uno_port"]), min_us=[s.min_us for s in core.servos],
+                    max_us=[s.max_us for s in core.servos], watchdog_ms=int(cfg["watchdog_ms"]),
+                    on_latch=on_latch if cfg["latch_report"] else None, on_state=state("uno"), **common)
+    mega = CurrentLink(str(cfg["mega_port"]), rate_hz=int(cfg["stream_rate_hz"]), on_samples=on_samples,
+                       on_state=state("mega"), **common)
+    return uno, mega

@@ -5,10 +5,10 @@ node classes in one process on one executor the same way.
 
 The executor is rclpy's EventsExecutor (C++ event queue): a 1 kHz JointState subscription costs ≈ 110-160 µs of CPU
 per message with it against ≈ 640 µs with the SingleThreadedExecutor on the 2-core robot PC (docs/node_layer.md).
-Its `spin()` does not return on SIGINT, so the loop below spins in bounded steps and Python's own SIGINT/SIGTERM
-handlers raise KeyboardInterrupt between them. rclpy's signal handler stays off: it would invalidate the context
-while a callback is still publishing. The bounded step also ends the wait when /clock stops (sim time, the
-simulator gone), where an unbounded wait would never return.
+Its `spin()` does not return on SIGINT, so the loop below spins in bounded steps and SIGINT/SIGTERM set a flag
+that ends the loop after the callback in progress (while nodes are built, they raise KeyboardInterrupt). rclpy's
+signal handler stays off: it would invalidate the context while a callback is still publishing. The bounded step
+also ends the wait when /clock stops (sim time, the simulator gone), where an unbounded wait would never return.
 """
 from __future__ import annotations
 
@@ -59,13 +59,27 @@ def executor_kind() -> str:
     return os.environ.get("HEXA_EXECUTOR", "events")
 
 
+class _StopRequest:
+    """Set by SIGINT/SIGTERM while an executor spins: the loop ends after the callback in progress (a
+    KeyboardInterrupt raised inside a callback would be logged by the executor as a FATAL callback failure)."""
+
+    requested = False
+
+    @classmethod
+    def handler(cls, _signum: int, _frame: Any) -> None:
+        cls.requested = True
+
+
 def spin_until_shutdown(executor: Any, step: float = SPIN_STEP) -> None:
-    """Spin `executor` in bounded steps until the context shuts down or SIGINT/SIGTERM (KeyboardInterrupt)."""
+    """Spin `executor` in bounded steps until the context shuts down or SIGINT/SIGTERM arrives."""
     import rclpy
     from rclpy.executors import ExternalShutdownException
 
+    _StopRequest.requested = False
+    signal.signal(signal.SIGINT, _StopRequest.handler)
+    signal.signal(signal.SIGTERM, _StopRequest.handler)
     try:
-        while rclpy.ok():
+        while rclpy.ok() and not _StopRequest.requested:
             executor.spin_once(timeout_sec=step)
     except (KeyboardInterrupt, ExternalShutdownException):
         pass

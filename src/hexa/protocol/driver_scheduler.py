@@ -1,0 +1,408 @@
+"""When each joint command goes out to the servo board, and which set-points each current sample carries.
+
+`DriverScheduler` is the driver's timing state between the two boards (docs/driver.md):
+
+- commands: the newest command waits while the previous one went out less than 1/`command_rate_hz` ago (faster
+  ones coalesce, the latest wins); with `command_sync` it is held until it would reach the Uno in the middle of the
+  pulse frame's quiet gap (`ServoFrameTimeline.aim`), three tries at most;
+- samples: the Mega's board clock mapped from the host's (`BoardClockMap`), each command dated on it when sent and
+  confirmed by the next read of the port (`CommandTimeline`), each sample paired with the set-points the servos acted
+  on when it was measured — from the Uno's reported pulse frames (`ServoFrameTimeline`) when it reports them;
+- LATCH reports: the Uno's frames moved onto the Mega's clock by the median offset between the two board clocks;
+- the zero-current calibration's averaging.
+
+Times are arguments (host monotonic seconds): nothing here reads a clock except `flush`, which dates a command after
+its bytes are written (`clock`). The serial link threads (`on_samples`, `on_latch`, `on_connected`) and the ROS
+callbacks (`submit`, `flush`, the calibration) may call in concurrently: every method that touches the shared state
+takes one lock.
+"""
+from __future__ import annotations
+
+import math
+import threading
+import time
+from collections import deque
+from collections.abc import Callable, Mapping, Sequence
+from typing import Any, NamedTuple
+
+import numpy as np
+
+from hexa.protocol import frames as fr
+from hexa.protocol.board_clock import BoardClockMap, CommandTimeline, ServoFrameTimeline
+from hexa.protocol.driver_core import N_JOINTS, DriverConfigError, DriverCore
+
+#: LATCH reports whose clock offsets (Uno board time − Mega board time) the median runs over: 1 s of 20 ms frames
+OFFSET_WINDOW = 50
+#: a command held for the quiet gap this many times goes anyway (the clocks disagree)
+MAX_GAP_DEFERRALS = 3
+#: fewest samples a zero-current calibration averages
+MIN_CALIBRATION_SAMPLES = 5
+
+
+class CalibrationRefused(RuntimeError):
+    """A zero-current calibration that cannot be done now; the message says why."""
+
+
+class SampleReading(NamedTuple):
+    """One current sample converted: motor currents I − I₀ (A), efforts τ = K_t (I − I₀) (N·m) and the six
+    set-points the servos acted on when it was measured (rad; NaN where unknown)."""
+
+    sample: fr.Sample
+    currents: np.ndarray
+    efforts: np.ndarray
+    setpoints: np.ndarray
+
+
+class DriverScheduler:
+    """Command scheduling and sample pairing of the serial driver (one per Uno + Mega pair).
+
+    Args:
+        core: the driver's conversions and command limits; `flush` records each command sent in it.
+        command_rate_hz: most SET_TARGETS per second.
+        max_extrapolation: `BoardClockMap.max_extrapolation` of both board clocks (s, ≥ 0).
+        latch_report: the Uno reports its pulse frames (`on_latch` is called).
+        command_sync: time commands into the frame's quiet gap (only with `latch_report`).
+        sync_guard: kept clear of the read points either side of the gap (s, in [0, 0.005)).
+
+    Raises:
+        DriverConfigError: a value out of range (named by its driver.yaml key).
+    """
+
+    def __init__(self, core: DriverCore, command_rate_hz: float, max_extrapolation: float = 0.01,
+                 latch_report: bool = True, command_sync: bool = False, sync_guard: float = 0.002) -> None:
+        rate, max_extrapolation, sync_guard = float(command_rate_hz), float(max_extrapolation), float(sync_guard)
+        if not (math.isfinite(rate) and rate > 0):
+            raise DriverConfigError(f"parameter command_rate_hz must be > 0, got {command_rate_hz}")
+        if not (math.isfinite(max_extrapolation) and max_extrapolation >= 0.0):
+            raise DriverConfigError(f"parameter board_clock_max_extrapolation must be >= 0 s, got {max_extrapolation}")
+        if not (math.isfinite(sync_guard) and 0.0 <= sync_guard < 0.005):
+            raise DriverConfigError(f"parameter command_sync_guard must be in [0, 0.005) s, got {sync_guard}")
+        self.core = core
+        self.min_interval = 1.0 / rate
+        self.latch_report = bool(latch_report)
+        self.command_sync = bool(command_sync) and self.latch_report
+        self.sync_guard = sync_guard
+        self.board_clock = BoardClockMap(max_extrapolation=max_extrapolation)   # the Mega's
+        self.uno_clock = BoardClockMap(max_extrapolation=max_extrapolation)     # stops as the Mega's does
+        self.timeline = CommandTimeline()
+        self.frames = ServoFrameTimeline()
+        if self.command_sync:   # one command per frame: the slew allowance builds up over a frame
+            core.slew_period = max(core.slew_period, self.frames.period)
+        self._lock = threading.Lock()
+        self._pending: np.ndarray | None = None
+        self._last_sent = -math.inf
+        self._held = False                        # a command waits for the quiet gap (the caller's timer runs)
+        self._aim_frame: float | None = None      # start (Mega clock) of the frame the command being sent is for
+        self._deferrals = 0                       # of the pending command
+        self._pulses_by_seq: dict[int, list[int]] = {}
+        self._uno_offsets: deque[float] = deque(maxlen=OFFSET_WINDOW)
+        self._board_restarts = 0
+        self._calib: list[tuple[int, ...]] | None = None
+        self._calib_submitted = 0
+        self._rate_mark: tuple[float, int] | None = None
+        self.sample_rate_hz = 0.0
+        self.submitted = 0              # commands handed to `submit`
+        self.tx_failures = 0            # commands the Uno's port did not take
+        self.latches_unmapped = 0       # LATCH reports before the Mega's clock was known
+        self.sync_held = 0              # commands held for the quiet gap
+        self.sync_sent_in_gap = 0       # commands sent when aimed at the gap (held or not)
+        self.sync_unsynced = 0          # commands sent without a gap to aim at, or given up on
+        self.last_sample_time = 0.0     # host time of the newest sample (0: none yet)
+
+    @classmethod
+    def from_config(cls, core: DriverCore, cfg: Mapping[str, Any]) -> DriverScheduler:
+        """The scheduler of a driver configuration (driver.yaml keys)."""
+        return cls(core, float(cfg["command_rate_hz"]), float(cfg["board_clock_max_extrapolation"]),
+                   bool(cfg["latch_report"]), bool(cfg["command_sync"]), float(cfg["command_sync_guard"]))
+
+    # ------------------------------------------------------------------------------------------ links
+    def on_connected(self, board: str) -> None:
+        """The link to `board` ("uno" or "mega") connected: the board may have restarted, its clock with it."""
+        with self._lock:
+            if board == "mega":
+                self.board_clock.reset()
+                self.timeline.rebase()
+            else:
+                self.uno_clock.reset()
+            self._uno_offsets.clear()
+            self.frames.reset()
+
+    # ------------------------------------------------------------------------------------------ commands
+    def submit(self, zeta: np.ndarray, now: float) -> bool:
+        """A checked command (six angles, rad) arrived at host time `now`: it replaces any command still waiting
+        (counted as coalesced). True when the rate limit lets it go at once (call `flush`)."""
+        with self._lock:
+            if self._pending is not None:
+                self.core.counters.coalesced += 1
+            self._pending = np.array(zeta, dtype=float)
+            self.submitted += 1
+            return now - self._last_sent >= self.min_interval
+
+    @property
+    def pending(self) -> np.ndarray | None:
+        """The command waiting to go out (None: none)."""
+        return self._pending
+
+    def flush(self, now: float, send: Callable[[list[int]], int | None],
+              clock: Callable[[], float] = time.monotonic, from_hold: bool = False) -> float | None:
+        """Send the waiting command at host time `now`, unless it is held for the quiet gap.
+
+        The command is clamped and slew-limited on the robot's time (the Mega's clock; before any sample the host's),
+        recorded in the core, written with `send` and dated on the Mega's clock at `clock()` read after the write
+        (the Uno cannot have it earlier), provisionally until the next read of the Mega's port.
+
+        Args:
+            now: host time (s).
+            send: writes six pulse widths (µs) to the Uno; the SEQ of the SET_TARGETS frame, None when not written.
+            clock: host clock read after the write.
+            from_hold: the caller's gap timer fired: the held command may go.
+
+        Returns:
+            Host seconds to wait before calling again with `from_hold` (the command is held for the gap: arm a
+            timer), else None (sent, nothing waiting, or a gap timer already runs).
+        """
+        with self._lock:
+            if from_hold:
+                self._held = False
+            if self._pending is None or self._held:
+                return None
+            self._aim_frame = None
+            wait = self._gap_wait(now)
+            if wait is not None:
+                self._held = True
+                return wait
+            self._deferrals = 0
+            zeta, self._pending = self._pending, None
+            board_now = self.board_clock.board_time_at(now)
+            robot_now = now if board_now is None else board_now
+            zeta = self.core.limit_command(zeta, robot_now)
+            pulses = self.core.accept(zeta, now, slew_now=robot_now)
+            seq = send(pulses)
+            t_sent = clock()
+            b_sent = self.timeline.add(self.board_clock.board_time_at(t_sent), self.core.commanded, sent_at=t_sent)
+            if seq is not None:
+                self.frames.add_command(seq, self.core.commanded, b_sent, aimed_at=self._aim_frame)
+                self._pulses_by_seq[int(seq) & 0xFF] = list(pulses)
+            else:
+                self.tx_failures += 1
+            self._last_sent = now
+        return None
+
+    def _gap_wait(self, now: float) -> float | None:
+        """With command_sync: host seconds to hold the waiting command so that it reaches the Uno in the middle of
+        the frame's quiet gap; None to send it now (in the gap already, no frame to aim at, or given up)."""
+        if not self.command_sync:
+            return None
+        board_now = self.board_clock.board_time_at(now)
+        aim = None if board_now is None else self.frames.aim(board_now, self.sync_guard)
+        if aim is None:                           # no frame reported yet: nothing to aim at
+            self.sync_unsynced += 1
+            return None
+        wait, frame_start = aim
+        if wait <= 0:
+            self.sync_sent_in_gap += 1
+            self._aim_frame = frame_start
+            return None
+        if self._deferrals >= MAX_GAP_DEFERRALS:  # the timer keeps missing the gap (the clocks disagree)
+            self.sync_unsynced += 1
+            return None
+        self._deferrals += 1
+        if self._deferrals == 1:
+            self.sync_held += 1
+        # board seconds to host seconds (sim time runs slower than the host's in simulation)
+        return min(wait / max(self.board_clock.rate, 1e-3), 1.0)
+
+    # ------------------------------------------------------------------------------------------ telemetry
+    def on_samples(self, samples: Sequence[fr.Sample], t_read: float, t_rx: float,
+                   servos_driven: bool = True) -> list[SampleReading]:
+        """One read of the Mega's port: its samples in order; the read started at host time `t_read` and returned at
+        `t_rx` (s). Each sample converted and paired with the set-points in effect when it was measured (all NaN
+        while `servos_driven` is False: no servo board, the arms' angle is unknown)."""
+        if not samples:
+            return []
+        with self._lock:
+            board_times = []
+            for sample in samples:
+                board_times.append(self.board_clock.update(sample.board_time_us, t_rx))
+                if self.board_clock.restarts != self._board_restarts:
+                    self._board_restarts = self.board_clock.restarts
+                    self.timeline.rebase()
+            # a command sent before this read is dated no earlier than its samples prove (CommandTimeline.confirm)
+            self.timeline.confirm(t_read, max(board_times), self.board_clock.rate)
+            setpoints = [self._setpoints_at(b) if servos_driven else None for b in board_times]
+            if self._calib is not None:
+                self._calib.extend(s.counts for s in samples)
+            self.last_sample_time = t_rx
+        return [self.reading(s, z) for s, z in zip(samples, setpoints)]
+
+    def reading(self, sample: fr.Sample, setpoints: np.ndarray | None) -> SampleReading:
+        """`sample` converted: currents, efforts and `setpoints` (None: unknown, NaN)."""
+        currents = self.core.currents_from_counts(sample.counts)
+        z = np.full(N_JOINTS, np.nan) if setpoints is None else np.asarray(setpoints, dtype=float)
+        return SampleReading(sample, currents, self.core.torques_from_currents(currents), z)
+
+    def setpoints_at(self, board_time: float) -> np.ndarray | None:
+        """The set-points the servos acted on at Mega board time `board_time` (s): from the Uno's pulse frames when
+        it reports them, else the command in effect (sent) then; None before any command."""
+        with self._lock:
+            return self._setpoints_at(board_time)
+
+    def _setpoints_at(self, board_time: float) -> np.ndarray | None:
+        z = self.frames.setpoints_at(board_time, self.timeline)
+        return self.timeline.at(board_time) if z is None else z
+
+    def on_latch(self, latch: fr.Latch, t_rx: float) -> None:
+        """A LATCH report from the Uno, arrived at host time `t_rx` (s): the frame's pulses onto the Mega's clock,
+        into the frame timeline.
+
+        The Uno sends it right after the frame's last pulse, so that pulse's end is what the Uno's clock read, at the
+        latest, when the report arrived, as the Mega's clock map says what the Mega's read then. Their difference is
+        the offset between the two board clocks plus the difference of the two delays; its median over the last
+        `OFFSET_WINDOW` frames (1 s) is the offset: crystals drift by ppm, constant over a second, and in simulation
+        both clocks are sim time and stop together while a camera frame renders, which a single mapping through the
+        host's clock would read as a jump."""
+        with self._lock:
+            widths = np.array([(self._pulses_by_seq.get(s) or [1500] * N_JOINTS)[i] for i, s in enumerate(latch.seqs)],
+                              dtype=float) * 1e-6
+            starts = np.asarray(latch.offsets_us, dtype=float) * 1e-6
+            end_us = (latch.frame_start_us + int(latch.offsets_us[-1]) + int(round(widths[-1] * 1e6))) & 0xFFFFFFFF
+            restarts = self.uno_clock.restarts
+            b_end = self.uno_clock.update(end_us, t_rx)     # unwrapped (the µs counter wraps, the board restarts)
+            if self.uno_clock.restarts != restarts:
+                self._uno_offsets.clear()
+                self.frames.reset()
+            mega_now = self.board_clock.board_time_at(t_rx)
+            if mega_now is None:
+                self.latches_unmapped += 1
+                return
+            self._uno_offsets.append(b_end - mega_now)
+            offset = float(np.median(self._uno_offsets))
+            frame_start = b_end - starts[-1] - widths[-1] - offset     # on the Mega's clock
+            self.frames.add_frame(frame_start, starts, starts + widths, np.asarray(latch.seqs), int(latch.mask),
+                                  commands=self.timeline)
+
+    @property
+    def clock_offset(self) -> float | None:
+        """Uno board time − Mega board time (s) as the LATCH reports measure it; None before any mapped report."""
+        with self._lock:
+            return float(np.median(self._uno_offsets)) if self._uno_offsets else None
+
+    # ------------------------------------------------------------------------------------------ calibration
+    def start_calibration(self, now: float, rest_quiet_time: float, link_state: str = "CONNECTED") -> None:
+        """Start averaging the samples for the zero-current offsets I₀ at host time `now` (s).
+
+        Args:
+            now: host time (s).
+            rest_quiet_time: the servos are at rest this long (s) after a command went out.
+            link_state: the current board link's state (hexa.protocol.link): samples come only when CONNECTED.
+
+        Raises:
+            CalibrationRefused: the link is not connected, a calibration runs already, or a command went out less
+                than `rest_quiet_time` s ago.
+        """
+        if link_state != "CONNECTED":
+            raise CalibrationRefused(f"current board link is {link_state}")
+        with self._lock:
+            if self._calib is not None:
+                raise CalibrationRefused("a calibration is running already")
+            t_cmd = self.core.last_command_time
+            if t_cmd is not None and now - t_cmd < rest_quiet_time:
+                raise CalibrationRefused(f"not at rest: a joint command arrived less than {rest_quiet_time} s ago")
+            self._calib = []
+            self._calib_submitted = self.submitted
+
+    def finish_calibration(self, duration: float) -> tuple[np.ndarray, int]:
+        """End the averaging started by `start_calibration` `duration` s ago; the offsets I₀ (A, now in effect) and
+        the number of samples averaged.
+
+        Raises:
+            CalibrationRefused: none was started, a command arrived meanwhile, or fewer than
+                MIN_CALIBRATION_SAMPLES samples came.
+        """
+        with self._lock:
+            samples, self._calib = self._calib, None
+            moved = self.submitted != self._calib_submitted
+        if samples is None:
+            raise CalibrationRefused("no calibration was started")
+        if moved:
+            raise CalibrationRefused("not at rest: joint commands arrived during the calibration")
+        if len(samples) < MIN_CALIBRATION_SAMPLES:
+            raise CalibrationRefused(f"only {len(samples)} samples in {duration} s")
+        return self.core.calibrate_offsets(np.asarray(samples)), len(samples)
+
+    # ------------------------------------------------------------------------------------------ diagnostics
+    def measure_sample_rate(self, now: float, samples: int) -> float:
+        """The sample rate (Hz) since the previous call, from the link's sample count `samples` at host time `now`."""
+        if self._rate_mark is not None and now > self._rate_mark[0]:
+            self.sample_rate_hz = (samples - self._rate_mark[1]) / (now - self._rate_mark[0])
+        self._rate_mark = (now, samples)
+        return self.sample_rate_hz
+
+
+class LinkReport(NamedTuple):
+    """One board's diagnostic status: level "OK", "WARN" or "ERROR", message, hardware id and key/values."""
+
+    name: str
+    level: str
+    message: str
+    hardware_id: str
+    values: dict[str, Any]
+
+
+def link_report(name: str, link: Any, now: float, extra: Mapping[str, Any]) -> LinkReport:
+    """The status of a `hexa.protocol.link.BoardLink` at host time `now`: OK when connected, ERROR when stale,
+    connecting or disconnected (the last error), with its stats and `extra` as values."""
+    from hexa.protocol.link import CONNECTED, STALE
+
+    st = link.stats
+    if st.state == CONNECTED:
+        level, message = "OK", "connected"
+    elif st.state == STALE:
+        level, message = "ERROR", f"telemetry stale (no data for {now - st.last_rx:.2f} s)"
+    else:
+        level = "ERROR"
+        message = f"{st.state.lower()}: {st.last_error}" if st.last_error else st.state.lower()
+    rtt = st.rtt_s * 1e3 if st.rtt_s == st.rtt_s else float("nan")
+    values = {"state": st.state, "port": link.port, "connects": st.connects, "disconnects": st.disconnects,
+              "last_reconnect_s": f"{st.last_reconnect_s:.3f}", "frames_rx": st.frames_rx, "frames_tx": st.frames_tx,
+              "crc_errors": st.crc_errors, "bad_length": st.bad_length, "resyncs": st.resyncs,
+              "discarded_bytes": st.discarded_bytes, "dropped_frames": st.dropped_frames,
+              "board_errors": st.board_errors, "decode_errors": st.decode_errors, "latency_rtt_ms": f"{rtt:.3f}",
+              "firmware_version": hex(st.firmware_version), "last_error": st.last_error}
+    return LinkReport(name, level, message, str(link.port), {**values, **extra})
+
+
+def driver_reports(sched: DriverScheduler, uno: Any, mega: Any, now: float, stale_timeout: float
+                   ) -> tuple[LinkReport, LinkReport]:
+    """The diagnostics of the servo board (a ServoLink) and the current board (a CurrentLink) at host time `now`:
+    each link's status and counters, the Mega's ERROR when no sample came for `stale_timeout` s, the Uno's WARN
+    while it holds the last command because commands stopped (its watchdog)."""
+    age = now - sched.last_sample_time if sched.last_sample_time else float("inf")
+    rate = sched.measure_sample_rate(now, mega.samples)
+    c = sched.core.counters
+    us = uno.status
+    hold = bool(us.flags & fr.FLAG_WATCHDOG_HOLD) if us is not None else None
+    mega_r = link_report("hexa_driver: current board (Mega)", mega, now, {
+        "sample_rate_hz": f"{rate:.1f}", "sample_rate_commanded_hz": mega.rate_hz, "samples": mega.samples,
+        "sample_gaps": mega.sample_gaps, "data_age_s": f"{age:.3f}",
+        "board_clock_rate": f"{sched.board_clock.rate:.4f}", "board_clock_restarts": sched.board_clock.restarts,
+        "commands_redated": sched.timeline.redated,
+        "board_overruns": mega.status.overruns if mega.status else "?"})
+    if mega_r.level == "OK" and age > stale_timeout:
+        mega_r = mega_r._replace(level="ERROR", message=f"telemetry stale (no sample for {age:.2f} s)")
+    uno_r = link_report("hexa_driver: servo board (Uno)", uno, now, {
+        "commands_accepted": c.accepted, "commands_rejected_nan": c.rejected_nan,
+        "commands_rejected_names": c.rejected_names, "commands_clamped": c.clamped,
+        "commands_slew_limited": c.slew_limited, "commands_coalesced": c.coalesced,
+        "commands_unsent": sched.tx_failures, "targets_restored_after_reconnect": uno.restored,
+        "board_pulses_us": list(us.pulses_us) if us is not None else "?",
+        "latch_report": sched.latch_report, "latch_frames": sched.frames.frames,
+        "latch_unknown_seq": sched.frames.unknown_seq, "latch_predicted_wrong": sched.frames.mismatches,
+        "latch_delivery_delay_ms": f"{1e3 * sched.frames.delivery_delay:.2f}",
+        "latch_unmapped": sched.latches_unmapped, "uno_clock_rate": f"{sched.uno_clock.rate:.4f}",
+        "command_sync": sched.command_sync, "commands_held_for_gap": sched.sync_held,
+        "commands_sent_in_gap": sched.sync_sent_in_gap, "commands_sent_unsynced": sched.sync_unsynced,
+        "board_watchdog_hold": "?" if hold is None else hold})
+    if uno_r.level == "OK" and hold and sched.core.last_command_time is not None:
+        uno_r = uno_r._replace(level="WARN", message="holding last command (no joint_commands within the watchdog)")
+    return uno_r, mega_r
