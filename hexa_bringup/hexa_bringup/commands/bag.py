@@ -26,6 +26,13 @@ def register(sub: argparse._SubParsersAction) -> None:
     pp.add_argument("--topics", nargs="*", help="only these topics")
     pp.add_argument("--wait", type=float, default=1.0, help="seconds to let subscribers connect before playing")
     pp.add_argument("--json", action="store_true", help="print a JSON summary at the end")
+    pp.add_argument("--wait-subscribers", action="store_true",
+                    help="end the --wait early once every topic (and /clock) has a matched subscriber and the "
+                         "number of matches held still for 0.5 s; when --wait runs out first, name the topics "
+                         "without a subscriber and play anyway")
+    pp.add_argument("--log", metavar="FILE",
+                    help="write one line per published message: monotonic ns just before publishing, the message's "
+                         "bag timestamp (ns) and its topic")
     pp.set_defaults(func=run_play)
 
 
@@ -127,6 +134,11 @@ def run_play(args: argparse.Namespace) -> int:
     except Exception as exc:  # noqa: BLE001
         print(f"hexa play: cannot open bag {args.bag}: {exc}", file=sys.stderr)
         return 2
+    try:
+        log = open(args.log, "w", encoding="utf-8") if args.log else None  # noqa: SIM115 - closed below
+    except OSError as exc:
+        print(f"hexa play: cannot write the log {args.log}: {exc}", file=sys.stderr)
+        return 2
     stop = False
 
     def on_signal(_sig, _frm) -> None:
@@ -145,8 +157,21 @@ def run_play(args: argparse.Namespace) -> int:
         pubs[topic] = node.create_publisher(get_message_class(msgtype), topic, qos)
     clock_pub = node.create_publisher(Clock, "/clock", 10) if args.clock else None
     end = time.monotonic() + args.wait
+    watched = list(pubs.items()) + ([("/clock", clock_pub)] if clock_pub is not None else [])
+    matches, steady_since = -1, time.monotonic()
     while time.monotonic() < end:
         rclpy.spin_once(node, timeout_sec=0.05)
+        if args.wait_subscribers:
+            counts = [p.get_subscription_count() for _t, p in watched]
+            if sum(counts) != matches:
+                matches, steady_since = sum(counts), time.monotonic()
+            elif all(counts) and time.monotonic() - steady_since >= 0.5:
+                break
+    if args.wait_subscribers:
+        lonely = [t for t, p in watched if p.get_subscription_count() == 0]
+        if lonely:
+            print(f"hexa play: no subscriber after {args.wait:g} s on {', '.join(lonely)}; playing anyway",
+                  file=sys.stderr)
     sent = 0
     try:
         for topic, _msgtype, stamp, data in paced(read_bag(args.bag, selected), args.rate):
@@ -156,12 +181,16 @@ def run_play(args: argparse.Namespace) -> int:
                 msg = Clock()
                 msg.clock.sec, msg.clock.nanosec = divmod(stamp, 1_000_000_000)
                 clock_pub.publish(msg)
+            if log is not None:
+                log.write(f"{time.monotonic_ns()} {stamp} {topic}\n")
             pubs[topic].publish(data)
             sent += 1
     except BagError as exc:
         print(f"hexa play: {exc}", file=sys.stderr)
         return 2
     finally:
+        if log is not None:
+            log.close()
         time.sleep(0.3)  # let the last reliable messages go out
         node.destroy_node()
         if rclpy.ok():

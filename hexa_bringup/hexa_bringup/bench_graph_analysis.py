@@ -1,0 +1,108 @@
+"""ROS-free analysis of `hexa bench graph` runs: stamps from raw CDR, latency statistics, matching of residuals to
+current samples, and the comparison of a replay's outputs with a slow reference replay."""
+from __future__ import annotations
+
+from collections import Counter, defaultdict, deque
+from typing import Iterable, Sequence
+
+import numpy as np
+
+
+def cdr_stamp_ns(data: bytes) -> int:
+    """Header stamp (ns) of a serialized message whose first field is a std_msgs/Header (CDR, either endianness)."""
+    order = "little" if data[1] & 1 else "big"
+    sec = int.from_bytes(data[4:8], order, signed=True)
+    nsec = int.from_bytes(data[8:12], order)
+    return sec * 1_000_000_000 + nsec
+
+
+def latency_stats(values: Iterable[float]) -> dict:
+    """{n, p50, p95, max} of latencies (s); the statistics are None when there is no value."""
+    v = np.asarray([x for x in values if np.isfinite(x)], dtype=float)
+    if v.size == 0:
+        return {"n": 0, "p50": None, "p95": None, "max": None}
+    return {"n": int(v.size), "p50": float(np.percentile(v, 50)), "p95": float(np.percentile(v, 95)),
+            "max": float(v.max())}
+
+
+def unwrap_board_us(values: Sequence[int]) -> np.ndarray:
+    """Board times (µs, a 32-bit counter) unwrapped and converted to seconds."""
+    raw = np.asarray(values, dtype=np.int64)
+    if raw.size == 0:
+        return np.zeros(0)
+    d = np.diff(raw)
+    d = np.where(d < -(1 << 31), d + (1 << 32), d)
+    return (raw[0] + np.concatenate([[0], np.cumsum(d)])) * 1e-6
+
+
+def match_nearest(stamps: Sequence[float], times: Sequence[float], tol: float = 1e-4) -> np.ndarray:
+    """For each stamp (s), the index of the nearest of `times` (s) when it is within `tol`, else -1."""
+    s = np.asarray(stamps, dtype=float)
+    t = np.asarray(times, dtype=float)
+    idx = np.full(s.size, -1, dtype=np.int64)
+    ok_t = np.isfinite(t)
+    if s.size == 0 or not ok_t.any():
+        return idx
+    where = np.flatnonzero(ok_t)
+    order = where[np.argsort(t[where], kind="stable")]
+    ts = t[order]
+    k = np.searchsorted(ts, s)
+    lo = np.clip(k - 1, 0, ts.size - 1)
+    hi = np.clip(k, 0, ts.size - 1)
+    pick = np.where(np.abs(ts[lo] - s) <= np.abs(ts[hi] - s), lo, hi)
+    good = np.abs(ts[pick] - s) <= tol
+    idx[good] = order[pick[good]]
+    return idx
+
+
+def fifo_pairs(keys_a: Sequence, keys_b: Sequence) -> list[tuple[int, int]]:
+    """(i, j) pairs with keys_a[i] == keys_b[j], the k-th occurrence of a key in `a` paired with its k-th
+    occurrence in `b` (frames that share a stamp)."""
+    slots: dict = defaultdict(deque)
+    for j, k in enumerate(keys_b):
+        slots[k].append(j)
+    out = []
+    for i, k in enumerate(keys_a):
+        if slots[k]:
+            out.append((i, slots[k].popleft()))
+    return out
+
+
+def compare_events(run: list[dict], ref: list[dict], sample_period: float) -> tuple[bool, str]:
+    """Same collision events as the reference: the same START/END sequence with each onset within one sample.
+
+    Events are dicts {kind: "START" | "END", id, onset (s), stamp (s)}."""
+    kinds_run = [e["kind"] for e in sorted(run, key=lambda e: (e["stamp"], e["kind"] != "START"))]
+    kinds_ref = [e["kind"] for e in sorted(ref, key=lambda e: (e["stamp"], e["kind"] != "START"))]
+    if kinds_run != kinds_ref:
+        return False, f"events {'/'.join(kinds_run) or 'none'} vs reference {'/'.join(kinds_ref) or 'none'}"
+    a = sorted(run, key=lambda e: (e["stamp"], e["kind"] != "START"))
+    b = sorted(ref, key=lambda e: (e["stamp"], e["kind"] != "START"))
+    d_onset = max((abs(x["onset"] - y["onset"]) for x, y in zip(a, b)), default=0.0)
+    d_stamp = max((abs(x["stamp"] - y["stamp"]) for x, y in zip(a, b)), default=0.0)
+    ok = d_onset <= sample_period * 1.001 + 1e-9
+    return ok, (f"{len(a)} events; max |onset difference| {d_onset * 1e3:.1f} ms, max |event time difference| "
+                f"{d_stamp * 1e3:.1f} ms (1 sample = {sample_period * 1e3:.1f} ms)")
+
+
+def compare_contacts(run: list[dict], ref: list[dict]) -> tuple[bool, str]:
+    """Same contacts as the reference: count and (link, chain) of each, in stamp order; dicts {stamp, id, link,
+    chain}."""
+    names = {0: "plate", 1: "arm", 2: "rod", 255: "unknown"}
+
+    def seq(cs: list[dict]) -> list[tuple[int, int]]:
+        return [(int(c["link"]), int(c["chain"])) for c in sorted(cs, key=lambda c: c["stamp"])]
+
+    a, b = seq(run), seq(ref)
+    ok = a == b
+
+    def text(s: list[tuple[int, int]]) -> str:
+        c = Counter(s)
+        return ", ".join(f"{n}x {names.get(k[0], k[0])}" + (f" {k[1]}" if k[1] else "") for k, n in c.items()) or "none"
+
+    return ok, f"{len(a)} contacts ({text(a)}) vs reference {len(b)} ({text(b)})"
+
+
+def within_percent(value: int, ref: int, percent: float) -> bool:
+    """|value - ref| <= percent % of ref (equal counts when ref is 0)."""
+    return abs(value - ref) <= percent / 100.0 * ref if ref else value == 0
