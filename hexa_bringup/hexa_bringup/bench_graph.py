@@ -411,44 +411,23 @@ def bag_identity(bag: Path) -> list:
 
 
 def record_default_bag(cache: Path, domain: int) -> Path:
-    """The default bag (cache/graph_bag), recorded by the plate case of `hexa demo` with the camera topics and the
-    currents at 1 kHz when it is not there yet."""
-    from hexa_bringup.demo_run import CASES, run_case
-    from hexa_bringup.rosenv import ros_env
+    """The default bag (cache/graph_bag): the plate case of `hexa demo`, made by the simulator alone with the
+    currents at 1 kHz and both cameras at 30 fps (hexa_bringup.bench_bag), when it is not there yet."""
+    from hexa_bringup.bench_bag import synthesize
 
     target = cache / "graph_bag"
     if target.exists():
         return target
-    work = cache / "graph_record"
+    work = cache / "graph_bag.partial"
     if work.exists():
         shutil.rmtree(work)
-    env = ros_env(domain)
-    os.environ.update(env)
-    sim_s = CASES[RECORD_CASE][2]
-    say(f"no bag given and none cached: recording the '{RECORD_CASE}' case of `hexa demo` with both cameras and "
-        f"currents at {RECORD_STREAM_HZ} Hz ({sim_s:.1f} s of sim time; about a minute) into {target}")
-    handlers = {s: signal.getsignal(s) for s in (signal.SIGINT, signal.SIGTERM)}
-    sys.stdout.flush()
-    saved = os.dup(1)
-    os.dup2(2, 1)  # the supervisor's status tables go to stderr: stdout is the report (and --json)
-    try:
-        run = run_case(RECORD_CASE, work, env, record_images=True, stream_rate_hz=RECORD_STREAM_HZ,
-                       status_every=15.0)
-    finally:
-        sys.stdout.flush()
-        os.dup2(saved, 1)
-        os.close(saved)
-        for s, h in handlers.items():
-            signal.signal(s, h)
-    try:
-        info = bag_inputs(run.bag)
-    except BenchGraphError as exc:
-        raise BenchGraphError(f"the recording did not produce a usable bag ({exc}); logs in {run.log_dir}") from exc
-    if run.returncode != 0 or info.duration < 0.9 * sim_s:
-        raise BenchGraphError(f"the recording stopped early (exit {run.returncode}, {info.duration:.1f} s of "
-                              f"{sim_s:.1f} s recorded); logs in {run.log_dir}")
-    shutil.move(str(run.bag), str(target))
-    say(f"recorded {target} in {run.wall_s:.0f} s")
+    cache.mkdir(parents=True, exist_ok=True)
+    say(f"no bag given and none cached: simulating the '{RECORD_CASE}' case with both cameras and currents at "
+        f"{RECORD_STREAM_HZ} Hz into {target} (about half a minute)")
+    t0 = time.monotonic()
+    synthesize(work, RECORD_CASE, stream_rate_hz=RECORD_STREAM_HZ, progress=say)
+    work.rename(target)
+    say(f"made {target} in {time.monotonic() - t0:.0f} s")
     return target
 
 

@@ -23,6 +23,9 @@ def register(sub: argparse._SubParsersAction) -> None:
     pp.add_argument("bag")
     pp.add_argument("--rate", type=float, default=1.0, help="playback speed factor (0 = as fast as possible)")
     pp.add_argument("--clock", action="store_true", help="publish /clock from the bag's time (for sim-time nodes)")
+    pp.add_argument("--clock-rate", type=float, default=100.0, metavar="HZ",
+                    help="with --clock: /clock messages per second of bag time (default 100; 0 = one per message: "
+                         "every sim-time node handles each of them, which costs the graph a core at 1 kHz)")
     pp.add_argument("--topics", nargs="*", help="only these topics")
     pp.add_argument("--wait", type=float, default=1.0, help="seconds to let subscribers connect before playing")
     pp.add_argument("--json", action="store_true", help="print a JSON summary at the end")
@@ -173,14 +176,17 @@ def run_play(args: argparse.Namespace) -> int:
             print(f"hexa play: no subscriber after {args.wait:g} s on {', '.join(lonely)}; playing anyway",
                   file=sys.stderr)
     sent = 0
+    clock_step = int(1e9 / args.clock_rate) if args.clock_rate > 0 else 0
+    next_clock = -1
     try:
         for topic, _msgtype, stamp, data in paced(read_bag(args.bag, selected), args.rate):
             if stop:
                 break
-            if clock_pub is not None:
+            if clock_pub is not None and stamp >= next_clock:
                 msg = Clock()
                 msg.clock.sec, msg.clock.nanosec = divmod(stamp, 1_000_000_000)
                 clock_pub.publish(msg)
+                next_clock = stamp + clock_step
             if log is not None:
                 log.write(f"{time.monotonic_ns()} {stamp} {topic}\n")
             pubs[topic].publish(data)
