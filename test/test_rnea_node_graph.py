@@ -1,6 +1,8 @@
 """The rnea node with the observer node, each in its own process: the peer replays a MuJoCo run with 3 N upwards on
-the plate and sends the true contact point as `contact` during the collision; the identified contact_wrench is close
-to the applied force; bad contacts (NaN point, unknown link, chain out of range) are counted, the node stays up."""
+the plate and sends the true contact point as `contact` during the collision; the rnea node takes ζ̂, ζ̂̇, τ from the
+observer's `zeta_estimate`; the identified contact_wrench is close to the applied force; bad contacts (NaN point,
+unknown link, chain out of range) are counted, the node stays up. In-process: the node's messages in and out are the
+ContactForceTracker's calls and results."""
 from __future__ import annotations
 
 import json
@@ -11,10 +13,14 @@ import pytest
 pytest.importorskip("rclpy", reason="ROS 2 Jazzy wheels not installed: run `make test` (it sets them up)")
 
 PY = sys.executable
+#: the observer, its 200 Hz `residual` renamed away from the peer: the peer spins once per sample it sends, and a
+#: reliable residual backlog would starve its contact_wrench subscription (the rnea tests do not use residuals)
+OBSERVER = [PY, "-m", "hexa_dynamics.observer_node", "--ros-args", "-r", "__ns:=/hexa", "-r",
+            "residual:=residual_not_heard"]
 
 
 def test_rnea_node_identifies_the_plate_force_at_the_contact(procs, ros_env):
-    procs.start([PY, "-m", "hexa_dynamics.observer_node", "--ros-args", "-r", "__ns:=/hexa"], ros_env)
+    procs.start(OBSERVER, ros_env)
     rnea = procs.start([PY, "-m", "hexa_dynamics.rnea_node", "--ros-args", "-r", "__ns:=/hexa"], ros_env)
     peer = procs.start([PY, "test/observer_node_peer.py", "rnea"], ros_env)
     out, err = peer.communicate(timeout=120)
@@ -34,7 +40,7 @@ def test_rnea_node_identifies_the_plate_force_at_the_contact(procs, ros_env):
 def test_a_contact_arriving_after_the_collision_ended_is_identified_over_the_whole_contact(procs, ros_env):
     """Isolation can take longer than the contact (two frames, the detector, a loaded host): the rnea node keeps its
     recent states and identifies the late contact retroactively, stamped with the sample times."""
-    procs.start([PY, "-m", "hexa_dynamics.observer_node", "--ros-args", "-r", "__ns:=/hexa"], ros_env)
+    procs.start(OBSERVER, ros_env)
     procs.start([PY, "-m", "hexa_dynamics.rnea_node", "--ros-args", "-r", "__ns:=/hexa"], ros_env)
     peer = procs.start([PY, "test/observer_node_peer.py", "rnea_late"], ros_env)
     out, err = peer.communicate(timeout=120)
@@ -47,3 +53,74 @@ def test_a_contact_arriving_after_the_collision_ended_is_identified_over_the_who
     assert r["f_on"] + 0.1 - 1e-6 <= r["wrench_t"][0] and r["wrench_t"][1] <= end["t"] + 1e-6, r["wrench_t"]
     assert all(e < 0.8 for e in r["wrench_rms_err"]), r["wrench_rms_err"]
     assert int(r["diag"]["backfilled"]) == r["wrenches"]
+
+
+def test_rnea_node_turns_its_messages_into_tracker_calls_and_results_into_contact_wrench(ros_domain_id, monkeypatch):
+    """zeta_estimate with the joints in any name order, plate_pose, collision and contact reach the tracker as plain
+    values; each result leaves as a ContactWrench stamped with its sample time; markers only with a subscriber."""
+    import numpy as np
+    import rclpy
+    from geometry_msgs.msg import PoseStamped
+    from hexa_msgs.msg import CollisionEvent, Contact
+    from sensor_msgs.msg import JointState
+
+    from hexa.dynamics.contact_force import ContactForceTracker, LocatedContact
+    from hexa.kinematics import hexa6rus
+    from hexa.trajectories import TRAJECTORIES
+    from hexa_dynamics.rnea_node import RneaNode
+    from hexa_ros.conversions import fill_pose_msg
+    from hexa_ros.stamps import to_sec, to_stamp
+
+    monkeypatch.setenv("ROS_DOMAIN_ID", str(ros_domain_id))
+    monkeypatch.setenv("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
+    t = np.arange(0.0, 0.4, 0.001)
+    pose, pose_dot, pose_ddot = (np.asarray(v, dtype=float) for v in TRAJECTORIES["circle"](t))
+    tau = 0.1 * np.sin(np.outer(t, np.arange(1, 7)))
+    T0 = 100.0
+    rclpy.init()
+    node = RneaNode()
+    try:
+        wrenches, markers = [], []
+        monkeypatch.setattr(node.pub_wrench, "publish", wrenches.append)
+        monkeypatch.setattr(node.pub_markers, "publish", markers.append)
+        ref = ContactForceTracker(node.tracker.desc, node.tracker.config)
+        zeta, zeta_dot, _ = hexa6rus.inverse_kinematics_derivatives(ref.desc, pose, pose_dot, pose_ddot)
+        ps = PoseStamped()
+        ps.header.stamp = to_stamp(T0)
+        fill_pose_msg(ps.pose, hexa6rus.rotation_zyx(*pose[0, 3:]), pose[0, :3])
+        node._on_pose(ps)
+        ref.on_pose(to_sec(ps.header.stamp), pose[0])
+        names = [f"arm_{i}" for i in (6, 5, 4, 3, 2, 1)]
+        point = pose[250, :3] + np.array([0.02, 0.01, 0.0])
+        expected = []
+        for k in range(len(t)):
+            stamp = to_stamp(T0 + t[k])
+            if k == 200:
+                ev = CollisionEvent(event=CollisionEvent.START, id=5)
+                ev.header.stamp = stamp
+                node._on_collision(ev)
+                expected += ref.on_collision("START", 5, to_sec(stamp))
+            if k == 250:
+                c = Contact(collision_id=5, link=Contact.PLATE, chain=0)
+                c.header.stamp = stamp
+                c.point.x, c.point.y, c.point.z = (float(v) for v in point)
+                node._on_contact(c)
+                expected += ref.on_contact(LocatedContact(to_sec(stamp), 5, "plate", 0, point, np.zeros(3)))
+            js = JointState(name=names)
+            js.header.stamp = stamp
+            js.position, js.velocity, js.effort = (v[k][::-1].tolist() for v in (zeta, zeta_dot, tau))
+            node._on_zeta(js)
+            expected += ref.step_state(to_sec(stamp), zeta[k], zeta_dot[k], tau[k])
+        assert len(wrenches) == len(expected) >= 10 and markers == []          # nobody subscribes to markers
+        for w, f in zip(wrenches, expected):
+            assert to_sec(w.header.stamp) == pytest.approx(f.time, abs=1e-9) and w.collision_id == 5
+            assert [w.force.x, w.force.y, w.force.z] == pytest.approx(f.force.tolist(), abs=1e-9)
+            assert (w.link, w.chain, w.rank, w.force_model) == (Contact.PLATE, 0, f.rank, f.force_model)
+        js = JointState(name=names, position=[0.0] * 6, effort=[0.0] * 6)   # no velocity
+        node._on_zeta(js)
+        js = JointState(name=list("abcdef"), position=[0.0] * 6, velocity=[0.0] * 6, effort=[0.0] * 6)
+        node._on_zeta(js)
+        assert node.rejects == {"bad_joint_names": 1, "no_velocity": 1, "bad_orientation": 0}
+    finally:
+        node.destroy_node()
+        rclpy.shutdown()

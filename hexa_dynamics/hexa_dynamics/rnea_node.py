@@ -1,338 +1,150 @@
-"""RNEA node: contact force at the located contact point by Newton–Euler (seed 000 §3.3, eqs 27-36) → `contact_wrench`
-and RViz/Foxglove markers (contact sphere + force arrow).
-
-It runs its own ζ estimator on `joint_states` (hexa.estimation, as the observer node), tracks the plate pose with
-forward kinematics from ζ̂ seeded by `plate_pose`, low-pass differentiates ζ̂̇ for ζ̈, averages τ over
-`torque_window`, and calls H5's hexa.dynamics.identification.identify_contact_force on each `contact` of the active
-collision, and again at `rate_hz` (message time) with the latest contact of that collision until its END.
-
-Isolation takes time (two camera frames, the detector, on a loaded host up to ~1 s): the first contact of a collision
-often arrives well after its START, or after its END. The node keeps the last `history` seconds of its states, so
-such a contact is also identified retroactively, at `rate_hz`, from the contact's image time (or the START) up to the
-present or to the END: the contact_wrench series covers the whole contact, stamped with the sample times
-(`backfilled` in diagnostics; a contact of a collision that ended more than `history` ago is rejected as
-`not_in_collision`).
-
-Parameters: description (""), zeta_source ("estimator" | "measured"), accel_sigma, torque_sigma, camera_sigma,
-bias_walk, saturation, stall_sigma, command_delay (ZetaEstimator, as the observer), rate_hz (100; 0 = only on contact
-messages), torque_window (0.02 s), accel_tau (0.02 s: time constant of the ζ̈ low-pass derivative),
-require_collision (true: ignore contacts outside a START..END), marker_scale (0.02 m/N), frame_id ("base"), history
-(3.0 s of states kept for late contacts; 0 = no backfill), arm_force_model ("friction_cone" | "object_axis" |
-"surface_normal" | "min_norm": what an arm force's two unobservable directions get — the pushing object's axis as the
-vision measured it (`Contact.push_direction`; the collision's last measured direction when a contact carries none)
-clamped into the friction cone about the inward surface normal at the contact point; that axis unclamped; a
-frictionless push along the normal; or nothing; without a measured direction the first two act as
-"surface_normal"; hexa.dynamics.identification), arm_friction (0.2: μ of "friction_cone").
-Topics (relative): sub `joint_states`, `motor_currents` (reliable; time_source as the observer), `plate_pose`,
-`contact` (hexa_msgs/Contact), `collision`
-(reliable); pub `contact_wrench` (hexa_msgs/ContactWrench), `contact_markers` (visualization_msgs/MarkerArray),
-`/diagnostics` (rejects by reason).
+"""RNEA node: the contact force at the located contact point (seed 000 §3.3, eqs 27–36) → `contact_wrench` and
+RViz/Foxglove markers, computed by hexa.dynamics.contact_force.ContactForceTracker (ζ̈ filter, τ window, plate pose
+by FK seeded by the camera, identification at `rate_hz` while in collision, backfill of late contacts stamped with
+the sample times: `backfilled` in diagnostics). ζ̂, ζ̂̇ and τ come from the observer's `zeta_estimate`, one message
+per accepted sample stamped with its time: the graph runs one ζ estimator. Parameters: `PARAMETERS` below
+(start-up only; the same defaults in hexa_bringup/config/hexa_params.yaml, `/**/rnea`).
+Topics (relative): sub `zeta_estimate` (sensor_msgs/JointState arm_1..arm_6: position ζ̂ rad, velocity ζ̂̇ rad/s,
+effort τ N·m; hexa_ros.qos.STREAM), `plate_pose` (geometry_msgs/PoseStamped, camera), `contact` (hexa_msgs/Contact),
+`collision` (hexa_msgs/CollisionEvent); pub `contact_wrench` (hexa_msgs/ContactWrench; STREAM: a backfill sends up
+to history·rate_hz at once), `contact_markers` (visualization_msgs/MarkerArray while subscribed: contact sphere and
+force arrow, DELETEALL on END), `/diagnostics` (1 Hz, rejects by reason).
 """
 from __future__ import annotations
 
-import math
 import sys
-from collections import deque
 from typing import Any
 
 import numpy as np
-from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
-from geometry_msgs.msg import Point
+from diagnostic_msgs.msg import DiagnosticArray
+from geometry_msgs.msg import Point, PoseStamped
 from hexa_msgs.msg import CollisionEvent, Contact, ContactWrench
+from rcl_interfaces.msg import ParameterDescriptor
 from rclpy.node import Node
+from sensor_msgs.msg import JointState
 from visualization_msgs.msg import Marker, MarkerArray
 
-from hexa_dynamics.observer_node import (EVENT_QOS, ArmSampleInput, declare_estimator, diagnostic, make_estimator,
-                                         run_node, stamp_from_seconds)
+import hexa_ros.node
+from hexa.dynamics.contact_force import ContactForce, ContactForceConfig, ContactForceTracker, LocatedContact
+from hexa_ros import diagnostics, qos
+from hexa_ros.conversions import hexa_pose_from_msg, ordered_joints
+from hexa_ros.stamps import to_sec, to_stamp
 
 LINK_NAMES = {Contact.PLATE: "plate", Contact.ARM: "arm", Contact.ROD: "rod"}
-REJECT_REASONS = ("non_finite", "unknown_link", "bad_chain", "no_state", "not_in_collision", "identification",
-                  "bad_joint_names", "bad_pose", "estimator", "pose_tracking")
+LINK_CODES = {v: k for k, v in LINK_NAMES.items()}
+PARAMETERS = {"description": ("", "robot YAML; empty = the packaged hexa.yaml"),
+              "rate_hz": (100.0, "identifications per second of sample time in a collision; 0 = on contacts only"),
+              "torque_window": (0.02, "s over which tau is averaged"),
+              "accel_tau": (0.02, "s, time constant of the low-pass derivative giving zeta_ddot"),
+              "require_collision": (True, "reject contacts outside a collision START..END"),
+              "history": (3.0, "s of states kept to identify late contacts (backfill); 0 = none"),
+              "arm_force_model": ("friction_cone", "what an arm force's two unobservable directions get: "
+                                  "friction_cone | object_axis | surface_normal | min_norm"),
+              "arm_friction": (0.2, "Coulomb coefficient mu of friction_cone (>= 0)"),
+              "marker_scale": (0.02, "force arrow length per newton (m/N)"),
+              "frame_id": ("base", "frame of the contact points and forces")}
+
+
+def _point(v: np.ndarray) -> Point:
+    return Point(x=float(v[0]), y=float(v[1]), z=float(v[2]))
 
 
 class RneaNode(Node):
-    """contact + states → identified contact force (ContactWrench) and markers."""
+    """zeta_estimate + plate_pose + contact + collision → contact_wrench and contact_markers."""
 
-    def __init__(self) -> None:
-        super().__init__("rnea")
-        from hexa.dynamics.identification import ARM_FORCE_MODELS
-        from hexa.dynamics.lagrange import HexaDynamicParameters
+    def __init__(self, **kwargs: Any) -> None:
+        super().__init__("rnea", **kwargs)
         from hexa.robots.hexa_description import load_hexa
 
-        p = self.declare_parameter
-        desc_path = str(p("description", "").value) or None
-        self.zeta_source = str(p("zeta_source", "estimator").value)
-        if self.zeta_source not in ("estimator", "measured"):
-            raise ValueError(f"parameter zeta_source must be 'estimator' or 'measured', got {self.zeta_source!r}")
-        est_cfg, delay = declare_estimator(self)
-        rate = float(p("rate_hz", 100.0).value)
-        self.period = 1.0 / rate if rate > 0 else math.inf
-        self.torque_window = float(p("torque_window", 0.02).value)
-        self.accel_tau = float(p("accel_tau", 0.02).value)
-        self.require_collision = bool(p("require_collision", True).value)
-        self.marker_scale = float(p("marker_scale", 0.02).value)
-        self.frame_id = str(p("frame_id", "base").value)
-        self.history = float(p("history", 3.0).value)
-        self.arm_force_model = str(p("arm_force_model", "friction_cone").value)
-        self.arm_friction = float(p("arm_friction", 0.2).value)
-        if not (math.isfinite(self.arm_friction) and self.arm_friction >= 0):
-            raise ValueError(f"parameter arm_friction must be a finite coefficient >= 0, got {self.arm_friction!r}")
-        if self.arm_force_model not in ARM_FORCE_MODELS:
-            raise ValueError(f"parameter arm_force_model must be one of {ARM_FORCE_MODELS}, "
-                             f"got {self.arm_force_model!r}")
-        if not (math.isfinite(self.history) and self.history >= 0):
-            raise ValueError(f"parameter history must be >= 0 s, got {self.history!r}")
-        if not (self.torque_window >= 0 and self.accel_tau > 0):
-            raise ValueError(f"torque_window {self.torque_window!r} must be >= 0 and accel_tau {self.accel_tau!r} > 0")
-        self.desc = load_hexa(desc_path)
-        self.params = HexaDynamicParameters.from_description(self.desc)
-        self.estimator = make_estimator(self.desc, est_cfg, delay)
-        self.settling = 0
-        self.rejects = {k: 0 for k in REJECT_REASONS}
+        cfg = {k: self.declare_parameter(k, d, ParameterDescriptor(description=text, read_only=True)).value
+               for k, (d, text) in PARAMETERS.items()}
+        desc = load_hexa(str(cfg.pop("description")) or None)
+        self.marker_scale, self.frame_id = float(cfg.pop("marker_scale")), str(cfg.pop("frame_id"))
+        self.tracker = ContactForceTracker(desc, ContactForceConfig(**cfg))
+        self.rejects = {"bad_joint_names": 0, "no_velocity": 0, "bad_orientation": 0}
         self.published = 0
-        self._tau: deque[tuple[float, np.ndarray]] = deque()
-        self._state: tuple | None = None        # (t, ζ, ζ̇, ζ̈, τ averaged over torque_window)
-        self._zd_prev: tuple[float, np.ndarray] | None = None
-        self._zdd = np.zeros(6)
-        self._pose: np.ndarray | None = None     # plate pose tracked from ζ̂
-        self._cam_pose: np.ndarray | None = None
-        self._active: int | None = None          # id of the collision in progress
-        self._contacts: dict[int, Contact] = {}  # latest contact per collision id
-        self._last_ident_t = -math.inf
-        self._started = 0                      # newest collision id seen STARTing
-        self._early_contacts: dict[int, Contact] = {}
-        self._hist: deque[tuple] = deque()      # the states of the last `history` seconds
-        self._spans: dict[int, list[float]] = {}  # collision id -> [START t, END t or inf], recent collisions
-        self._identified: set[int] = set()       # collisions with at least one contact identified
-        self._push_dirs: dict[int, np.ndarray] = {}  # last measured push direction per collision id
-        self.backfilled = 0
-
-        self.pub_wrench = self.create_publisher(ContactWrench, "contact_wrench", EVENT_QOS)
-        self.pub_markers = self.create_publisher(MarkerArray, "contact_markers", 10)
-        self.pub_diag = self.create_publisher(DiagnosticArray, "/diagnostics", 10)
-        self.input = ArmSampleInput(self, self.desc.K_t, self._on_sample, self.rejects, on_pose=self._on_pose)
-        self.create_subscription(Contact, "contact", self._on_contact, EVENT_QOS)
-        self.create_subscription(CollisionEvent, "collision", self._on_collision, EVENT_QOS)
+        self.pub_wrench = self.create_publisher(ContactWrench, "contact_wrench", qos.STREAM)
+        self.pub_markers = self.create_publisher(MarkerArray, "contact_markers", qos.RELIABLE)
+        self.pub_diag = self.create_publisher(DiagnosticArray, "/diagnostics", qos.RELIABLE)
+        self.create_subscription(JointState, "zeta_estimate", self._on_zeta, qos.STREAM)
+        self.create_subscription(PoseStamped, "plate_pose", self._on_pose, qos.RELIABLE)
+        self.create_subscription(Contact, "contact", self._on_contact, qos.EVENT)
+        self.create_subscription(CollisionEvent, "collision", self._on_collision, qos.EVENT)
         self.create_timer(1.0, self._diagnostics)
-        self.get_logger().info(f"rnea: ζ from {self.zeta_source}, identification at {rate:g} Hz while in collision")
 
-    # ------------------------------------------------------------------ state
-    def _on_pose(self, t: float, pose: np.ndarray) -> None:
-        """A camera pose (image time t), released by the sequencer at sample time t + pose_delay."""
-        self._cam_pose = pose
-        if self.zeta_source == "estimator":
-            self.estimator.update_camera(t, pose)
-            z_then = self.estimator.zeta_at(t)
-            if self._pose is not None and z_then is not None:  # tracking on the camera's assembly branch at time t?
-                from hexa.kinematics.hexa6rus import forward_kinematics
+    def _on_zeta(self, msg: JointState) -> None:
+        zeta, zeta_dot, tau = (ordered_joints(msg, f) for f in ("position", "velocity", "effort"))
+        if zeta is None or tau is None:
+            self.rejects["bad_joint_names"] += 1
+            return
+        if zeta_dot is None:
+            self.rejects["no_velocity"] += 1
+            return
+        self._publish(self.tracker.step_state(to_sec(msg.header.stamp), zeta, zeta_dot, tau))
 
-                try:
-                    then = np.asarray(forward_kinematics(self.desc, z_then, guess=self._pose), dtype=float)
-                    lost = bool(np.max(np.abs(then[:3] - pose[:3])) > 0.02)
-                except (ValueError, ArithmeticError):
-                    lost = True
-                if lost:
-                    self._pose = None  # the next identification starts again from the camera
-
-    def _on_sample(self, t: float, pos: np.ndarray, tau: np.ndarray, vel: np.ndarray | None) -> None:
-        if self.zeta_source == "estimator":
-            e = self.estimator.update(t, pos, tau)
-            if e is None:
-                self.rejects["estimator"] += 1
-                return
-            if not e.settled:  # ζ̇ still converging after a (re)start: the observer restarts after it
-                self.settling += 1
-                return
-            zeta, zd = e.zeta, e.zeta_dot
-        else:
-            zeta, zd = pos, vel
-            if zd is None or not (np.all(np.isfinite(zeta)) and np.all(np.isfinite(zd)) and np.all(np.isfinite(tau))):
-                self.rejects["non_finite"] += 1
-                return
-        if self._zd_prev is not None and t > self._zd_prev[0]:
-            h = t - self._zd_prev[0]
-            a = math.exp(-h / self.accel_tau)
-            self._zdd = a * self._zdd + (1 - a) * (zd - self._zd_prev[1]) / h
-        self._zd_prev = (t, zd.copy())
-        self._tau.append((t, tau))
-        while self._tau and self._tau[0][0] < t - self.torque_window:
-            self._tau.popleft()
-        self._state = (t, zeta, zd, self._zdd.copy(), np.mean([v for _, v in self._tau], axis=0))
-        if self.history > 0:
-            self._hist.append(self._state)
-            while self._hist and self._hist[0][0] < t - self.history:
-                self._hist.popleft()
-        if self._active is not None and t - self._last_ident_t >= self.period:
-            c = self._contacts.get(self._active)
-            if c is not None:
-                self._identify(c)
-
-    def _plate_pose(self, zeta: np.ndarray) -> np.ndarray | None:
-        from hexa.kinematics.hexa6rus import forward_kinematics
-
-        guess = self._cam_pose if self._pose is None else self._pose
-        if guess is None:
-            return None
+    def _on_pose(self, msg: PoseStamped) -> None:
         try:
-            pose = np.asarray(forward_kinematics(self.desc, zeta, guess=guess), dtype=float)
-        except (ValueError, ArithmeticError):
-            return None
-        return pose if np.all(np.isfinite(pose)) else None
+            self.tracker.on_pose(to_sec(msg.header.stamp), hexa_pose_from_msg(msg.pose))
+        except ValueError:                          # a zero or non-finite orientation
+            self.rejects["bad_orientation"] += 1
 
-    # ------------------------------------------------------------------ contacts and collisions
     def _on_collision(self, msg: CollisionEvent) -> None:
-        t_ev = msg.header.stamp.sec + msg.header.stamp.nanosec * 1e-9
-        if msg.event == CollisionEvent.START:
-            self._spans[int(msg.id)] = [t_ev, math.inf]
-            for old in sorted(self._spans)[:-10]:  # only recent collisions can still get a late contact
-                self._spans.pop(old)
-                self._identified.discard(old)
-                self._push_dirs.pop(old, None)
-            self._active = int(msg.id)
-            self._started = max(self._started, int(msg.id))
-            early = self._early_contacts.pop(int(msg.id), None)
-            self._early_contacts.clear()
-            if early is not None:  # the contact of this collision arrived before its START (separate topics)
-                self._contacts[int(msg.id)] = early
-                self._identify(early)
-        elif int(msg.id) in self._spans:
-            self._spans[int(msg.id)][1] = t_ev
-        if msg.event != CollisionEvent.START and self._active == int(msg.id):
-            self._active = None
-            self._contacts.pop(int(msg.id), None)
+        was = self.tracker.active
+        kind = "START" if msg.event == CollisionEvent.START else "END"
+        self._publish(self.tracker.on_collision(kind, int(msg.id), to_sec(msg.header.stamp)))
+        if was is not None and self.tracker.active is None and self.pub_markers.get_subscription_count() > 0:
             m = Marker(action=Marker.DELETEALL)
             m.header.frame_id = self.frame_id
             self.pub_markers.publish(MarkerArray(markers=[m]))
 
     def _on_contact(self, msg: Contact) -> None:
-        pt = np.array([msg.point.x, msg.point.y, msg.point.z])
-        if not np.all(np.isfinite(pt)):
-            self.rejects["non_finite"] += 1
-            return
-        if msg.link not in LINK_NAMES:
-            self.rejects["unknown_link"] += 1
-            return
-        if msg.link != Contact.PLATE and not 1 <= msg.chain <= 6:
-            self.rejects["bad_chain"] += 1
-            return
-        cid = int(msg.collision_id)
-        if self.require_collision and (self._active is None or cid != self._active):
-            if cid in self._spans and cid not in self._identified and self._backfill(msg):
-                return  # a collision that ended before its contact arrived: identified retroactively
-            if int(msg.collision_id) > self._started:  # its START is still on its way: kept until it arrives
-                if len(self._early_contacts) < 20:
-                    self._early_contacts[int(msg.collision_id)] = msg
-                return
-            self.rejects["not_in_collision"] += 1
-            return
-        self._contacts[int(msg.collision_id)] = msg
-        if cid not in self._identified and cid in self._spans:
-            self._backfill(msg)  # the states between the contact's image time and now
-        self._identify(msg)
+        v = msg.push_direction
+        c = LocatedContact(time=to_sec(msg.header.stamp), collision_id=int(msg.collision_id),
+                           link=LINK_NAMES.get(msg.link, f"link {msg.link}"), chain=int(msg.chain),
+                           point=np.array([msg.point.x, msg.point.y, msg.point.z]),
+                           push_direction=np.array([v.x, v.y, v.z]))
+        self._publish(self.tracker.on_contact(c))
 
-    def _backfill(self, c: Contact) -> bool:
-        """Identify `c` on the kept states from its image time (not before its collision's START) to the END or the
-        newest state, every 1/rate_hz; True if any state was in that span."""
-        start, end = self._spans[int(c.collision_id)]
-        t_img = c.header.stamp.sec + c.header.stamp.nanosec * 1e-9
-        t0 = max(start, t_img)
-        span = [h for h in self._hist if t0 <= h[0] <= end and (self._state is None or h[0] < self._state[0])]
-        if not span:
-            return False
-        last = -math.inf
-        for h in span:
-            if h[0] - last >= min(self.period, 0.05):
-                if self._identify(c, h):
-                    self.backfilled += 1
-                last = h[0]
-        return True
+    def _publish(self, forces: list[ContactForce]) -> None:
+        for f in forces:
+            w = ContactWrench(collision_id=f.collision_id, link=LINK_CODES[f.link], chain=f.chain, rank=f.rank,
+                              condition=f.condition, observable=f.observable, residual_norm=f.residual_norm,
+                              force_model=f.force_model)
+            w.header.stamp, w.header.frame_id = to_stamp(f.time), self.frame_id
+            w.point = _point(f.point)
+            w.force.x, w.force.y, w.force.z = (float(v) for v in f.force)
+            self.pub_wrench.publish(w)
+            self.published += 1
+            if not f.backfilled and self.pub_markers.get_subscription_count() > 0:  # markers show the present
+                self.pub_markers.publish(self._markers(f, w.header.stamp))
 
-    def _identify(self, c: Contact, state: tuple | None = None) -> bool:
-        from hexa.dynamics.identification import identify_contact_force
-        from hexa.dynamics.lagrange import DynamicsError, motion_from_joint_rates
-
-        backfill = state is not None
-        state = state if backfill else self._state
-        if state is None:
-            self.rejects["no_state"] += 1
-            return False
-        t, zeta, zd, zdd, tau = state
-        stamp = stamp_from_seconds(t)
-        pose = self._plate_pose(zeta)
-        if pose is None:
-            self.rejects["pose_tracking"] += 1
-            return False
-        self._pose = pose
-        link = LINK_NAMES[c.link]
-        chain = 0 if link == "plate" else int(c.chain)
-        point = np.array([c.point.x, c.point.y, c.point.z])
-        push = np.array([c.push_direction.x, c.push_direction.y, c.push_direction.z])
-        cid = int(c.collision_id)
-        if np.all(np.isfinite(push)) and np.any(push != 0.0):
-            self._push_dirs[cid] = push
-        push = self._push_dirs.get(cid)   # a later frame may not see the object's axis: keep the last measured
-        try:
-            st = motion_from_joint_rates(self.params, zeta[None], zd[None], pose[None], zdd[None])
-            est = identify_contact_force(self.params, st, tau, link, chain, point,
-                                         arm_force_model=self.arm_force_model, push_direction=push,
-                                         friction=self.arm_friction)
-        except (ValueError, DynamicsError, np.linalg.LinAlgError) as exc:
-            self.rejects["identification"] += 1
-            self.get_logger().warn(f"identification failed: {exc}", throttle_duration_sec=1.0)
-            return False
-        self._identified.add(int(c.collision_id))
-        if not backfill:
-            self._last_ident_t = t
-        w = ContactWrench()
-        w.header.stamp = stamp
-        w.header.frame_id = self.frame_id
-        w.collision_id = c.collision_id
-        w.link, w.chain = c.link, chain
-        w.point = Point(x=float(point[0]), y=float(point[1]), z=float(point[2]))
-        w.force.x, w.force.y, w.force.z = (float(v) for v in est.force)
-        w.rank = int(est.rank)
-        w.condition = float(est.condition)
-        w.observable = bool(est.observable)
-        w.residual_norm = float(est.residual_norm)
-        w.force_model = est.force_model
-        self.pub_wrench.publish(w)
-        self.published += 1
-        if not backfill:  # markers show the present only (a backfilled state is history)
-            self.pub_markers.publish(self._markers(point, est.force, stamp, est.observable))
-        return True
-
-    def _markers(self, point: np.ndarray, force: np.ndarray, stamp: Any, observable: bool) -> MarkerArray:
-        s = Marker()
-        s.header.stamp = stamp
-        s.header.frame_id = self.frame_id
-        s.ns, s.id, s.type, s.action = "contact_point", 0, Marker.SPHERE, Marker.ADD
-        s.pose.position = Point(x=float(point[0]), y=float(point[1]), z=float(point[2]))
+    def _markers(self, f: ContactForce, stamp: Any) -> MarkerArray:
+        s = Marker(ns="contact_point", id=0, type=Marker.SPHERE, action=Marker.ADD)
+        s.header.stamp, s.header.frame_id = stamp, self.frame_id
+        s.pose.position = _point(f.point)
         s.pose.orientation.w = 1.0
         s.scale.x = s.scale.y = s.scale.z = 0.015
         s.color.r, s.color.g, s.color.b, s.color.a = 1.0, 0.8, 0.0, 1.0
-        a = Marker()
+        a = Marker(ns="contact_force", id=0, type=Marker.ARROW, action=Marker.ADD)
         a.header = s.header
-        a.ns, a.id, a.type, a.action = "contact_force", 0, Marker.ARROW, Marker.ADD
-        end = point + self.marker_scale * np.asarray(force)
-        a.points = [s.pose.position, Point(x=float(end[0]), y=float(end[1]), z=float(end[2]))]
+        a.points = [s.pose.position, _point(f.point + self.marker_scale * f.force)]
         a.pose.orientation.w = 1.0
-        a.scale.x, a.scale.y, a.scale.z = 0.006, 0.012, 0.015
-        a.color.r, a.color.g, a.color.b, a.color.a = (1.0, 0.2, 0.2, 1.0) if observable else (1.0, 0.6, 0.2, 1.0)
+        a.scale.x, a.scale.y, a.scale.z = 0.006, 0.012, 0.015     # shaft and head diameters, head length (m)
+        a.color.r, a.color.g, a.color.b, a.color.a = (1.0, 0.2, 0.2, 1.0) if f.observable else (1.0, 0.6, 0.2, 1.0)
         return MarkerArray(markers=[s, a])
 
     def _diagnostics(self) -> None:
-        values: dict[str, Any] = {"published": self.published, "backfilled": self.backfilled,
-                                  "active_collision": self._active,
-                                  "servo_saturated_samples": self.estimator.saturated}
-        values.update({f"reject_{k}": v for k, v in self.rejects.items()})
-        values.update({f"reject_estimator_{k}": v for k, v in self.estimator.rejected.items()})
-        level = DiagnosticStatus.OK if self._state is not None else DiagnosticStatus.WARN
-        msg = "ok" if self._state is not None else "no joint_states yet"
-        self.pub_diag.publish(diagnostic(self, level, msg, values))
+        t = self.tracker
+        values: dict[str, Any] = {"published": self.published, "backfilled": t.backfilled, "active_collision": t.active,
+                                  "stream_restarts": t.restarts, "last_identification_error": t.last_error}
+        values.update({f"reject_{k}": v for k, v in {**self.rejects, **t.rejects}.items()})
+        level, message = (diagnostics.OK, "ok") if t.state is not None else (diagnostics.WARN, "no zeta_estimate yet")
+        st = diagnostics.status(self.get_fully_qualified_name(), level, message, values)
+        self.pub_diag.publish(diagnostics.array(self, [st]))
 
 
 def main(argv: list[str] | None = None) -> int:
-    return run_node(RneaNode, "rnea", argv)
+    return hexa_ros.node.main(RneaNode, "rnea", argv)
 
 
 if __name__ == "__main__":
