@@ -37,7 +37,7 @@ def bag_series(bag: Path, ns: str = "/hexa") -> dict:
     from hexa.dynamics.lagrange import HexaDynamicParameters, chain_jacobian, pose_to_position_rotation
     from hexa.robots.hexa_description import load_hexa
     from hexa_bringup.bag import typestore
-    from hexa_dynamics.conversions import hexa_pose_from_msg
+    from hexa_ros.conversions import hexa_pose_from_msg
 
     prm = HexaDynamicParameters.from_description(load_hexa())
     res, zeta, pose, force = [], [], [], []

@@ -69,7 +69,7 @@ def main() -> int:
     from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
     from sensor_msgs.msg import JointState
 
-    from hexa_dynamics.conversions import quaternion_from_matrix
+    from hexa.rotations import quaternion_from_matrix
     from hexa_ros.stamps import to_sec as stamp_seconds, to_stamp as stamp_from_seconds
     from hexa.kinematics.hexa6rus import rotation_zyx
 
@@ -115,9 +115,9 @@ def main() -> int:
         while time.monotonic() < end:
             rclpy.spin_once(node, timeout_sec=0.01)
 
-    deadline = time.monotonic() + 20
-    want = 2 if mode.startswith("rnea") else 1
-    while pub_js.get_subscription_count() < want and time.monotonic() < deadline:
+    deadline = time.monotonic() + 20     # the observer on joint_states; rnea on contact (it reads zeta_estimate)
+    while time.monotonic() < deadline and (pub_js.get_subscription_count() < 1 or (
+            mode.startswith("rnea") and pub_contact.get_subscription_count() < 1)):
         spin(0.1)
     spin(1.0)
 
@@ -162,6 +162,9 @@ def main() -> int:
     T0 = 100.0
     replay(T0)
     if mode == "rnea_late" and events:  # isolation slower than the collision: its contact arrives after the END
+        end_by = time.monotonic() + 10
+        while not any(e["event"] == CollisionEvent.END for e in events) and time.monotonic() < end_by:
+            spin(0.1)
         c = Contact(collision_id=events[0]["id"], link=Contact.PLATE, chain=0, camera="cam_top", confidence=0.9)
         c.header.stamp = stamp_from_seconds(T0 + F_ON + 0.1)
         c.header.frame_id = "base"

@@ -60,7 +60,8 @@ def test_missing_tracking_section_names_it(tmp_path):
 @given(poses)
 @settings(max_examples=50, deadline=None)
 def test_quaternion_conversions_round_trip(X):
-    conv = pytest.importorskip("hexa_dynamics.conversions", reason="hexa_dynamics not installed")
+    conv = pytest.importorskip("hexa_ros.conversions", reason="hexa_ros not installed")
+    from hexa.rotations import matrix_from_quaternion
 
     class _P:   # a geometry_msgs/Pose look-alike (plain fields)
         class position:
@@ -75,4 +76,4 @@ def test_quaternion_conversions_round_trip(X):
     p.position.x, p.position.y, p.position.z = pos
     p.orientation.x, p.orientation.y, p.orientation.z, p.orientation.w = quat
     np.testing.assert_allclose(conv.upsrpu_pose_from_msg(p), X, atol=1e-12)
-    np.testing.assert_allclose(conv.matrix_from_quaternion(*quat), rotation_yz(X[2], X[3]), atol=1e-12)
+    np.testing.assert_allclose(matrix_from_quaternion(*quat), rotation_yz(X[2], X[3]), atol=1e-12)

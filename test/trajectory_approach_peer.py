@@ -25,7 +25,7 @@ def main() -> int:
     from hexa.kinematics import hexa6rus
     from hexa.robots.hexa_description import load_hexa
     from hexa.trajectories import TRAJECTORIES
-    from hexa_dynamics.conversions import quaternion_from_matrix
+    from hexa.rotations import quaternion_from_matrix
 
     desc = load_hexa()
     start = np.asarray(TRAJECTORIES["circle"](0.0)[0])

@@ -1,16 +1,15 @@
 """Rosbag2 (MCAP) recording and playback of raw CDR messages with rosbags, including hexa_msgs types."""
 from __future__ import annotations
 
-import time
 from pathlib import Path
-from typing import TYPE_CHECKING, Callable, Iterator
+from typing import TYPE_CHECKING
+
+from hexa.bags import BagError, paced, read_bag
 
 if TYPE_CHECKING:
     from rosbags.typesys.store import Typestore
 
-
-class BagError(RuntimeError):
-    """A bag cannot be written or read (path exists, unknown type, corrupt file)."""
+__all__ = ["BagError", "BagRecorder", "bag_topics", "paced", "read_bag", "typestore"]
 
 
 def _hexa_msgs_dir() -> Path | None:
@@ -97,28 +96,6 @@ class BagRecorder:
             self._writer = None  # type: ignore[assignment]
 
 
-def read_bag(path: str | Path, topics: list[str] | None = None) -> Iterator[tuple[str, str, int, bytes]]:
-    """Yield (topic, msgtype, timestamp_ns, cdr) in time order.
-
-    Raises:
-        BagError: the bag is missing or unreadable.
-    """
-    from rosbags.rosbag2 import Reader
-
-    p = Path(path)
-    if not p.exists():
-        raise BagError(f"bag {p} does not exist")
-    try:
-        with Reader(p) as reader:
-            conns = [c for c in reader.connections if topics is None or c.topic in topics]
-            for conn, stamp, data in reader.messages(connections=conns):
-                yield conn.topic, conn.msgtype, stamp, bytes(data)
-    except Exception as exc:  # noqa: BLE001 - rosbags raises several types; name the bag
-        if isinstance(exc, BagError):
-            raise
-        raise BagError(f"cannot read bag {p}: {exc}") from exc
-
-
 def bag_topics(path: str | Path) -> dict[str, tuple[str, int, bool]]:
     """topic → (msgtype, message count, reliable) of a bag."""
     from rosbags.rosbag2 import Reader
@@ -131,20 +108,3 @@ def bag_topics(path: str | Path) -> dict[str, tuple[str, int, bool]]:
             reliable = not qos or all(getattr(q, "reliability", None) != QosReliability.BEST_EFFORT for q in qos)
             out[c.topic] = (c.msgtype, c.msgcount, reliable)
         return out
-
-
-def paced(messages: Iterator[tuple[str, str, int, bytes]], rate: float,
-          sleep: Callable[[float], None] = time.sleep) -> Iterator[tuple[str, str, int, bytes]]:
-    """Re-yield `messages` at `rate` times their recorded pace (rate <= 0: as fast as possible)."""
-    t_wall0 = None
-    t_bag0 = None
-    for item in messages:
-        stamp = item[2]
-        if rate > 0:
-            if t_wall0 is None:
-                t_wall0, t_bag0 = time.monotonic(), stamp
-            due = t_wall0 + (stamp - t_bag0) / 1e9 / rate
-            delay = due - time.monotonic()
-            if delay > 0:
-                sleep(delay)
-        yield item

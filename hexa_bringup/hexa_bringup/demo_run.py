@@ -149,7 +149,7 @@ def case_data_from_bag(case: str, bag: Path, ns: str = "/hexa"):
     """
     from hexa.report.collision_demo import CaseData
     from hexa_bringup.bag import read_bag, typestore
-    from hexa_dynamics.conversions import hexa_pose_from_msg
+    from hexa_ros.conversions import hexa_pose_from_msg
 
     store = typestore()
     rows: dict[str, list] = {k: [] for k in ("truth", "wrench_truth", "pose_truth", "zeta_truth", "res", "ev",

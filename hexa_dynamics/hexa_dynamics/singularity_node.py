@@ -1,7 +1,7 @@
 """Type II singularity monitor node (seed 003 sec 2.2-2.3) for the Hexa or the 3UPS+RPU.
 
-Thin wrapper over hexa.singularity. Parameters: `robot` ("hexa" | "upsrpu"; default from the namespace: "upsrpu"
-when it contains "upsrpu", else "hexa"), `input` ("pose" | "markers"),
+Thin adapter over hexa.singularity.SingularityMonitor. Parameters: `robot` ("hexa" | "upsrpu"; default from the
+namespace: "upsrpu" when it contains "upsrpu", else "hexa"), `input` ("pose" | "markers"),
 `description` (YAML path, default packaged), `det_jd_limit`, `omega_limit` (rad; default Table 2 for the
 3UPS+RPU, 1.8 deg and no det limit for the Hexa).
 Topics (relative; run in /upsrpu or /hexa): sub `pose` (3UPS+RPU, geometry_msgs/PoseStamped, X_c from the
@@ -11,139 +11,96 @@ marker positions in the tracking world) with input=markers; pub `singularity` (h
 """
 from __future__ import annotations
 
-import math
 import sys
 
 import numpy as np
-import rclpy
-from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
+from diagnostic_msgs.msg import DiagnosticArray
 from geometry_msgs.msg import PoseArray, PoseStamped
 from hexa_msgs.msg import SingularityIndices
-from rclpy.executors import ExternalShutdownException
 from rclpy.node import Node
-from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
 
-from hexa_dynamics.conversions import hexa_pose_from_msg, points_from_pose_array, upsrpu_pose_from_msg
+import hexa_ros.node
+from hexa.singularity import SingularityMonitor
+from hexa_ros import diagnostics, qos
+from hexa_ros.conversions import hexa_pose_from_msg, points_from_pose_array, upsrpu_pose_from_msg
 
 
 class SingularityNode(Node):
     """Publishes det J_D, every Omega_ij, the minimum pair and the near-flag for each measured pose."""
 
-    def __init__(self) -> None:
-        super().__init__("singularity")
-        self.robot = str(self.declare_parameter("robot", "").value) or (
+    def __init__(self, **kwargs) -> None:
+        super().__init__("singularity", **kwargs)
+        robot = str(self.declare_parameter("robot", "").value) or (
             "upsrpu" if "upsrpu" in self.get_namespace() else "hexa")
         mode = str(self.declare_parameter("input", "pose").value)
         path = str(self.declare_parameter("description", "").value) or None
-        if self.robot == "upsrpu":
-            from hexa.robots.upsrpu_description import load_upsrpu
-
-            self.desc = load_upsrpu(path)
-            det_default, om_default = self.desc.det_jd_limit, self.desc.omega_limit
-        elif self.robot == "hexa":
-            from hexa.robots.hexa_description import load_hexa
-
-            self.desc = load_hexa(path)
-            det_default, om_default = 0.0, math.radians(1.8)
-        else:
-            raise ValueError(f"parameter robot must be 'hexa' or 'upsrpu', got {self.robot!r}")
-        self.det_limit = float(self.declare_parameter("det_jd_limit", float(det_default)).value)
-        self.omega_limit = float(self.declare_parameter("omega_limit", float(om_default)).value)
-        self.pub = self.create_publisher(SingularityIndices, "singularity",
-                                         QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE,
-                                                    history=HistoryPolicy.KEEP_LAST))
-        self.pub_diag = self.create_publisher(DiagnosticArray, "/diagnostics", 10)
+        self.monitor = m = SingularityMonitor(robot, path)
+        m.det_jd_limit = float(self.declare_parameter("det_jd_limit", m.det_jd_limit).value)
+        m.omega_limit = float(self.declare_parameter("omega_limit", m.omega_limit).value)
+        self.pub = self.create_publisher(SingularityIndices, "singularity", qos.RELIABLE)
+        self.pub_diag = self.create_publisher(DiagnosticArray, "/diagnostics", qos.RELIABLE)
         self.rejected = 0
         self.published = 0
-        self._fixed: PoseArray | None = None
         if mode == "markers":
-            if self.robot != "upsrpu":
+            if robot != "upsrpu":
                 raise ValueError("input=markers is only for the 3UPS+RPU")
-            from hexa.srm.tracking import tracking_model
+            from hexa.srm.tracking import MarkerTracker, tracking_model
 
-            self.tracking = tracking_model(self.desc)
-            self.create_subscription(PoseArray, "markers/fixed", self._on_fixed, 10)
-            self.create_subscription(PoseArray, "markers/mobile", self._on_mobile, 10)
+            self.tracker = MarkerTracker(tracking_model(m.desc))
+            self.create_subscription(PoseArray, "markers/fixed", self._on_fixed, qos.RELIABLE)
+            self.create_subscription(PoseArray, "markers/mobile", self._on_mobile, qos.RELIABLE)
         else:
-            topic = "pose" if self.robot == "upsrpu" else "plate_pose"
-            self.create_subscription(PoseStamped, topic, self._on_pose, 10)
+            topic = "pose" if robot == "upsrpu" else "plate_pose"
+            self.create_subscription(PoseStamped, topic, self._on_pose, qos.RELIABLE)
         self.create_timer(1.0, self._diagnostics)
 
     def _on_fixed(self, msg: PoseArray) -> None:
-        self._fixed = msg
+        self.tracker.add_fixed(points_from_pose_array(msg))
 
     def _on_mobile(self, msg: PoseArray) -> None:
-        from hexa.srm.tracking import pose_from_markers
-
-        if self._fixed is None:
-            return
         try:
-            X, _ = pose_from_markers(self.tracking, points_from_pose_array(self._fixed), points_from_pose_array(msg))
+            X = self.tracker.add_mobile(points_from_pose_array(msg))
         except ValueError as exc:
-            self.rejected += 1
-            self.get_logger().warn(f"marker fit rejected: {exc}", throttle_duration_sec=2.0)
+            self._reject(f"marker fit rejected: {exc}")
             return
-        self._publish(X, msg.header)
+        if X is not None:
+            self._publish(X, msg.header)
 
     def _on_pose(self, msg: PoseStamped) -> None:
         try:
-            X = upsrpu_pose_from_msg(msg.pose) if self.robot == "upsrpu" else hexa_pose_from_msg(msg.pose)
+            X = (upsrpu_pose_from_msg(msg.pose) if self.monitor.robot == "upsrpu"
+                 else hexa_pose_from_msg(msg.pose))
         except ValueError as exc:
-            self.rejected += 1
-            self.get_logger().warn(f"pose rejected: {exc}", throttle_duration_sec=2.0)
+            self._reject(f"pose rejected: {exc}")
             return
         self._publish(X, msg.header)
 
-    def _publish(self, X: np.ndarray, header) -> None:
-        from hexa import singularity
+    def _reject(self, why: str) -> None:
+        self.rejected += 1
+        self.get_logger().warn(why, throttle_duration_sec=2.0)
 
+    def _publish(self, X: np.ndarray, header) -> None:
         try:
-            rep = (singularity.upsrpu_indices(self.desc, X) if self.robot == "upsrpu"
-                   else singularity.hexa_indices(self.desc, X))
+            rep = self.monitor.report(X)
         except ValueError as exc:                      # e.g. an unreachable Hexa pose
-            self.rejected += 1
-            self.get_logger().warn(f"indices not computed: {exc}", throttle_duration_sec=2.0)
+            self._reject(f"indices not computed: {exc}")
             return
-        out = SingularityIndices()
-        out.header = header
-        out.robot = self.robot
-        out.det_jd = float(rep.det_jd)
-        out.omega = [float(w) for w in rep.omega]
-        out.pairs = list(rep.pairs)
-        out.min_omega = float(rep.min_omega)
-        out.min_pair = rep.min_pair
-        out.det_jd_limit = self.det_limit
-        out.omega_limit = self.omega_limit
-        out.near = bool(abs(rep.det_jd) < self.det_limit or rep.min_omega < self.omega_limit)
-        self.pub.publish(out)
+        m = self.monitor
+        self.pub.publish(SingularityIndices(
+            header=header, robot=m.robot, det_jd=float(rep.det_jd), omega=[float(w) for w in rep.omega],
+            pairs=list(rep.pairs), min_omega=float(rep.min_omega), min_pair=rep.min_pair,
+            det_jd_limit=m.det_jd_limit, omega_limit=m.omega_limit, near=bool(m.near(rep))))
         self.published += 1
 
     def _diagnostics(self) -> None:
-        arr = DiagnosticArray()
-        arr.header.stamp = self.get_clock().now().to_msg()
-        st = DiagnosticStatus(level=DiagnosticStatus.OK, name=f"{self.get_fully_qualified_name()}",
-                              message="ok" if self.rejected == 0 else "some inputs rejected")
-        st.values = [KeyValue(key="published", value=str(self.published)),
-                     KeyValue(key="rejected", value=str(self.rejected))]
-        arr.status = [st]
-        self.pub_diag.publish(arr)
+        st = diagnostics.status(self.get_fully_qualified_name(), diagnostics.OK,
+                                "ok" if self.rejected == 0 else "some inputs rejected",
+                                {"published": self.published, "rejected": self.rejected})
+        self.pub_diag.publish(diagnostics.array(self, [st]))
 
 
 def main(argv: list[str] | None = None) -> int:
-    from hexa_bringup.rosenv import apply_defaults
-
-    apply_defaults()
-    rclpy.init(args=argv if argv is not None else sys.argv)
-    node = SingularityNode()
-    try:
-        rclpy.spin(node)
-    except (KeyboardInterrupt, ExternalShutdownException):
-        pass
-    finally:
-        node.destroy_node()
-        if rclpy.ok():
-            rclpy.shutdown()
-    return 0
+    return hexa_ros.node.main(SingularityNode, "singularity", argv)
 
 
 if __name__ == "__main__":

@@ -1,7 +1,7 @@
 """Simulated 3UPS+RPU node for the SRM (seed 003 sec 3.1): actuators under their inner loop, pose by
 branch-continuous FK, optional push by hand; publishes what the 3D tracking system and encoders would.
 
-Thin wrapper over hexa.srm.plant / hexa.srm.tracking. Run in /upsrpu. Parameters: `description`,
+Thin adapter over hexa.srm.plant / hexa.srm.tracking. Run in /upsrpu. Parameters: `description`,
 `initial_pose` [x_m, z_m, theta, psi] (default the description's home), `rate_hz` (100 = 1/t_s; the plant
 advances t_s per tick), `push_at` (s after start, < 0 = never), `push_force` (N), `publish_markers` (bool),
 `marker_noise` (m, default from the description), `seed`.
@@ -15,29 +15,40 @@ from __future__ import annotations
 import sys
 
 import numpy as np
-import rclpy
-from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
+from diagnostic_msgs.msg import DiagnosticArray
 from geometry_msgs.msg import Pose, PoseArray, PoseStamped
-from rclpy.executors import ExternalShutdownException
 from rclpy.node import Node
 from sensor_msgs.msg import JointState
+from std_msgs.msg import Header
 
-from hexa_dynamics.conversions import UPSRPU_JOINTS, upsrpu_pose_to_msg_fields
+import hexa_ros.node
+from hexa_ros import diagnostics, qos
+from hexa_ros.conversions import UPSRPU_JOINTS, upsrpu_pose_to_msg_fields
 
 
 def _pose_msg(X: np.ndarray) -> Pose:
-    p, q = upsrpu_pose_to_msg_fields(X)
+    (px, py, pz), (qx, qy, qz, qw) = upsrpu_pose_to_msg_fields(X)
     m = Pose()
-    m.position.x, m.position.y, m.position.z = p
-    m.orientation.x, m.orientation.y, m.orientation.z, m.orientation.w = q
+    m.position.x, m.position.y, m.position.z = px, py, pz
+    m.orientation.x, m.orientation.y, m.orientation.z, m.orientation.w = qx, qy, qz, qw
     return m
+
+
+def _points_msg(points: np.ndarray, header: Header) -> PoseArray:
+    arr = PoseArray(header=header)
+    for p in points:
+        m = Pose()
+        m.position.x, m.position.y, m.position.z = (float(v) for v in p)
+        m.orientation.w = 1.0
+        arr.poses.append(m)
+    return arr
 
 
 class UpsrpuSimNode(Node):
     """The simulated robot: one plant step of t_s per timer tick."""
 
-    def __init__(self) -> None:
-        super().__init__("upsrpu_sim")
+    def __init__(self, **kwargs) -> None:
+        super().__init__("upsrpu_sim", **kwargs)
         from hexa.robots.upsrpu_description import load_upsrpu
         from hexa.srm.plant import SimulatedUpsrpu, half_sine_push
         from hexa.srm.tracking import tracking_model
@@ -51,20 +62,18 @@ class UpsrpuSimNode(Node):
         push_force = float(self.declare_parameter("push_force", 10.0).value)
         self.publish_markers = bool(self.declare_parameter("publish_markers", True).value)
         self.tracking = tracking_model(self.desc)
-        noise = float(self.declare_parameter("marker_noise", self.tracking.marker_noise).value)
-        self.noise = noise
-        seed = int(self.declare_parameter("seed", 0).value)
-        self.rng = np.random.default_rng(seed)
+        self.noise = float(self.declare_parameter("marker_noise", self.tracking.marker_noise).value)
+        self.rng = np.random.default_rng(int(self.declare_parameter("seed", 0).value))
         push = half_sine_push(push_at, 2.0, np.array([push_force, 0, 0, 0.1 * push_force])) if push_at >= 0 else None
         self.plant = SimulatedUpsrpu(self.desc, np.array(X0, dtype=float), push=push)
         self.q_d = self.plant.q.copy()
-        self.pub_pose = self.create_publisher(PoseStamped, "pose", 10)
-        self.pub_fk = self.create_publisher(PoseStamped, "pose_fk", 10)
-        self.pub_js = self.create_publisher(JointState, "joint_states", 10)
-        self.pub_fixed = self.create_publisher(PoseArray, "markers/fixed", 10)
-        self.pub_mobile = self.create_publisher(PoseArray, "markers/mobile", 10)
-        self.pub_diag = self.create_publisher(DiagnosticArray, "/diagnostics", 10)
-        self.create_subscription(JointState, "joint_commands", self._on_command, 10)
+        self.pub_pose = self.create_publisher(PoseStamped, "pose", qos.RELIABLE)
+        self.pub_fk = self.create_publisher(PoseStamped, "pose_fk", qos.RELIABLE)
+        self.pub_js = self.create_publisher(JointState, "joint_states", qos.RELIABLE)
+        self.pub_fixed = self.create_publisher(PoseArray, "markers/fixed", qos.RELIABLE)
+        self.pub_mobile = self.create_publisher(PoseArray, "markers/mobile", qos.RELIABLE)
+        self.pub_diag = self.create_publisher(DiagnosticArray, "/diagnostics", qos.RELIABLE)
+        self.create_subscription(JointState, "joint_commands", self._on_command, qos.RELIABLE)
         self.rejected = 0
         self.fk_failures = 0
         self.ticks = 0
@@ -83,8 +92,7 @@ class UpsrpuSimNode(Node):
         if not np.all(np.isfinite(q)):
             self.rejected += 1
             return
-        # the actuators' own end stops
-        self.q_d = np.clip(q, self.desc.q_min, self.desc.q_max)
+        self.q_d = np.clip(q, self.desc.q_min, self.desc.q_max)   # the actuators' own end stops
 
     def _tick(self) -> None:
         from hexa.kinematics.upsrpu import ForwardKinematicsError
@@ -98,65 +106,31 @@ class UpsrpuSimNode(Node):
             return
         self.ticks += 1
         stamp = self.get_clock().now().to_msg()
-        ps = PoseStamped()
-        ps.header.stamp = stamp
-        ps.header.frame_id = "upsrpu_base"
-        ps.pose = _pose_msg(s.X)
+        ps = PoseStamped(pose=_pose_msg(s.X))
+        ps.header.stamp, ps.header.frame_id = stamp, "upsrpu_base"
         self.pub_pose.publish(ps)
-        fk = PoseStamped()
-        fk.header = ps.header
-        fk.pose = _pose_msg(s.X_kin)
-        self.pub_fk.publish(fk)
-        js = JointState()
+        self.pub_fk.publish(PoseStamped(header=ps.header, pose=_pose_msg(s.X_kin)))
+        js = JointState(name=list(UPSRPU_JOINTS), position=[float(v) for v in s.q],
+                        velocity=[float(v) for v in s.q_dot], effort=[float(v) for v in s.tau])
         js.header.stamp = stamp
-        js.name = list(UPSRPU_JOINTS)
-        js.position = [float(v) for v in s.q]
-        js.velocity = [float(v) for v in s.q_dot]
-        js.effort = [float(v) for v in s.tau]
         self.pub_js.publish(js)
         if self.publish_markers:
             fixed, mobile = markers_from_pose(self.tracking, s.X, self.rng, self.noise)
-            for pub, pts in ((self.pub_fixed, fixed), (self.pub_mobile, mobile)):
-                arr = PoseArray()
-                arr.header.stamp = stamp
-                arr.header.frame_id = "tracking_world"
-                for p in pts:
-                    m = Pose()
-                    m.position.x, m.position.y, m.position.z = (float(v) for v in p)
-                    m.orientation.w = 1.0
-                    arr.poses.append(m)
-                pub.publish(arr)
-
+            world = Header(stamp=stamp, frame_id="tracking_world")
+            self.pub_fixed.publish(_points_msg(fixed, world))
+            self.pub_mobile.publish(_points_msg(mobile, world))
 
     def _diagnostics(self) -> None:
-        arr = DiagnosticArray()
-        arr.header.stamp = self.get_clock().now().to_msg()
         bad = self.fk_failures > 0
-        st = DiagnosticStatus(level=DiagnosticStatus.WARN if bad else DiagnosticStatus.OK,
-                              name=self.get_fully_qualified_name(), message="FK failures" if bad else "ok")
-        st.values = [KeyValue(key="sim_time", value=f"{self.plant.t:.2f}"),
-                     KeyValue(key="ticks", value=str(self.ticks)),
-                     KeyValue(key="rejected_commands", value=str(self.rejected)),
-                     KeyValue(key="fk_failures", value=str(self.fk_failures))]
-        arr.status = [st]
-        self.pub_diag.publish(arr)
+        st = diagnostics.status(self.get_fully_qualified_name(), diagnostics.WARN if bad else diagnostics.OK,
+                                "FK failures" if bad else "ok",
+                                {"sim_time": f"{self.plant.t:.2f}", "ticks": self.ticks,
+                                 "rejected_commands": self.rejected, "fk_failures": self.fk_failures})
+        self.pub_diag.publish(diagnostics.array(self, [st]))
 
 
 def main(argv: list[str] | None = None) -> int:
-    from hexa_bringup.rosenv import apply_defaults
-
-    apply_defaults()
-    rclpy.init(args=argv if argv is not None else sys.argv)
-    node = UpsrpuSimNode()
-    try:
-        rclpy.spin(node)
-    except (KeyboardInterrupt, ExternalShutdownException):
-        pass
-    finally:
-        node.destroy_node()
-        if rclpy.ok():
-            rclpy.shutdown()
-    return 0
+    return hexa_ros.node.main(UpsrpuSimNode, "upsrpu-sim", argv)
 
 
 if __name__ == "__main__":

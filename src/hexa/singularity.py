@@ -28,7 +28,7 @@ if TYPE_CHECKING:
     from hexa.robots.upsrpu_description import UpsrpuDescription
 
 __all__ = [
-    "SingularityError", "SingularityReport", "output_twist_screws", "omega_angles", "limb_pairs",
+    "SingularityError", "SingularityMonitor", "SingularityReport", "output_twist_screws", "omega_angles", "limb_pairs",
     "indices_from_screws", "hexa_indices", "upsrpu_indices", "upsrpu_indices_from_screws",
     "upsrpu_indices_with_jd",
 ]
@@ -246,3 +246,45 @@ def hexa_indices(desc: Any, pose: np.ndarray, zeta: np.ndarray | None = None) ->
         if om is not None:
             return _report(det, om, _pair_index(6)[2])
     return indices_from_screws(det, J_D)
+
+
+class SingularityMonitor:
+    """The indices of measured poses of one robot, with its near-singularity limits.
+
+    Args:
+        robot: "hexa" (pose x y z α β γ) or "upsrpu" (X = x_m, z_m, θ, ψ).
+        description: robot description YAML path (None = the packaged one).
+
+    The limits start at the robot's defaults: the 3UPS+RPU's det J_D and Ω limits from its description (seed 003
+    Table 2); for the Hexa no det J_D limit and Ω 1.8°. Set `det_jd_limit` / `omega_limit` to change them.
+
+    Raises:
+        SingularityError: an unknown robot.
+    """
+
+    def __init__(self, robot: str, description: str | None = None) -> None:
+        if robot == "upsrpu":
+            from hexa.robots.upsrpu_description import load_upsrpu
+
+            self.desc = load_upsrpu(description)
+            self.det_jd_limit, self.omega_limit = float(self.desc.det_jd_limit), float(self.desc.omega_limit)
+        elif robot == "hexa":
+            from hexa.robots.hexa_description import load_hexa
+
+            self.desc = load_hexa(description)
+            self.det_jd_limit, self.omega_limit = 0.0, math.radians(1.8)
+        else:
+            raise SingularityError(f"robot must be 'hexa' or 'upsrpu', got {robot!r}")
+        self.robot = robot
+
+    def report(self, pose: np.ndarray) -> SingularityReport:
+        """det J_D and every Ω at `pose`.
+
+        Raises:
+            ValueError: the pose is unreachable (Hexa) or the indices are undefined there.
+        """
+        return upsrpu_indices(self.desc, pose) if self.robot == "upsrpu" else hexa_indices(self.desc, pose)
+
+    def near(self, report: SingularityReport) -> bool:
+        """True when `report` is within the limits (Algorithm 1's test)."""
+        return report.near(self.det_jd_limit, self.omega_limit)

@@ -8,6 +8,7 @@ formulas in mm and degrees; they are converted here. All three share ω = 0.4π 
 from __future__ import annotations
 
 import math
+from pathlib import Path
 from typing import Callable
 
 import numpy as np
@@ -65,3 +66,45 @@ def sample(name: str, rate_hz: float = 100.0,
     T = DURATIONS[name] if duration is None else float(duration)
     t = np.arange(int(round(T * rate_hz)) + 1) / rate_hz
     return (t, *TRAJECTORIES[name](t))
+
+
+def load_pose_file(path: str | Path) -> tuple[Trajectory, float]:
+    """A trajectory from a CSV file of rows t x y z α β γ (SI), linearly interpolated, and its duration (s).
+
+    The rates are the file's finite differences (np.gradient), the accelerations zero.
+
+    Raises:
+        ValueError: the file has the wrong number of columns, non-finite values or non-increasing time.
+        OSError: the file cannot be read.
+    """
+    data = np.loadtxt(path, delimiter=",", ndmin=2, comments="#")
+    if data.shape[1] != 7:
+        raise ValueError(f"{path}: expected 7 columns (t x y z alpha beta gamma), got {data.shape[1]}")
+    if not np.all(np.isfinite(data)):
+        raise ValueError(f"{path}: non-finite values")
+    t = data[:, 0]
+    if np.any(np.diff(t) <= 0):
+        raise ValueError(f"{path}: time must increase strictly")
+    poses = data[:, 1:]
+    rates = np.gradient(poses, t, axis=0) if len(t) > 1 else np.zeros_like(poses)
+
+    def traj(tt: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        pose = np.array([np.interp(tt, t, poses[:, k]) for k in range(6)])
+        rate = np.array([np.interp(tt, t, rates[:, k]) for k in range(6)])
+        return pose, rate, np.zeros(6)
+
+    return traj, float(t[-1] - t[0]) if len(t) > 1 else 0.0
+
+
+def trajectory_named(name: str, path: str | Path = "") -> tuple[Trajectory, float]:
+    """(trajectory, duration s) of `name`: one of TRAJECTORIES, or "file" for the pose file at `path`.
+
+    Raises:
+        ValueError: an unknown name, or a bad file (see load_pose_file).
+        OSError: the file cannot be read.
+    """
+    if name == "file":
+        return load_pose_file(path)
+    if name not in TRAJECTORIES:
+        raise ValueError(f"trajectory must be one of {sorted(TRAJECTORIES)} or 'file', got {name!r}")
+    return TRAJECTORIES[name], DURATIONS[name]

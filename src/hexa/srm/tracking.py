@@ -19,7 +19,8 @@ from hexa.robots.schema import RobotDescriptionError, require_array, require_flo
 if TYPE_CHECKING:
     from hexa.robots.upsrpu_description import UpsrpuDescription
 
-__all__ = ["TrackingModel", "tracking_model", "pose_from_transform", "pose_from_markers", "markers_from_pose"]
+__all__ = ["TrackingModel", "MarkerTracker", "tracking_model", "pose_from_transform", "pose_from_markers",
+           "markers_from_pose"]
 
 
 @dataclass(frozen=True)
@@ -92,3 +93,26 @@ def markers_from_pose(model: TrackingModel, X: np.ndarray, rng: np.random.Genera
         fixed = fixed + rng.normal(0.0, sigma, fixed.shape)
         mobile = mobile + rng.normal(0.0, sigma, mobile.shape)
     return fixed, mobile
+
+
+class MarkerTracker:
+    """X_c from the tracking system's two marker streams as they arrive: the newest fixed set is kept, each mobile
+    set gives a pose."""
+
+    def __init__(self, model: TrackingModel) -> None:
+        self.model = model
+        self.fixed: np.ndarray | None = None
+
+    def add_fixed(self, points: np.ndarray) -> None:
+        """Keep the fixed platform's measured markers (N, 3) (world)."""
+        self.fixed = np.asarray(points, dtype=float)
+
+    def add_mobile(self, points: np.ndarray) -> np.ndarray | None:
+        """X_c from the mobile platform's measured markers (M, 3) and the newest fixed set; None before any fixed set.
+
+        Raises:
+            hexa.vision.rigid.RigidFitError: a marker set is degenerate or does not match its model.
+        """
+        if self.fixed is None:
+            return None
+        return pose_from_markers(self.model, self.fixed, np.asarray(points, dtype=float))[0]

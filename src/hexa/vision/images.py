@@ -147,7 +147,8 @@ def depth_to_meters(array: np.ndarray, encoding: str) -> np.ndarray:
     """
     a = np.asarray(array)
     if encoding in ("16UC1", "mono16"):
-        d = a.astype(np.float32) * 1e-3
+        d = a.astype(np.float32)
+        d *= np.float32(1e-3)          # in place: one new array per frame
         d[a == 0] = np.nan
         return d
     if encoding == "32FC1":

@@ -12,6 +12,7 @@ from itertools import combinations
 import cv2
 import numpy as np
 
+from hexa.rotations import quaternion_from_matrix  # noqa: F401 - part of this module's interface
 from hexa.vision.camera import CameraModel
 from hexa.vision.rigid import RigidFitError, fit_rigid_transform, residuals
 
@@ -338,23 +339,3 @@ def pose_from_transform(T: np.ndarray) -> np.ndarray:
     alpha = float(np.arctan2(R[1, 0], R[0, 0]))
     gamma = float(np.arctan2(R[2, 1], R[2, 2]))
     return np.array([T[0, 3], T[1, 3], T[2, 3], alpha, beta, gamma])
-
-
-def quaternion_from_matrix(R: np.ndarray) -> np.ndarray:
-    """Unit quaternion (x, y, z, w) of a rotation matrix."""
-    R = np.asarray(R, float)
-    tr = np.trace(R)
-    if tr > 0:
-        s = np.sqrt(tr + 1.0) * 2
-        q = [(R[2, 1] - R[1, 2]) / s, (R[0, 2] - R[2, 0]) / s, (R[1, 0] - R[0, 1]) / s, 0.25 * s]
-    elif R[0, 0] > R[1, 1] and R[0, 0] > R[2, 2]:
-        s = np.sqrt(1.0 + R[0, 0] - R[1, 1] - R[2, 2]) * 2
-        q = [0.25 * s, (R[0, 1] + R[1, 0]) / s, (R[0, 2] + R[2, 0]) / s, (R[2, 1] - R[1, 2]) / s]
-    elif R[1, 1] > R[2, 2]:
-        s = np.sqrt(1.0 + R[1, 1] - R[0, 0] - R[2, 2]) * 2
-        q = [(R[0, 1] + R[1, 0]) / s, 0.25 * s, (R[1, 2] + R[2, 1]) / s, (R[0, 2] - R[2, 0]) / s]
-    else:
-        s = np.sqrt(1.0 + R[2, 2] - R[0, 0] - R[1, 1]) * 2
-        q = [(R[0, 2] + R[2, 0]) / s, (R[1, 2] + R[2, 1]) / s, 0.25 * s, (R[1, 0] - R[0, 1]) / s]
-    q = np.array(q)
-    return q / np.linalg.norm(q)

@@ -1,0 +1,208 @@
+"""A TrajectoryPlayer on a clock: when trajectory time starts (a set time, a delay after the first clock reading,
+or the end of a slow approach from the first measured plate pose), what is commanded each tick, the collision and
+operator requests, and the state an operator reads."""
+from __future__ import annotations
+
+import math
+from collections.abc import Callable
+from dataclasses import dataclass
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+
+from hexa.trajectory_player import Command, TrajectoryPlayer
+
+if TYPE_CHECKING:
+    from hexa.robots.hexa_description import HexaDescription
+
+#: s: the approach starts only from a plate pose whose stamp is this recent (limp servos let the plate sag; a
+#: stalled camera lies)
+APPROACH_POSE_MAX_AGE = 0.5
+#: states in which the robot does not follow the trajectory for a reason an operator should see
+WARN_STATES = ("held", "retracting", "waiting_for_pose")
+
+
+@dataclass(frozen=True)
+class TrajectorySettings:
+    """The trajectory node's configuration (its parameters: same names, SI units; see hexa_dynamics.trajectory_node).
+
+    Raises (check):
+        ValueError: naming the setting out of range.
+    """
+
+    trajectory: str = "circle"
+    file: str = ""
+    rate_hz: float = 100.0
+    start_delay: float = 1.0
+    start_time: float = -1.0
+    loop: bool = False
+    loop_blend: float = 2.0
+    collision_policy: str = "hold"
+    retract_distance: float = 0.02
+    retract_time: float = 0.5
+    max_step: float = 0.03
+    start_blend: float = 1.0
+    approach_speed: float = 0.0
+    approach_tolerance: float = 0.02
+
+    def check(self) -> None:
+        if not (math.isfinite(self.approach_speed) and self.approach_speed >= 0):
+            raise ValueError(f"approach_speed must be >= 0 rad/s (0 = off), got {self.approach_speed}")
+        if not (math.isfinite(self.approach_tolerance) and self.approach_tolerance >= 0):
+            raise ValueError(f"approach_tolerance must be >= 0 rad, got {self.approach_tolerance}")
+        if not self.rate_hz > 0:
+            raise ValueError(f"rate_hz must be > 0, got {self.rate_hz}")
+        if not self.start_blend >= 0:
+            raise ValueError(f"start_blend must be >= 0 s, got {self.start_blend}")
+        m = self.max_step
+        if not math.isfinite(m) or m < 0 or (0 < m < 1.0 / self.rate_hz):
+            raise ValueError(f"max_step must be 0 (no limit) or >= 1/rate_hz = {1.0 / self.rate_hz:g} s, got {m}")
+
+
+@dataclass(frozen=True)
+class Tick:
+    """What one tick gives: the state to report (None: nothing) and the arm angles ζ (rad) and rates ζ̇ (rad/s) to
+    command (None: no command)."""
+
+    state: str | None = None
+    zeta: np.ndarray | None = None
+    zeta_dot: np.ndarray | None = None
+
+
+class TrajectoryRunner:
+    """Trajectory time from a clock for a TrajectoryPlayer.
+
+    Trajectory time 0 is `start_time` on the clock, or `start_delay` after the first clock reading when
+    `start_time` < 0; before it the start pose is commanded at rest ("waiting"). With `approach_speed` > 0 nothing
+    is commanded until a plate pose at most APPROACH_POSE_MAX_AGE old has arrived (`on_pose`): from it the player
+    plans a slow approach to the start pose, and trajectory time 0 becomes that moment. A clock at 0 (sim time not
+    started) commands nothing.
+
+    Args:
+        player: the trajectory player.
+        start_time, start_delay: see above (s).
+        approach_speed: rad/s, 0 = no approach.
+        approach_tolerance: rad; no approach when every arm is this close to its start angle.
+        log: called with ("info" | "warn" | "error", message) for what an operator should read.
+    """
+
+    def __init__(self, player: TrajectoryPlayer, start_time: float = -1.0, start_delay: float = 1.0,
+                 approach_speed: float = 0.0, approach_tolerance: float = 0.02,
+                 log: Callable[[str, str], Any] | None = None) -> None:
+        self.player = player
+        self.start_time, self.start_delay = start_time, start_delay
+        self.approach_speed, self.approach_tolerance = approach_speed, approach_tolerance
+        self.approach_pending = approach_speed > 0
+        self._log = log or (lambda _level, _text: None)
+        self._t0: float | None = None
+        self._pose: np.ndarray | None = None
+        self._pose_time = -math.inf
+        self._last: Command | None = None
+        self.state = "waiting"
+        self.collisions = 0
+        self.bad_poses = 0
+
+    @classmethod
+    def from_settings(cls, desc: HexaDescription, s: TrajectorySettings,
+                      log: Callable[[str, str], Any] | None = None) -> TrajectoryRunner:
+        """The runner of checked settings, with its player.
+
+        Raises:
+            ValueError: a setting out of range, an unknown trajectory or policy, a bad pose file.
+            OSError: the pose file cannot be read.
+        """
+        from hexa.trajectories import trajectory_named
+
+        s.check()
+        traj, duration = trajectory_named(s.trajectory, s.file)
+        player = TrajectoryPlayer(desc, traj, duration, policy=s.collision_policy,
+                                  retract_distance=s.retract_distance, retract_time=s.retract_time, loop=s.loop,
+                                  max_step=s.max_step or None, start_blend=s.start_blend, loop_blend=s.loop_blend)
+        return cls(player, s.start_time, s.start_delay, s.approach_speed, s.approach_tolerance, log)
+
+    # -- inputs --------------------------------------------------------------------------------------------------
+    def reject_pose(self, why: str) -> None:
+        """Count a plate pose that cannot be used (and say why)."""
+        self.bad_poses += 1
+        self._log("warn", f"plate_pose rejected: {why}")
+
+    def on_pose(self, pose: np.ndarray, stamp: float, now: float) -> None:
+        """A measured plate pose [x y z α β γ] taken at `stamp` (s; ≤ 0: unknown, `now` is used)."""
+        pose = np.asarray(pose, dtype=float)
+        if not np.all(np.isfinite(pose)):
+            self.reject_pose(f"non-finite pose {pose.tolist()}")
+            return
+        self._pose, self._pose_time = pose, (stamp if stamp > 0 else now)
+
+    def _fresh(self, now: float) -> bool:
+        return self._pose is not None and now - self._pose_time <= APPROACH_POSE_MAX_AGE
+
+    # -- time ----------------------------------------------------------------------------------------------------
+    def time(self, now: float) -> float | None:
+        """Trajectory time at clock time `now` (negative before the start), or None while nothing may be
+        commanded. Plans the approach at the first call with a fresh measured pose."""
+        if now <= 0.0:
+            return None
+        if self._t0 is None:
+            self._t0 = self.start_time if self.start_time >= 0 else now + self.start_delay
+        if self.approach_pending:
+            if now < self._t0 or not self._fresh(now) or not self._plan_approach(now):
+                return None
+        return now - self._t0
+
+    def _plan_approach(self, now: float) -> bool:
+        try:
+            T = self.player.approach_from(self._pose, self.approach_speed, self.approach_tolerance)
+        except ValueError as exc:  # unreachable measured pose: wait for the next one
+            self.bad_poses += 1
+            self._pose = None
+            self._log("error", f"cannot approach from the measured plate pose: {exc}")
+            return False
+        self.approach_pending = False
+        self._t0 = now
+        p = self._pose
+        self._log("info", f"approach from plate pose ({p[0]:.3f}, {p[1]:.3f}, {p[2]:.3f}) m: {T:.2f} s"
+                  if T > 0 else "at the start pose: no approach needed")
+        return True
+
+    # -- per tick and on request ---------------------------------------------------------------------------------
+    def tick(self, now: float) -> Tick:
+        """The command and state at clock time `now`; after an IK failure the previous command again."""
+        t = self.time(now)
+        if t is None:
+            if not self.approach_pending:
+                return Tick()
+            self.state = "waiting" if self._fresh(now) else "waiting_for_pose"
+            return Tick(self.state)
+        try:
+            self._last = self.player.command(max(0.0, t))
+        except ValueError as exc:
+            self._log("error", f"IK failed, holding the last command: {exc}")
+            if self._last is None:
+                return Tick()
+        cmd = self._last
+        self.state = "waiting" if t < 0 else cmd.state
+        return Tick(self.state, cmd.zeta, np.zeros(6) if t < 0 else cmd.zeta_dot)
+
+    def collision(self, now: float, external_force: np.ndarray | None = None) -> str | None:
+        """A collision START: the player's new state, or None before the trajectory clock runs."""
+        self.collisions += 1
+        t = self.time(now)
+        return None if t is None else self.player.on_collision(max(0.0, t), external_force)
+
+    def resume(self, now: float) -> bool:
+        """Resume after a hold; False when not held."""
+        t = self.time(now)
+        return t is not None and self.player.resume(max(0.0, t))
+
+    def hold(self, now: float) -> bool:
+        """Hold as on a collision; False with the policy "ignore" or before the trajectory clock runs."""
+        t = self.time(now)
+        return t is not None and self.player.on_collision(max(0.0, t)) in ("held", "retracting")
+
+    def diagnostic_values(self) -> dict[str, str]:
+        """State and counters for /diagnostics."""
+        p = self.player
+        return {"state": self.state, "collisions": str(self.collisions), "ik_failures": str(p.ik_failures),
+                "lag_events": str(p.lag_events), "lag_time_s": f"{p.lag_time:.3f}",
+                "approach_time_s": f"{p.approach_time:.3f}", "rejected_poses": str(self.bad_poses)}

@@ -1,0 +1,120 @@
+"""Plate pose from one camera's RGB-D stream: colour/depth pairing, the plate detector's box, the marker fit, and the
+counters a node reports (what the pose node does per frame, without ROS)."""
+from __future__ import annotations
+
+from collections import Counter
+from dataclasses import dataclass, field
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+
+from hexa.vision.markers import MarkerDetector, MarkerError, MarkerFit, MarkerLayout
+from hexa.vision.sync import FrameAssembler, RGBDFrame
+
+if TYPE_CHECKING:
+    from hexa.vision.detector import Detection, PlateDetector
+
+#: counters that count work done, not rejected input
+_WORK_COUNTERS = ("frames", "detections", "poses")
+
+
+@dataclass
+class PlatePose:
+    """The outcome of one RGB-D frame: its stamp (s), the detector's boxes (empty when it did not run or found
+    nothing) and the accepted marker fit (None when the frame gave no pose; the reason is counted)."""
+
+    stamp: float
+    detections: list[Detection] = field(default_factory=list)
+    fit: MarkerFit | None = None
+
+
+class PlatePoseEstimator:
+    """Pairs a camera's colour and depth images, finds the plate (detector box, then coloured markers) per frame.
+
+    Bad input is counted by reason in `counters()` and skipped, never raised. The detector runs when its box is
+    used (`roi_from_detector`) or its boxes are wanted (`detections_wanted` of `add_color` / `add_depth`): no
+    detector work for a frame whose boxes nobody uses.
+
+    Args:
+        layout: the plate's marker layout.
+        camera: camera name ("cam_top").
+        T_base_camera: extrinsics of the colour optical frame (4x4).
+        detector: the plate detector, or None (markers searched in the whole frame).
+        roi_from_detector: search the markers in the best box, padded by `roi_pad` of its size on each side; the
+            whole frame again when no fit is found there.
+    """
+
+    def __init__(self, layout: MarkerLayout, camera: str, T_base_camera: np.ndarray,
+                 detector: PlateDetector | None = None, roi_from_detector: bool = True, roi_pad: float = 0.2) -> None:
+        self.layout = layout
+        self.detector = detector
+        self.roi_from_detector = roi_from_detector
+        self.roi_pad = roi_pad
+        self.assembler = FrameAssembler(camera, T_base_camera)
+        self.markers: MarkerDetector | None = None
+        self._counters: Counter[str] = Counter()
+
+    def set_camera_info(self, width: int, height: int, k: Any, d: Any = None) -> None:
+        """Update the intrinsics from CameraInfo fields (a new marker detector when they change)."""
+        self.assembler.set_camera_info(width, height, k, d)
+        cam = self.assembler.camera
+        if cam is not None and not cam.same_as(self.markers.camera if self.markers else None):
+            self.markers = MarkerDetector(self.layout, cam)
+
+    def add_color(self, stamp: float, height: int, width: int, encoding: str, is_bigendian: int, step: int,
+                  data: Any, detections_wanted: bool = True) -> PlatePose | None:
+        """Add a colour image (sensor_msgs/Image fields); the pose of the frame it completes, or None."""
+        frame = self.assembler.add_color(stamp, height, width, encoding, is_bigendian, step, data)
+        return None if frame is None else self.process(frame, detections_wanted)
+
+    def add_depth(self, stamp: float, height: int, width: int, encoding: str, is_bigendian: int, step: int,
+                  data: Any, detections_wanted: bool = True) -> PlatePose | None:
+        """Add a depth image (sensor_msgs/Image fields); the pose of the frame it completes, or None."""
+        frame = self.assembler.add_depth(stamp, height, width, encoding, is_bigendian, step, data)
+        return None if frame is None else self.process(frame, detections_wanted)
+
+    def detector_box(self, detections: list[Detection]) -> tuple[float, float, float, float] | None:
+        """The marker search box: the best detection padded by `roi_pad` of its size, or None."""
+        if not detections or not self.roi_from_detector:
+            return None
+        b = detections[0].box
+        pw, ph = self.roi_pad * (b[2] - b[0]), self.roi_pad * (b[3] - b[1])
+        return (b[0] - pw, b[1] - ph, b[2] + pw, b[3] + ph)
+
+    def process(self, frame: RGBDFrame, detections_wanted: bool = True) -> PlatePose:
+        """Detector (when its output is used) and marker fit of one RGB-D frame."""
+        c = self._counters
+        c["frames"] += 1
+        out = PlatePose(frame.stamp)
+        if self.detector is not None and (self.roi_from_detector or detections_wanted):
+            out.detections = self.detector.detect(frame.rgb)
+            c["detections"] += len(out.detections)
+        if self.markers is None:
+            c["no camera_info"] += 1
+            return out
+        roi = self.detector_box(out.detections)
+        try:
+            fit, _ = self.markers.estimate(frame.rgb, frame.depth, roi)
+            if not fit.ok and roi is not None:
+                fit, _ = self.markers.estimate(frame.rgb, frame.depth, None)
+        except MarkerError:
+            c["reject: marker input"] += 1
+            return out
+        if not fit.ok:
+            c["marker fit rejected"] += 1
+            return out
+        c["poses"] += 1
+        if fit.rejected:
+            c["markers rejected as outliers"] += len(fit.rejected)
+        out.fit = fit
+        return out
+
+    def counters(self) -> Counter[str]:
+        """Frames, detections, poses and every reject by reason (the pairing's included)."""
+        merged = Counter(self._counters)
+        merged.update(self.assembler.rejects)
+        return merged
+
+    def rejected(self) -> int:
+        """How many inputs were rejected (frames without a pose, unusable images, outlier markers)."""
+        return int(sum(v for k, v in self.counters().items() if k not in _WORK_COUNTERS))

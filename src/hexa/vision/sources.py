@@ -1,0 +1,197 @@
+"""RGB-D camera sources without ROS: PNG-folder pairs, a rosbag2 of camera topics, an Intel RealSense (pyrealsense2).
+
+Each source yields what one RGB-D camera in the realsense-ros layout publishes: RGB uint8 colour and aligned depth
+as uint16 millimetres (0 = invalid), with the camera's intrinsics.
+"""
+from __future__ import annotations
+
+import threading
+from collections.abc import Callable, Iterator
+from pathlib import Path
+
+import numpy as np
+
+from hexa.vision.camera import CameraModel
+
+#: the camera topics of a camera `c` (relative), as realsense-ros names them
+TOPICS = ("color/image_raw", "color/camera_info", "aligned_depth_to_color/image_raw")
+
+
+class SourceError(ValueError):
+    """A camera source cannot start (missing folder, bag or library); the message says what to do."""
+
+
+def folder_pairs(path: str | Path) -> list[tuple[Path, Path]]:
+    """Sorted (colour, depth) PNG pairs of a folder (color_<n>.png + depth_<n>.png).
+
+    Raises:
+        SourceError: the folder is missing or holds no pair.
+    """
+    p = Path(path)
+    if not p.is_dir():
+        raise SourceError(f"folder {p} does not exist")
+    pairs = []
+    for c in sorted(p.glob("color_*.png")):
+        d = c.with_name("depth_" + c.name[len("color_"):])
+        if d.exists():
+            pairs.append((c, d))
+    if not pairs:
+        raise SourceError(f"folder {p} holds no color_<n>.png / depth_<n>.png pair")
+    return pairs
+
+
+def read_pair(color: Path, depth: Path) -> tuple[np.ndarray, np.ndarray]:
+    """RGB uint8 and depth uint16 (mm) from a PNG pair.
+
+    Raises:
+        SourceError: a file cannot be read, or the depth PNG is not 16-bit.
+    """
+    import cv2
+
+    bgr = cv2.imread(str(color), cv2.IMREAD_COLOR)
+    dep = cv2.imread(str(depth), cv2.IMREAD_UNCHANGED)
+    if bgr is None or dep is None:
+        raise SourceError(f"cannot read {color} / {depth}")
+    if dep.dtype != np.uint16:
+        raise SourceError(f"{depth} must be a 16-bit PNG (mm), got {dep.dtype}")
+    return cv2.cvtColor(bgr, cv2.COLOR_BGR2RGB), dep
+
+
+class FolderSource:
+    """The PNG pairs of a folder in order, from the start again when `loop`.
+
+    The intrinsics come from the folder's camera_info.yaml (width, height, k[9], optional d) or, without it, from
+    `fallback()` (e.g. the robot description's camera).
+
+    Raises:
+        SourceError: the folder is missing or empty, or no intrinsics are found.
+    """
+
+    def __init__(self, path: str | Path, name: str, loop: bool = True,
+                 fallback: Callable[[], CameraModel] | None = None) -> None:
+        self.path = Path(path)
+        self.pairs = folder_pairs(self.path)
+        self.loop = loop
+        self.index = 0
+        info = self.path / "camera_info.yaml"
+        if info.exists():
+            import yaml
+
+            d = yaml.safe_load(info.read_text())
+            self.model = CameraModel.from_camera_info(d["width"], d["height"], d["k"], d.get("d"), name=name)
+            return
+        try:
+            if fallback is None:
+                raise SourceError("no fallback intrinsics given")
+            self.model = fallback()
+        except Exception as exc:
+            raise SourceError(f"no camera_info.yaml in {self.path} and no intrinsics for {name} in the robot "
+                              f"description ({exc})") from exc
+
+    def next(self) -> tuple[np.ndarray, np.ndarray] | None:
+        """The next (rgb, depth mm) pair, or None once the folder is played (without `loop`).
+
+        Raises:
+            SourceError: the pair cannot be read (it is skipped; the next call reads the following one).
+        """
+        if self.index >= len(self.pairs):
+            if not self.loop:
+                return None
+            self.index = 0
+        c, d = self.pairs[self.index]
+        self.index += 1
+        return read_pair(c, d)
+
+
+class BagSource:
+    """The colour, depth and camera_info messages of one camera from a rosbag2, as recorded (CDR), at `rate` times
+    the recorded pace, from the start again when `loop`; `stop()` ends the iteration.
+
+    Raises:
+        SourceError: the bag does not exist.
+    """
+
+    def __init__(self, path: str | Path, camera: str, rate: float = 1.0, loop: bool = True) -> None:
+        self.path = Path(path)
+        if not self.path.exists():
+            raise SourceError(f"bag {self.path} does not exist")
+        self.suffixes = tuple(f"{camera}/{t}" for t in TOPICS)
+        self.rate = rate if rate > 0 else 1.0
+        self.loop = loop
+        self._stop = threading.Event()
+
+    def stop(self) -> None:
+        self._stop.set()
+
+    @property
+    def stopped(self) -> bool:
+        return self._stop.is_set()
+
+    def messages(self) -> Iterator[tuple[str, str, bytes]]:
+        """(topic suffix as in TOPICS after `<camera>/`, msgtype, cdr) of the camera's messages.
+
+        Raises:
+            hexa.bags.BagError: the bag is unreadable.
+        """
+        from hexa.bags import paced, read_bag
+
+        while not self._stop.is_set():
+            for topic, msgtype, _t, cdr in paced(read_bag(self.path), self.rate):
+                if self._stop.is_set():
+                    return
+                key = next((k for k in self.suffixes if topic.endswith(k)), None)
+                if key is not None:
+                    yield key.split("/", 1)[1], msgtype, cdr
+            if not self.loop:
+                return
+
+
+def depth_to_mm(depth: np.ndarray, scale_mm: float) -> np.ndarray:
+    """uint16 millimetres of raw depth units times `scale_mm` (mm per unit), rounded and clipped to 0..65535."""
+    d = np.asarray(depth).astype(np.float32) * scale_mm
+    return np.clip(np.rint(d), 0, 65535).astype(np.uint16)
+
+
+class RealSenseSource:
+    """An Intel RealSense (pyrealsense2): 640x480 colour and depth at 30 fps, depth aligned to colour.
+
+    Args:
+        name: camera name (for the model).
+        serial: device serial number ("" = the first device; two cameras on one PC: one source per serial).
+
+    Raises:
+        SourceError: pyrealsense2 is not installed.
+    """
+
+    def __init__(self, name: str, serial: str = "", width: int = 640, height: int = 480, fps: int = 30) -> None:
+        try:
+            import pyrealsense2 as rs  # type: ignore[import-not-found]
+        except ImportError as exc:
+            raise SourceError("source 'realsense' needs the optional pyrealsense2 package (pip install "
+                              "pyrealsense2; not installed here) — use source:=folder or source:=bag") from exc
+        self._pipe = rs.pipeline()
+        cfg = rs.config()
+        if serial:
+            cfg.enable_device(serial)
+        cfg.enable_stream(rs.stream.color, width, height, rs.format.rgb8, fps)
+        cfg.enable_stream(rs.stream.depth, width, height, rs.format.z16, fps)
+        profile = self._pipe.start(cfg)
+        self._align = rs.align(rs.stream.color)
+        intr = profile.get_stream(rs.stream.color).as_video_stream_profile().get_intrinsics()
+        K = np.array([[intr.fx, 0, intr.ppx], [0, intr.fy, intr.ppy], [0, 0, 1.0]])
+        self.model = CameraModel(K, intr.width, intr.height, name=name)
+        self._depth_scale_mm = profile.get_device().first_depth_sensor().get_depth_scale() * 1000.0
+
+    def poll(self) -> tuple[np.ndarray, np.ndarray] | None:
+        """The newest (rgb, depth mm) pair, or None when no new frame set has arrived."""
+        frames = self._pipe.poll_for_frames()
+        if not frames:
+            return None
+        frames = self._align.process(frames)
+        color, depth = frames.get_color_frame(), frames.get_depth_frame()
+        if not color or not depth:
+            return None
+        return np.asanyarray(color.get_data()), depth_to_mm(np.asanyarray(depth.get_data()), self._depth_scale_mm)
+
+    def stop(self) -> None:
+        self._pipe.stop()

@@ -1,0 +1,102 @@
+"""The trajectory node's logic without ROS: when trajectory time starts (delay, set time, approach from a fresh
+measured pose), the command per tick, requests before the clock runs, settings refused by name."""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from hexa.kinematics import hexa6rus
+from hexa.robots.hexa_description import load_hexa
+from hexa.trajectories import TRAJECTORIES, load_pose_file
+from hexa.trajectory_runner import APPROACH_POSE_MAX_AGE, TrajectoryRunner, TrajectorySettings
+
+START = np.asarray(TRAJECTORIES["circle"](0.0)[0])
+
+
+@pytest.fixture(scope="module")
+def desc():
+    return load_hexa()
+
+
+def _runner(desc, log=None, **kw) -> TrajectoryRunner:
+    return TrajectoryRunner.from_settings(desc, TrajectorySettings(**kw), log)
+
+
+def test_the_start_pose_is_held_at_rest_for_the_start_delay_then_the_trajectory_plays(desc):
+    r = _runner(desc, start_delay=1.0, start_blend=0.0)
+    assert r.tick(0.0).state is None                             # sim time not started: nothing
+    first = r.tick(10.0)                                         # trajectory time 0 is 11.0
+    assert first.state == "waiting" and not first.zeta_dot.any()
+    assert np.allclose(first.zeta, hexa6rus.inverse_kinematics(desc, START))
+    assert r.tick(11.5).state == "running" and r.time(11.5) == pytest.approx(0.5)
+    fixed = _runner(desc, start_time=0.0)
+    assert fixed.tick(2.0).state == "running" and fixed.time(2.0) == pytest.approx(2.0)
+
+
+def test_with_an_approach_nothing_is_commanded_before_a_fresh_valid_pose(desc):
+    logs: list[tuple[str, str]] = []
+    r = _runner(desc, lambda lv, t: logs.append((lv, t)), start_delay=0.0, approach_speed=0.3)
+    assert r.approach_pending
+    tick = r.tick(5.0)
+    assert tick.state == "waiting_for_pose" and tick.zeta is None
+    r.on_pose(np.full(6, np.nan), 5.0, 5.0)                      # rejected, counted
+    r.reject_pose("invalid quaternion")
+    assert r.bad_poses == 2 and [lv for lv, _ in logs] == ["warn", "warn"]
+    here = START + np.array([0.015, -0.02, 0.01, 0.04, 0.0, -0.03])
+    r.on_pose(here, 5.0 - 2.0, 5.1)                              # 2 s old at 5.1: not used
+    assert r.tick(5.1).zeta is None and r.state == "waiting_for_pose"
+    assert r.collision(5.1) is None and not r.resume(5.1) and not r.hold(5.1)
+    r.on_pose(here, 5.2, 5.2)
+    first = r.tick(5.2 + APPROACH_POSE_MAX_AGE / 2)
+    assert first.state == "approaching" and not r.approach_pending
+    assert np.allclose(first.zeta, hexa6rus.inverse_kinematics(desc, here))
+    assert logs[-1][0] == "info" and "approach from plate pose" in logs[-1][1]
+    assert r.diagnostic_values()["rejected_poses"] == "2" and float(r.diagnostic_values()["approach_time_s"]) > 0
+
+
+def test_an_unreachable_measured_pose_is_dropped_and_nothing_is_commanded(desc):
+    logs: list[tuple[str, str]] = []
+    r = _runner(desc, lambda lv, t: logs.append((lv, t)), start_delay=0.0, approach_speed=0.3)
+    r.on_pose(START + np.array([0, 0, 1.0, 0, 0, 0]), 1.0, 1.0)   # 1 m away: no IK solution
+    assert r.tick(1.1).zeta is None and r.approach_pending and r.bad_poses == 1
+    assert logs[-1][0] == "error" and r.tick(1.2).state == "waiting_for_pose"
+
+
+def test_an_ik_failure_repeats_the_previous_command(desc):
+    logs: list[tuple[str, str]] = []
+    r = _runner(desc, lambda lv, t: logs.append((lv, t)), start_time=0.0, start_blend=0.0, max_step=0.0)
+    good = r.tick(1.0)
+    r.player.trajectory = lambda t: (START + np.array([0, 0, 1.0, 0, 0, 0]), np.zeros(6), np.zeros(6))
+    again = r.tick(1.01)
+    assert np.array_equal(again.zeta, good.zeta) and logs[-1][0] == "error"
+    assert r.diagnostic_values()["ik_failures"] == "1"
+
+
+def test_hold_and_resume_requests_reach_the_player(desc):
+    r = _runner(desc, start_time=0.0)
+    r.tick(1.0)
+    assert r.hold(1.0) and r.tick(1.5).state == "held"
+    assert r.resume(2.0) and not r.resume(2.1)
+    assert r.collision(3.0) == "held" and r.collisions == 1
+    assert not _runner(desc, start_time=0.0, collision_policy="ignore").hold(1.0)
+
+
+@pytest.mark.parametrize("kw, name", [({"approach_speed": -1.0}, "approach_speed"),
+                                      ({"approach_tolerance": float("nan")}, "approach_tolerance"),
+                                      ({"rate_hz": 0.0}, "rate_hz"), ({"start_blend": -0.1}, "start_blend"),
+                                      ({"max_step": 0.001}, "max_step"), ({"trajectory": "square"}, "'square'"),
+                                      ({"collision_policy": "stop"}, "'stop'")])
+def test_bad_settings_are_refused_naming_the_setting(desc, kw, name):
+    with pytest.raises(ValueError, match=name):
+        _runner(desc, **kw)
+
+
+def test_a_pose_file_is_interpolated_with_its_rates(tmp_path):
+    f = tmp_path / "poses.csv"
+    f.write_text("# t x y z alpha beta gamma\n0,0,0,-0.55,0,0,0\n2,0.1,0,-0.55,0,0,0.2\n")
+    traj, duration = load_pose_file(f)
+    pose, rate, _ = traj(1.0)
+    assert duration == 2.0 and np.allclose(pose, [0.05, 0, -0.55, 0, 0, 0.1]) and rate[0] == pytest.approx(0.05)
+    f.write_text("0,0,0,-0.55,0,0,0\n0,0.1,0,-0.55,0,0,0\n")
+    with pytest.raises(ValueError, match="increase"):
+        load_pose_file(f)
