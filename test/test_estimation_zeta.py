@@ -140,3 +140,45 @@ def test_a_camera_pose_ahead_of_the_samples_waits_for_them():
         est.update(k * 0.001, z + 0.01, np.zeros(6))
     assert est.camera_accepted == 1              # applied once the samples passed 50 ms
     assert np.all(np.abs(est.last.zeta - z) < 0.005)
+
+
+def _matrix_form(x, P, h, c, tq, free, r_s, cfg, sv):
+    """The filter step in its 3×3 matrix form (the reference for the closed form the estimator runs)."""
+    x, P = x.copy(), P.copy()
+    x[:, 0] += h * x[:, 1]
+    F = np.array([[1.0, h, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]])
+    qa = np.where(free, cfg.accel_sigma ** 2, cfg.stall_accel_sigma ** 2)[:, None, None]
+    Q = qa * np.array([[h ** 3 / 3, h ** 2 / 2, 0.0], [h ** 2 / 2, h, 0.0], [0.0, 0.0, 0.0]])
+    Q[:, 2, 2] = cfg.bias_walk ** 2 * h
+    P = F @ P @ F.T + Q
+    use = free | (cfg.stall_sigma > 0.0)
+    H = np.array([1.0, sv.kv / sv.kp, 1.0])
+    y = c - tq / sv.kp
+    PH = P @ H
+    S = PH @ H + np.where(free, r_s, cfg.stall_sigma ** 2)
+    K = PH / S[:, None]
+    x += K * ((y - x @ H) * use)[:, None]
+    P = np.where(use[:, None, None], P - K[:, :, None] * PH[:, None, :], P)
+    return x, 0.5 * (P + np.swapaxes(P, 1, 2))
+
+
+def test_closed_form_filter_step_equals_the_matrix_form():
+    from hexa.estimation import ZetaEstimator
+    from hexa.robots.hexa_description import load_hexa
+
+    est = ZetaEstimator(load_hexa())
+    rng = np.random.default_rng(3)
+    r_s = (est.config.torque_sigma / est.servo.kp) ** 2
+    for _ in range(50):
+        A = rng.normal(size=(6, 3, 3))
+        P0 = A @ np.swapaxes(A, 1, 2) * 1e-3 + np.eye(3) * 1e-4       # symmetric positive definite
+        x0 = rng.normal(size=(6, 3)) * 0.1
+        h = float(rng.uniform(1e-4, 0.02))
+        c, tq = rng.normal(size=6), rng.normal(size=6) * 0.5
+        free = rng.random(6) > 0.3
+        x_ref, P_ref = _matrix_form(x0, P0, h, c, tq, free, r_s, est.config, est.servo)
+        est._x, est._P = x0.copy(), P0.copy()
+        est._predict_update(h, c, tq, free, r_s)
+        assert np.allclose(est._x, x_ref, rtol=1e-12, atol=1e-15)
+        assert np.allclose(est._P, P_ref, rtol=1e-12, atol=1e-18)
+        assert np.array_equal(est._P, np.swapaxes(est._P, 1, 2))

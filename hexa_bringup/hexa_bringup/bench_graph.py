@@ -78,6 +78,7 @@ class Options:
     domain_id: int | None = None
     ready_timeout: float = 120.0
     compose: bool = False
+    stream_rate: int = RECORD_STREAM_HZ
 
 
 def say(text: str) -> None:
@@ -410,22 +411,23 @@ def bag_identity(bag: Path) -> list:
             for f in files if f.is_file()]
 
 
-def record_default_bag(cache: Path, domain: int) -> Path:
-    """The default bag (cache/graph_bag): the plate case of `hexa demo`, made by the simulator alone with the
-    currents at 1 kHz and both cameras at 30 fps (hexa_bringup.bench_bag), when it is not there yet."""
+def record_default_bag(cache: Path, stream_rate: int = RECORD_STREAM_HZ) -> Path:
+    """The default bag (cache/graph_bag, or graph_bag_<rate>hz): the plate case of `hexa demo`, made by the
+    simulator alone with the currents at `stream_rate` Hz and both cameras at 30 fps (hexa_bringup.bench_bag), when
+    it is not there yet."""
     from hexa_bringup.bench_bag import synthesize
 
-    target = cache / "graph_bag"
+    target = cache / ("graph_bag" if stream_rate == RECORD_STREAM_HZ else f"graph_bag_{stream_rate}hz")
     if target.exists():
         return target
-    work = cache / "graph_bag.partial"
+    work = target.with_name(target.name + ".partial")
     if work.exists():
         shutil.rmtree(work)
     cache.mkdir(parents=True, exist_ok=True)
     say(f"no bag given and none cached: simulating the '{RECORD_CASE}' case with both cameras and currents at "
-        f"{RECORD_STREAM_HZ} Hz into {target} (about half a minute)")
+        f"{stream_rate} Hz into {target} (about half a minute)")
     t0 = time.monotonic()
-    synthesize(work, RECORD_CASE, stream_rate_hz=RECORD_STREAM_HZ, progress=say)
+    synthesize(work, RECORD_CASE, stream_rate_hz=stream_rate, progress=say)
     work.rename(target)
     say(f"made {target} in {time.monotonic() - t0:.0f} s")
     return target
@@ -829,7 +831,7 @@ def run(opts: Options) -> dict[str, Any]:
         with held_domain(opts.domain_id) as domain:
             env = ros_env(domain)
             info_out["ros_domain_id"] = domain
-            bag = opts.bag if opts.bag is not None else record_default_bag(cache, domain)
+            bag = opts.bag if opts.bag is not None else record_default_bag(cache, opts.stream_rate)
             info = bag_inputs(bag)
             info_out["bag"] = {"path": str(bag), "ns": info.ns, "duration_s": info.duration,
                                "messages": {info.rel(t): n for t, n in info.counts.items()},

@@ -252,28 +252,8 @@ class ZetaEstimator:
         else:
             h = t - self._t
             step = sv.speed_max * h
-            c = self._c + np.clip(uc - self._c, -step, step)
-            x, P = self._x, self._P
-            # predict: constant velocity (white acceleration), bias random walk
-            x[:, 0] += h * x[:, 1]
-            F = np.array([[1.0, h, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]])
-            qa = np.where(free, cfg.accel_sigma ** 2, cfg.stall_accel_sigma ** 2)[:, None, None]  # (6, 1, 1)
-            Q = qa * np.array([[h ** 3 / 3, h ** 2 / 2, 0.0], [h ** 2 / 2, h, 0.0], [0.0, 0.0, 0.0]])
-            Q[:, 2, 2] = cfg.bias_walk ** 2 * h
-            P = F @ P @ F.T + Q
-            # servo-model update y = c − τ/k_p = ζ + (k_v/k_p) ζ̇ + b; a saturated servo's y is only a weak
-            # measurement (noise stall_sigma): its true torque is larger than the clipped one it reports
-            use = free | (cfg.stall_sigma > 0.0)
-            if use.any():
-                H = np.array([1.0, sv.kv / sv.kp, 1.0])
-                y = c - tq / sv.kp
-                PH = P @ H                                   # (6, 3)
-                S = PH @ H + np.where(free, r_s, cfg.stall_sigma ** 2)   # (6,)
-                K = PH / S[:, None]
-                innov = (y - x @ H) * use
-                x += K * innov[:, None]
-                P = np.where(use[:, None, None], P - K[:, :, None] * PH[:, None, :], P)
-            self._P = 0.5 * (P + np.swapaxes(P, 1, 2))
+            c = self._c + np.minimum(np.maximum(uc - self._c, -step), step)
+            self._predict_update(h, c, tq, free, r_s)
         self._y = c - tq / sv.kp
         self._c = c
         self._t = t
@@ -286,6 +266,49 @@ class ZetaEstimator:
             tc, q = self._pending_cam.popleft()
             self.update_camera(tc, q)
         return self.last
+
+    def _predict_update(self, h: float, c: NDArray, tq: NDArray, free: NDArray, r_s: float) -> None:
+        """Kalman predict over h seconds and the servo-model update, for the six arms at once, in closed form.
+
+        State [ζ, ζ̇, b] per arm. Predict: constant velocity (white acceleration √q_a, stall_accel_sigma for a
+        saturated servo), bias random walk: P ← F P Fᵀ + Q with F = [[1, h, 0], [0, 1, 0], [0, 0, 1]]. Update with
+        y = c − τ/k_p = ζ + (k_v/k_p) ζ̇ + b (H = [1, a, 1]); a saturated servo's y is only a weak measurement (noise
+        stall_sigma): its true torque is larger than the clipped one it reports. Written out per arm on the six
+        distinct covariance entries in plain floats: at 1 kHz the 3×3 numpy products of the matrix form cost ten
+        times more (numpy's per-call overhead on 3×3 arrays), for the same numbers."""
+        cfg, sv = self.config, self.servo
+        a = sv.kv / sv.kp
+        kp = sv.kp
+        h2, h3 = h * h, h * h * h
+        qb = cfg.bias_walk ** 2 * h
+        q_free, q_stall = cfg.accel_sigma ** 2, cfg.stall_accel_sigma ** 2
+        r_stall = cfg.stall_sigma ** 2
+        stall_measured = cfg.stall_sigma > 0.0
+        xs, Ps = self._x.tolist(), self._P.tolist()
+        for i, (xi, Pi, ci, ti, fi) in enumerate(zip(xs, Ps, c.tolist(), tq.tolist(), free.tolist())):
+            z, zd, b = xi
+            (p00, p01, p02), (_, p11, p12), (_, _, p22) = Pi
+            qa = q_free if fi else q_stall
+            z += h * zd
+            n00 = p00 + 2.0 * h * p01 + h2 * p11 + qa * (h3 / 3.0)
+            n01 = p01 + h * p11 + qa * (h2 / 2.0)
+            n02 = p02 + h * p12
+            n11 = p11 + qa * h
+            n12 = p12
+            n22 = p22 + qb
+            if fi or stall_measured:
+                ph0 = n00 + a * n01 + n02
+                ph1 = n01 + a * n11 + n12
+                ph2 = n02 + a * n12 + n22
+                S = ph0 + a * ph1 + ph2 + (r_s if fi else r_stall)
+                g = (ci - ti / kp - (z + a * zd + b)) / S
+                z, zd, b = z + ph0 * g, zd + ph1 * g, b + ph2 * g
+                n00, n01, n02 = n00 - ph0 * ph0 / S, n01 - ph0 * ph1 / S, n02 - ph0 * ph2 / S
+                n11, n12, n22 = n11 - ph1 * ph1 / S, n12 - ph1 * ph2 / S, n22 - ph2 * ph2 / S
+            xs[i] = [z, zd, b]
+            Ps[i] = [[n00, n01, n02], [n01, n11, n12], [n02, n12, n22]]
+        self._x = np.array(xs)
+        self._P = np.array(Ps)
 
     def _estimate(self) -> ArmEstimate:
         return ArmEstimate(time=self._t, zeta=self._x[:, 0].copy(), zeta_dot=self._x[:, 1].copy(),

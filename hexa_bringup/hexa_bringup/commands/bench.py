@@ -8,7 +8,7 @@ import argparse
 import json
 
 GRAPH_OPTIONS = ("rate", "no_reference", "robot", "no_robot", "robot_duration", "cache", "params", "domain_id",
-                 "compose")
+                 "compose", "stream_rate")
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -34,6 +34,9 @@ def register(sub: argparse._SubParsersAction) -> None:
     g.add_argument("--cache", default=None, metavar="DIR",
                    help="the recorded bag, slow-replay results, exported frames and node logs (default out/bench)")
     g.add_argument("--params", default=None, help="node parameter YAML (default: the shipped hexa_params.yaml)")
+    g.add_argument("--stream-rate", type=int, default=None, metavar="HZ",
+                   help="without BAG: the current-sample rate of the simulated bag (default 1000; the driver's "
+                        "default is 200)")
     g.add_argument("--compose", action="store_true",
                    help="the graph as `hexa bringup --compose` starts it (several nodes per process; CPU per process)")
     g.add_argument("--domain-id", type=int, default=None,
@@ -105,5 +108,5 @@ def run_graph(args: argparse.Namespace) -> int:
                    reference=not args.no_reference, replay=not args.robot, robot=not args.no_robot,
                    robot_duration=duration, cache=Path(args.cache) if args.cache else Path("out/bench"),
                    params=Path(args.params) if args.params else None, domain_id=args.domain_id,
-                   compose=args.compose)
+                   compose=args.compose, stream_rate=1000 if args.stream_rate is None else args.stream_rate)
     return main(opts, args.json, args.out, print_rows)
