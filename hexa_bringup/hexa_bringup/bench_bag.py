@@ -27,16 +27,11 @@ def synthesize(path: Path, case: str = "plate", stream_rate_hz: int = 1000, came
         hexa_bringup.bag.BagError: `path` exists or cannot be written.
         ValueError: an unknown case or a stream rate that does not divide the simulator's 1 kHz step.
     """
-    from builtin_interfaces.msg import Time
-    from hexa_msgs.msg import MotorCurrents
-    from rclpy.serialization import serialize_message
-    from sensor_msgs.msg import CameraInfo, Image, JointState
-
     from hexa.protocol.driver_core import load_driver_config
     from hexa.protocol.sensor_model import CurrentSensorModel
     from hexa.sim import Simulator
-    from hexa.vision.images import fill_message
-    from hexa_bringup.bag import BagRecorder
+    from hexa.vision.images import numpy_to_image
+    from hexa_bringup.bag import BagRecorder, typestore
     from hexa_bringup.demo_run import CASES, LEAD_IN
 
     if case not in CASES:
@@ -53,10 +48,37 @@ def synthesize(path: Path, case: str = "plate", stream_rate_hz: int = 1000, came
     names = [f"arm_{i}" for i in range(1, 7)]
     t_end = LEAD_IN + duration
     cam_period = 1.0 / camera_rate_hz
+    store = typestore()
+    ty = store.types
+    Time, Header = ty["builtin_interfaces/msg/Time"], ty["std_msgs/msg/Header"]
+    Image, CameraInfo, JointState = (ty[f"sensor_msgs/msg/{n}"] for n in ("Image", "CameraInfo", "JointState"))
+    MotorCurrents, Roi = ty["hexa_msgs/msg/MotorCurrents"], ty["sensor_msgs/msg/RegionOfInterest"]
+
+    def header(t: float, frame: str):
+        ns_ = int(round(t * 1e9))
+        return Header(stamp=Time(sec=ns_ // 1_000_000_000, nanosec=ns_ % 1_000_000_000), frame_id=frame)
+
+    def image(arr: np.ndarray, encoding: str, t: float, frame: str):
+        f = numpy_to_image(arr, encoding)
+        return Image(header=header(t, frame), height=f.height, width=f.width, encoding=f.encoding,
+                     is_bigendian=int(f.is_bigendian), step=f.step, data=np.frombuffer(f.data, np.uint8))
+
     infos = {}
     for c in CAMERAS:
         model = sim.camera_model(c)
-        infos[c] = (CameraInfo(**model.camera_info_fields()), model.frame_id)
+        f = model.camera_info_fields()
+        infos[c] = (f, model.frame_id)
+
+    def info_msg(c: str, t: float):
+        f, frame = infos[c]
+        return CameraInfo(header=header(t, frame), height=int(f["height"]), width=int(f["width"]),
+                          distortion_model=f["distortion_model"], d=np.asarray(f["d"], float),
+                          k=np.asarray(f["k"], float), r=np.asarray(f["r"], float), p=np.asarray(f["p"], float),
+                          binning_x=0, binning_y=0, roi=Roi(x_offset=0, y_offset=0, height=0, width=0,
+                                                            do_rectify=False))
+
+    def cdr(msg) -> bytes:
+        return bytes(store.serialize_cdr(msg, msg.__msgtype__))
     p = ns.rstrip("/")
     topics = {"joint_states": "sensor_msgs/msg/JointState", "motor_currents": "hexa_msgs/msg/MotorCurrents"}
     for c in CAMERAS:
@@ -64,26 +86,19 @@ def synthesize(path: Path, case: str = "plate", stream_rate_hz: int = 1000, came
                        f"{c}/aligned_depth_to_color/image_raw": "sensor_msgs/msg/Image",
                        f"{c}/color/camera_info": "sensor_msgs/msg/CameraInfo"})
 
-    def stamp(t: float) -> Time:
-        ns_ = int(round(t * 1e9))
-        return Time(sec=ns_ // 1_000_000_000, nanosec=ns_ % 1_000_000_000)
-
     with BagRecorder(path) as bag:
         for topic, msgtype in topics.items():
             bag.add_topic(f"{p}/{topic}", msgtype, reliable=not topic.startswith("cam_"))
 
         def cameras() -> None:
             t = sim.time
-            st, t_ns = stamp(t), int(round(t * 1e9))
+            t_ns = int(round(t * 1e9))
             for c in CAMERAS:
                 rgb, depth = sim.render(c)
-                info, frame = infos[c]
-                img, dimg = fill_message(Image(), rgb, "rgb8"), fill_message(Image(), depth, "16UC1")
-                img.header.stamp = dimg.header.stamp = info.header.stamp = st
-                img.header.frame_id = dimg.header.frame_id = info.header.frame_id = frame
-                bag.write(f"{p}/{c}/color/image_raw", t_ns, serialize_message(img))
-                bag.write(f"{p}/{c}/aligned_depth_to_color/image_raw", t_ns, serialize_message(dimg))
-                bag.write(f"{p}/{c}/color/camera_info", t_ns, serialize_message(info))
+                frame = infos[c][1]
+                bag.write(f"{p}/{c}/color/image_raw", t_ns, cdr(image(rgb, "rgb8", t, frame)))
+                bag.write(f"{p}/{c}/aligned_depth_to_color/image_raw", t_ns, cdr(image(depth, "16UC1", t, frame)))
+                bag.write(f"{p}/{c}/color/camera_info", t_ns, cdr(info_msg(c, t)))
 
         cameras()
         next_cam, seq, next_note = cam_period, 0, 1.0
@@ -92,14 +107,14 @@ def synthesize(path: Path, case: str = "plate", stream_rate_hz: int = 1000, came
             s = sim.state()
             counts = sensor.counts_from_current(s.tau / k_t + noise * sensor.amps_per_count * rng.standard_normal(6))
             amps = sensor.current_from_counts(counts) - sensor.current_from_counts(sensor.counts_from_current(0.0))
-            st, t_ns = stamp(s.time), int(round(s.time * 1e9))
-            m = MotorCurrents(current=amps.tolist(), raw=[int(c) for c in counts], sequence=seq & 0xFFFFFFFF,
+            t_ns = int(round(s.time * 1e9))
+            m = MotorCurrents(header=header(s.time, "base"), current=amps.astype(float),
+                              raw=counts.astype(np.uint16), sequence=seq & 0xFFFFFFFF,
                               board_time_us=int(round(s.time * 1e6)) & 0xFFFFFFFF, gaps=0)
-            m.header.stamp, m.header.frame_id = st, "base"
-            js = JointState(name=names, position=s.targets.tolist(), effort=(k_t * amps).tolist())
-            js.header.stamp, js.header.frame_id = st, "base"
-            bag.write(f"{p}/motor_currents", t_ns, serialize_message(m))
-            bag.write(f"{p}/joint_states", t_ns, serialize_message(js))
+            js = JointState(header=header(s.time, "base"), name=names, position=np.asarray(s.targets, float),
+                            velocity=np.zeros(0), effort=k_t * amps)
+            bag.write(f"{p}/motor_currents", t_ns, cdr(m))
+            bag.write(f"{p}/joint_states", t_ns, cdr(js))
             seq += 1
             if sim.time + 1e-9 >= next_cam:
                 cameras()

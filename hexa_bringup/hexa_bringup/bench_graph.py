@@ -72,6 +72,7 @@ class Options:
     reference: bool = True
     replay: bool = True
     robot: bool = True
+    sim: bool = True
     robot_duration: float = 10.0
     cache: Path = Path("out/bench")
     params: Path | None = None
@@ -831,37 +832,47 @@ def run(opts: Options) -> dict[str, Any]:
         with held_domain(opts.domain_id) as domain:
             env = ros_env(domain)
             info_out["ros_domain_id"] = domain
-            bag = opts.bag if opts.bag is not None else record_default_bag(cache, opts.stream_rate)
-            info = bag_inputs(bag)
-            info_out["bag"] = {"path": str(bag), "ns": info.ns, "duration_s": info.duration,
-                               "messages": {info.rel(t): n for t, n in info.counts.items()},
-                               "stream_rate_hz": 1.0 / info.stream_period, "camera_fps": info.camera_fps,
-                               "board_time_coverage": info.board_coverage}
-            say(f"bag {bag}: {info.duration:.1f} s, currents at {1 / info.stream_period:.0f} Hz "
-                f"({100 * info.board_coverage:.0f} % of the board-time span present), cameras at "
-                f"{info.camera_fps:.0f} fps")
-            if info.board_coverage < 0.95:
-                say(f"warning: the bag holds {100 * info.board_coverage:.0f} % of the current samples its board-time "
-                    f"span had (the recording lost the rest); the replay feeds what is there"
-                    + ("; delete it to record anew on a quieter machine" if opts.bag is None else ""))
-            if opts.replay:
-                results.update(_replay_section(opts, info, env, params, cache, info_out))
-            if opts.robot:
-                from hexa_bringup.bench_graph_robot import ROBOT_RATES, rest_scene, robot_once, robot_rows
+            if opts.replay or opts.robot:
+                bag = opts.bag if opts.bag is not None else record_default_bag(cache, opts.stream_rate)
+                info = bag_inputs(bag)
+                info_out["bag"] = {"path": str(bag), "ns": info.ns, "duration_s": info.duration,
+                                   "messages": {info.rel(t): n for t, n in info.counts.items()},
+                                   "stream_rate_hz": 1.0 / info.stream_period, "camera_fps": info.camera_fps,
+                                   "board_time_coverage": info.board_coverage}
+                say(f"bag {bag}: {info.duration:.1f} s, currents at {1 / info.stream_period:.0f} Hz "
+                    f"({100 * info.board_coverage:.0f} % of the board-time span present), cameras at "
+                    f"{info.camera_fps:.0f} fps")
+                if info.board_coverage < 0.95:
+                    say(f"warning: the bag holds {100 * info.board_coverage:.0f} % of the current samples its "
+                        f"board-time span had (the recording lost the rest); the replay feeds what is there"
+                        + ("; delete it to record anew on a quieter machine" if opts.bag is None else ""))
+                if opts.replay:
+                    results.update(_replay_section(opts, info, env, params, cache, info_out))
+                if opts.robot:
+                    from hexa_bringup.bench_graph_robot import ROBOT_RATES, rest_scene, robot_once, robot_rows
 
-                scene = rest_scene(info, cache)
-                info_out["robot_scene"] = {"frames": str(scene.frames), "frames_per_camera": scene.n_frames,
-                                           "rest_currents_a": scene.amps, "rest_zeta_rad": scene.zeta}
-                for hz in ROBOT_RATES:
-                    r = robot_once(info, scene, hz, env, params, cache / "graph_logs" / f"robot_{hz}hz",
-                                   opts.robot_duration, opts.ready_timeout, opts.compose)
-                    results[f"graph robot {hz} Hz"] = [row.as_dict() for row in robot_rows(r)]
-                    info_out[f"robot_{hz}hz"] = {
-                        "boards": r.boards, "nodes": r.nodes, "pids": r.pids, "rates_hz": r.rates, "counts": r.counts,
-                        "diagnostics": r.diagnostics,
-                        "latency": {"frame_pose": latency_stats(r.frame_latency),
-                                    "sample_residual": latency_stats(r.residual_latency or []),
-                                    "sample_currents": latency_stats(r.driver_latency)}}
+                    scene = rest_scene(info, cache)
+                    info_out["robot_scene"] = {"frames": str(scene.frames), "frames_per_camera": scene.n_frames,
+                                               "rest_currents_a": scene.amps, "rest_zeta_rad": scene.zeta}
+                    for hz in ROBOT_RATES:
+                        r = robot_once(info, scene, hz, env, params, cache / "graph_logs" / f"robot_{hz}hz",
+                                       opts.robot_duration, opts.ready_timeout, opts.compose)
+                        results[f"graph robot {hz} Hz"] = [row.as_dict() for row in robot_rows(r)]
+                        info_out[f"robot_{hz}hz"] = {
+                            "boards": r.boards, "nodes": r.nodes, "pids": r.pids, "rates_hz": r.rates,
+                            "counts": r.counts,
+                            "diagnostics": r.diagnostics,
+                            "latency": {"frame_pose": latency_stats(r.frame_latency),
+                                        "sample_residual": latency_stats(r.residual_latency or []),
+                                        "sample_currents": latency_stats(r.driver_latency)}}
+            if opts.sim:
+                from hexa_bringup.bench_graph_sim import sim_once, sim_rows
+
+                r = sim_once(env, params, cache / "graph_logs" / "sim", opts.robot_duration, opts.ready_timeout,
+                             opts.compose)
+                results["graph sim 1x"] = [row.as_dict() for row in sim_rows(r)]
+                info_out["sim"] = {"rtf": r.rtf, "window_s": r.window, "nodes": r.nodes, "pids": r.pids,
+                                   "counts": r.counts}
     finally:
         for s, h in previous.items():
             signal.signal(s, h)

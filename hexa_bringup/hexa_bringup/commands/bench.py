@@ -7,8 +7,8 @@ from __future__ import annotations
 import argparse
 import json
 
-GRAPH_OPTIONS = ("rate", "no_reference", "robot", "no_robot", "robot_duration", "cache", "params", "domain_id",
-                 "compose", "stream_rate")
+GRAPH_OPTIONS = ("rate", "no_reference", "robot", "no_robot", "sim", "no_sim", "robot_duration", "cache", "params",
+                 "domain_id", "compose", "stream_rate")
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -29,6 +29,10 @@ def register(sub: argparse._SubParsersAction) -> None:
     g.add_argument("--robot", action="store_true",
                    help="only the robot-mode figures (emulated boards at 1 kHz and 200 Hz, folder cameras)")
     g.add_argument("--no-robot", action="store_true", help="skip the robot-mode figures")
+    g.add_argument("--sim", action="store_true",
+                   help="only the sim-mode figures (`hexa bringup sim`, the simulator asked for 1x: the real-time "
+                        "factor it reaches, from /clock against wall time)")
+    g.add_argument("--no-sim", action="store_true", help="skip the sim-mode figures")
     g.add_argument("--robot-duration", type=float, default=None, metavar="S",
                    help="seconds measured per robot-mode run (default 10; 5 with --quick)")
     g.add_argument("--cache", default=None, metavar="DIR",
@@ -97,15 +101,17 @@ def run_graph(args: argparse.Namespace) -> int:
     if len(rest) > 1:
         print(f"hexa bench graph: one BAG at most, got {rest}", file=sys.stderr)
         return 2
-    if args.robot and args.no_robot:
-        print("hexa bench graph: --robot and --no-robot exclude each other", file=sys.stderr)
+    if (args.robot and args.no_robot) or (args.sim and args.no_sim) or (args.robot and args.sim):
+        print("hexa bench graph: --robot, --sim and their --no- forms: at most one of each, and --robot or --sim",
+              file=sys.stderr)
         return 2
     duration = args.robot_duration if args.robot_duration is not None else (5.0 if args.quick else 10.0)
     if not duration > 0:
         print(f"hexa bench graph: --robot-duration must be > 0 s, got {duration}", file=sys.stderr)
         return 2
     opts = Options(bag=Path(rest[0]) if rest else None, rate=1.0 if args.rate is None else args.rate,
-                   reference=not args.no_reference, replay=not args.robot, robot=not args.no_robot,
+                   reference=not args.no_reference, replay=not (args.robot or args.sim),
+                   robot=not (args.no_robot or args.sim), sim=not (args.no_sim or args.robot),
                    robot_duration=duration, cache=Path(args.cache) if args.cache else Path("out/bench"),
                    params=Path(args.params) if args.params else None, domain_id=args.domain_id,
                    compose=args.compose, stream_rate=1000 if args.stream_rate is None else args.stream_rate)

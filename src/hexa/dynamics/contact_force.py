@@ -169,6 +169,9 @@ class ContactForceTracker:
         self._spans: dict[int, list[float]] = {}     # recent collision id -> [START t, END t or inf]
         self._identified: set[int] = set()           # collisions with at least one force identified
         self._push: dict[int, NDArray] = {}          # last measured push direction per collision id
+        from hexa.dynamics.identification import _kernel_of
+
+        _kernel_of(self.params)   # the identification kernel (and LAPACK's import) now, not at the first contact
 
     @property
     def state(self) -> ArmState | None:

@@ -7,6 +7,7 @@ from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
+from scipy.spatial.transform import Rotation  # imported with the module, not in the first collision
 
 from hexa.vision.camera import CameraModel, CameraModelError
 from hexa.vision.images import ImageConversionError, depth_to_meters, image_to_numpy, to_rgb
@@ -247,8 +248,6 @@ class PoseBuffer:
 
 def interpolate_pose(T0: np.ndarray, T1: np.ndarray, s: float) -> np.ndarray:
     """Pose a fraction s ∈ [0, 1] of the way from T0 to T1: position linear, rotation R0·exp(s·log(R0ᵀR1))."""
-    from scipy.spatial.transform import Rotation
-
     s = float(np.clip(s, 0.0, 1.0))
     out = np.eye(4)
     r01 = Rotation.from_matrix(T0[:3, :3].T @ T1[:3, :3]).as_rotvec()
