@@ -33,6 +33,10 @@ OFF_SLOT_US = 100       # slot of a channel whose output is off (OFF_SLOT_TICKS)
 PREP_US = 50            # channel 1's width is read this long before its frame starts (PREP_TICKS)
 
 
+#: shortest wait (s) of an emulator thread for a board event that is not due yet
+MIN_POLL = 0.0005
+
+
 class EmulatorError(RuntimeError):
     """Emulator misuse (e.g. a symlink path that exists and is not ours)."""
 
@@ -423,7 +427,8 @@ class UnoEmulator(_BoardEmulator):
             return 0.01
         if self.latch_source is not None:   # the source's frames are polled: its clock may not be this thread's
             return 0.002
-        return max(0.0, min(0.01, (self.latch_frame(self._next_frame)[1] - self._now_us()) * 1e-6))
+        wait = (self.latch_frame(self._next_frame)[1] - self._now_us()) * 1e-6
+        return 0.0 if wait <= 0.0 else max(MIN_POLL, min(0.01, wait))
 
     def _tick(self) -> None:
         if not self.latch_report:
@@ -509,7 +514,10 @@ class MegaEmulator(_BoardEmulator):
     def _poll_timeout(self) -> float:
         if not self.streaming:
             return 0.01
-        return max(0.0, min(0.01, self._next_t - self._clock()))
+        wait = self._next_t - self._clock()
+        # a sample due: no wait; else at least MIN_POLL, even when the board clock is a simulator's that stands
+        # still during a camera render (a zero timeout would spin on the interpreter lock the renderer needs)
+        return 0.0 if wait <= 0.0 else max(MIN_POLL, min(0.01, wait))
 
     def sample_counts(self, t: float) -> tuple[int, ...]:
         """The six ADC counts the board would read at board time `t` (s)."""
