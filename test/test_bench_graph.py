@@ -1,5 +1,5 @@
-"""`hexa bench graph`: the analysis helpers, the user's mistakes, and one end-to-end run on a short recorded bag
-(replay at a slow rate plus both robot-mode runs), shared by the tests of this module. No timing is asserted."""
+"""`hexa bench graph`: the analysis helpers, the user's mistakes, and one end-to-end run on the simulated bag (replay
+at a slow rate, both robot-mode runs, sim mode), shared by the tests of this module. No timing is asserted."""
 from __future__ import annotations
 
 import json
@@ -126,31 +126,16 @@ def test_graph_options_are_refused_for_the_ros_free_areas():
 
 
 @pytest.fixture(scope="module")
-def short_bag(tmp_path_factory, module_ros_domain_id):
-    """The plate case of `hexa demo` with both cameras and currents at 1 kHz, cut short after the collision."""
+def short_bag(tmp_path_factory):
+    """The plate case made by the simulator alone, as `hexa bench graph` makes its default bag (currents at 1 kHz)."""
     pytest.importorskip("rclpy", reason="ROS 2 Jazzy wheels not installed: run `make test` (it sets them up)")
-    from hexa_bringup.demo_run import run_case
-    from hexa_bringup.rosenv import ros_env
-
-    out = tmp_path_factory.mktemp("bench_graph_bag")
-    env = ros_env(module_ros_domain_id)
-    saved = {k: os.environ.get(k) for k in env}
-    os.environ.update(env)
-    try:
-        run = run_case("plate", out, env, duration=4.4, real_time_factor=0.5, record_images=True,
-                       stream_rate_hz=1000, status_every=30.0)
-    finally:
-        for k, v in saved.items():
-            if v is None:
-                os.environ.pop(k, None)
-            else:
-                os.environ[k] = v
-    assert (run.bag / "metadata.yaml").exists(), f"no bag recorded (logs in {run.log_dir})"
+    from hexa_bringup.bench_bag import synthesize
     from hexa_bringup.bench_graph import bag_inputs
 
-    info = bag_inputs(run.bag)
-    assert info.duration > 5.0, f"the recording stopped after {info.duration:.1f} s (logs in {run.log_dir})"
-    return run.bag
+    bag = synthesize(tmp_path_factory.mktemp("bench_graph_bag") / "bag", "plate", stream_rate_hz=1000)
+    info = bag_inputs(bag)
+    assert info.duration > 6.0 and info.board_coverage > 0.999, (info.duration, info.board_coverage)
+    return bag
 
 
 @pytest.fixture(scope="module")
@@ -230,9 +215,20 @@ def test_robot_mode_reports_rates_cpu_and_latencies_at_both_stream_rates(bench_r
         assert info["boards"].get("mega_samples", 0) > 0, info["boards"]
 
 
+def test_sim_mode_reports_the_real_time_factor_the_simulator_reached(bench_run):
+    res = bench_run["result"]
+    rows = _rows(res, "graph sim")
+    rtf = rows["sim: real-time factor reached"]
+    assert rtf["target"] == ">= 0.5x" and 0.05 < rtf["value"] <= 1.1, rtf
+    for name in ("CPU sim", "CPU driver", "CPU trajectory", "CPU observer", "CPU processing nodes, total",
+                 "sim: residuals per sim second", "sim: plate_pose per sim second"):
+        assert name in rows, name
+    assert res["info"]["sim"]["counts"]["clock"] > 10 and res["info"]["sim"]["counts"]["residual"] > 0
+
+
 def test_no_child_process_outlives_the_bench(bench_run):
     res = bench_run["result"]["info"]
-    pids = list(res["replay"]["pids"].values())
+    pids = list(res["replay"]["pids"].values()) + list(res["sim"]["pids"].values())
     for hz in (1000, 200):
         pids += list(res[f"robot_{hz}hz"]["pids"].values())
     alive = []
@@ -262,7 +258,7 @@ def _children_of(pid: int) -> list[int]:
 
 def test_ctrl_c_while_playing_stops_every_child(short_bag, tmp_path, ros_domain_id):
     proc = subprocess.Popen([PY, "-m", "hexa_bringup.cli", "bench", "graph", str(short_bag), "--rate", "0.25",
-                             "--no-reference", "--no-robot", "--cache", str(tmp_path), "--domain-id",
+                             "--no-reference", "--no-robot", "--no-sim", "--cache", str(tmp_path), "--domain-id",
                              str(ros_domain_id)], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
                             cwd=str(REPO), start_new_session=True)
     try:
