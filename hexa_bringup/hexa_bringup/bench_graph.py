@@ -18,7 +18,6 @@ and keeps it under the cache directory for the next runs.
 """
 from __future__ import annotations
 
-import fcntl
 import hashlib
 import json
 import math
@@ -93,28 +92,18 @@ def say(text: str) -> None:
 
 @contextmanager
 def held_domain(forced: int | None = None) -> Iterator[int]:
-    """A ROS_DOMAIN_ID (1..100) no other hexa test or bench holds (the flock files of test/rosdomain.py), held
-    until the block ends; `forced` is used as given."""
+    """A ROS_DOMAIN_ID (1..100) no other hexa test or bench holds (hexa_ros.env.held_ros_domain), held until the
+    block ends; `forced` is used as given."""
+    from hexa_ros.env import NoFreeDomain, held_ros_domain
+
     if forced is not None:
         yield int(forced)
         return
-    start = (os.getpid() * 7) % 100
-    for k in range(100):
-        domain = (start + k) % 100 + 1
-        fd = os.open(f"/tmp/hexa_ros_domain_{domain}.lock", os.O_CREAT | os.O_RDWR, 0o666)
-        try:
-            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
-        except OSError:
-            os.close(fd)
-            continue
-        try:
+    try:
+        with held_ros_domain() as domain:
             yield domain
-        finally:
-            fcntl.flock(fd, fcntl.LOCK_UN)
-            os.close(fd)
-        return
-    raise BenchGraphError("no free ROS_DOMAIN_ID in 1..100 (too many ROS tests or benches at once); "
-                          "pass --domain-id N")
+    except NoFreeDomain as exc:
+        raise BenchGraphError(f"{exc}; pass --domain-id N") from exc
 
 
 class Children:

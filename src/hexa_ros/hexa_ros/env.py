@@ -1,7 +1,10 @@
 """The ROS environment every hexa process runs in: rmw_fastrtps with hexa's Fast DDS profile."""
 from __future__ import annotations
 
+import fcntl
 import os
+from collections.abc import Iterable, Iterator
+from contextlib import contextmanager
 from pathlib import Path
 
 PROFILE = Path(__file__).resolve().parent / "config" / "fastdds_profile.xml"
@@ -47,3 +50,34 @@ def ros_env(domain_id: int | None = None, localhost_only: bool = True, base: dic
         env["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "LOCALHOST"
     env.setdefault("PYTHONUNBUFFERED", "1")
     return env
+
+
+class NoFreeDomain(RuntimeError):
+    """Every domain in 1..100 is held (too many ROS tests or benches at once)."""
+
+
+@contextmanager
+def held_ros_domain(order: Iterable[int] | None = None) -> Iterator[int]:
+    """The first ROS_DOMAIN_ID of `order` (default: all of 1..100 from a pid-dependent start) that no other hexa test
+    or bench on this machine holds right now (an flock on /tmp/hexa_ros_domain_<id>.lock), held until the block ends.
+
+    Raises:
+        NoFreeDomain: all are held.
+    """
+    if order is None:
+        start = (os.getpid() * 7) % 100
+        order = [(start + k) % 100 + 1 for k in range(100)]
+    for domain in order:
+        fd = os.open(f"/tmp/hexa_ros_domain_{domain}.lock", os.O_CREAT | os.O_RDWR, 0o666)
+        try:
+            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except OSError:
+            os.close(fd)
+            continue
+        try:
+            yield domain
+        finally:
+            fcntl.flock(fd, fcntl.LOCK_UN)
+            os.close(fd)
+        return
+    raise NoFreeDomain("no free ROS_DOMAIN_ID in 1..100 (too many ROS tests or benches running at once?)")
