@@ -32,6 +32,7 @@ from hexa.robots.hexa_description import load_hexa
 from hexa.vision.isolation import LINK_UNKNOWN
 from hexa.vision.isolation_scheduler import BACKGROUND, ContactLocator, IsolationScheduler, Located
 from hexa.vision.sync import RawImage
+from hexa_ros.cdr import CdrError, image_from_cdr
 from hexa_msgs.msg import CollisionEvent, Contact
 from hexa_vision.common import CAMERAS, description_cameras, image_msg
 
@@ -59,7 +60,7 @@ class IsolationNode(Node):
         for c in CAMERAS:
             for topic, color in (("color/image_raw", True), ("aligned_depth_to_color/image_raw", False)):
                 self.create_subscription(Image, f"{c}/{topic}", lambda m, c=c, k=color: self._on_image(c, m, k),
-                                         qos.SENSOR)
+                                         qos.SENSOR, raw=True)
             self.create_subscription(CameraInfo, f"{c}/color/camera_info", lambda m, c=c: self._on_info(c, m),
                                      qos.SENSOR)
         self.create_subscription(PoseStamped, "plate_pose", self._on_pose, qos.STREAM)
@@ -75,9 +76,13 @@ class IsolationNode(Node):
     def _on_info(self, cam: str, msg: CameraInfo) -> None:
         self.locator.assemblers[cam].set_camera_info(msg.width, msg.height, msg.k, msg.d)
 
-    def _on_image(self, cam: str, msg: Image, color: bool) -> None:
-        raw = RawImage(stamps.to_sec(msg.header.stamp), msg.height, msg.width, msg.encoding, msg.is_bigendian,
-                       msg.step, np.frombuffer(msg.data, np.uint8))      # a view: the message's data, not copied
+    def _on_image(self, cam: str, data: bytes, color: bool) -> None:
+        try:
+            m = image_from_cdr(data)     # serialized: the pixels stay a view of the delivered bytes
+        except CdrError:
+            self.sched.counters["reject: malformed image"] += 1
+            return
+        raw = RawImage(m.stamp, m.height, m.width, m.encoding, m.is_bigendian, m.step, m.data)
         self.sched.add_image(cam, raw, color, time.monotonic())
         self._run()
 

@@ -12,10 +12,12 @@ Parameters: camera ("cam_top"), robot_description (YAML path, "" = default), det
 from __future__ import annotations
 
 import sys
+from typing import Any
 
 import numpy as np
 from diagnostic_msgs.msg import DiagnosticArray
 from geometry_msgs.msg import PoseStamped, PoseWithCovarianceStamped
+from builtin_interfaces.msg import Time
 from rcl_interfaces.msg import ParameterDescriptor
 from rclpy.node import Node
 from sensor_msgs.msg import CameraInfo, Image
@@ -24,8 +26,8 @@ import hexa_ros.node
 from hexa.vision.plate_pose import PlatePose, PlatePoseEstimator
 from hexa_msgs.msg import PlateDetection, PlateDetections
 from hexa_ros import diagnostics, qos
+from hexa_ros.cdr import CdrError, image_from_cdr
 from hexa_ros.conversions import fill_pose_msg
-from hexa_ros.stamps import to_sec
 from hexa_vision.common import description_cameras
 
 
@@ -55,8 +57,8 @@ class PoseNode(Node):
         self.estimator = PlatePoseEstimator(layout, self.cam_name, T, detector, roi_from_detector)
         self.det_frame = f"{self.cam_name}_color_optical_frame"
         c = self.cam_name
-        self.create_subscription(Image, f"{c}/color/image_raw", self._on_color, qos.SENSOR)
-        self.create_subscription(Image, f"{c}/aligned_depth_to_color/image_raw", self._on_depth, qos.SENSOR)
+        self.create_subscription(Image, f"{c}/color/image_raw", self._on_color, qos.SENSOR, raw=True)
+        self.create_subscription(Image, f"{c}/aligned_depth_to_color/image_raw", self._on_depth, qos.SENSOR, raw=True)
         self.create_subscription(CameraInfo, f"{c}/color/camera_info", self._on_info, qos.SENSOR)
         self.pub_det = self.create_publisher(PlateDetections, "plate_detections", qos.RELIABLE)
         self.pub_pose = self.create_publisher(PoseStamped, "plate_pose", qos.RELIABLE)
@@ -67,20 +69,26 @@ class PoseNode(Node):
     def _on_info(self, msg: CameraInfo) -> None:
         self.estimator.set_camera_info(msg.width, msg.height, msg.k, msg.d)
 
-    def _on_color(self, msg: Image) -> None:
-        want = self.pub_det.get_subscription_count() > 0
-        self._publish(self.estimator.add_color(to_sec(msg.header.stamp), msg.height, msg.width, msg.encoding,
-                                               msg.is_bigendian, msg.step, msg.data, want), msg, want)
+    def _on_color(self, data: bytes) -> None:
+        self._on_image(data, self.estimator.add_color)
 
-    def _on_depth(self, msg: Image) -> None:
-        want = self.pub_det.get_subscription_count() > 0
-        self._publish(self.estimator.add_depth(to_sec(msg.header.stamp), msg.height, msg.width, msg.encoding,
-                                               msg.is_bigendian, msg.step, msg.data, want), msg, want)
+    def _on_depth(self, data: bytes) -> None:
+        self._on_image(data, self.estimator.add_depth)
 
-    def _publish(self, result: PlatePose | None, msg: Image, detections_wanted: bool) -> None:
+    def _on_image(self, data: bytes, add: Any) -> None:
+        """A serialized image (raw subscription): its pixels stay a view of the delivered bytes."""
+        try:
+            m = image_from_cdr(data)
+        except CdrError:
+            self.estimator.count_reject("malformed image")
+            return
+        want = self.pub_det.get_subscription_count() > 0
+        result = add(m.stamp, m.height, m.width, m.encoding, m.is_bigendian, m.step, m.data, want)
+        self._publish(result, Time(sec=m.stamp_sec, nanosec=m.stamp_nanosec), want)
+
+    def _publish(self, result: PlatePose | None, stamp: Any, detections_wanted: bool) -> None:
         if result is None:
             return
-        stamp = msg.header.stamp
         if self.estimator.detector is not None and detections_wanted:
             out = PlateDetections()
             out.header.stamp, out.header.frame_id = stamp, self.det_frame

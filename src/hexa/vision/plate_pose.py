@@ -109,6 +109,10 @@ class PlatePoseEstimator:
         out.fit = fit
         return out
 
+    def count_reject(self, reason: str) -> None:
+        """Count an input rejected before it reached the estimator (e.g. a malformed message)."""
+        self._counters[f"reject: {reason}"] += 1
+
     def counters(self) -> Counter[str]:
         """Frames, detections, poses and every reject by reason (the pairing's included)."""
         merged = Counter(self._counters)
