@@ -53,3 +53,27 @@ def test_truncated_or_foreign_bytes_are_refused_naming_why():
         image_from_cdr(b"\x00\x07\x00\x00" + raw[4:])
     with pytest.raises(CdrError, match="shorter"):
         image_from_cdr(b"\x00")
+
+
+def test_driver_streams_read_in_place_equal_rclpy():
+    from builtin_interfaces.msg import Time
+    from hexa_msgs.msg import MotorCurrents
+    from rclpy.serialization import serialize_message
+    from sensor_msgs.msg import JointState
+
+    from hexa_ros.cdr import joint_state_from_cdr, motor_currents_from_cdr
+
+    js = JointState(name=[f"arm_{i}" for i in (3, 1, 2, 6, 5, 4)], position=[0.1 * k for k in range(6)],
+                    effort=[-0.5 * k for k in range(6)])
+    js.header.stamp, js.header.frame_id = Time(sec=12, nanosec=5), "base"
+    t, names, pos, vel, eff = joint_state_from_cdr(serialize_message(js))
+    assert (t, names) == (12 + 5e-9, list(js.name)) and vel.size == 0
+    assert pos.tolist() == list(js.position) and eff.tolist() == list(js.effort)
+    js.velocity, js.header.frame_id, js.name = [1.5] * 6, "a_longer_frame", [f"j{k}" for k in range(6)]
+    _t, names, pos, vel, eff = joint_state_from_cdr(serialize_message(js))
+    assert names == list(js.name) and vel.tolist() == [1.5] * 6 and eff.tolist() == list(js.effort)
+    mc = MotorCurrents(current=[0.25 * k - 1 for k in range(6)], raw=[512 + k for k in range(6)], sequence=77,
+                       board_time_us=4_000_000_123, gaps=2)
+    mc.header.stamp, mc.header.frame_id = Time(sec=3, nanosec=999), "b"
+    t, cur, board = motor_currents_from_cdr(serialize_message(mc))
+    assert (t, board) == (3 + 999e-9, 4_000_000_123) and cur.tolist() == list(mc.current)

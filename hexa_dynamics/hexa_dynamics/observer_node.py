@@ -17,7 +17,8 @@ from geometry_msgs.msg import Point, PoseStamped
 from hexa_msgs.msg import CollisionEvent, MotorCurrents, Residual
 from hexa_msgs.srv import ResetObserver
 from hexa_ros import diagnostics, node, qos
-from hexa_ros.conversions import JOINT_NAMES, fill_pose_msg, hexa_pose_from_msg, ordered_joints
+from hexa_ros.cdr import CdrError, joint_state_from_cdr, motor_currents_from_cdr
+from hexa_ros.conversions import JOINT_NAMES, fill_pose_msg, hexa_pose_from_msg, ordered_values
 from hexa_ros.stamps import to_sec, to_stamp
 from rcl_interfaces.msg import SetParametersResult
 from rclpy.node import Node
@@ -67,9 +68,10 @@ class ObserverNode(Node):
         self.pub_pose = self.create_publisher(PoseStamped, "plate_pose_estimate", qos.RELIABLE)
         self.pub_markers = self.create_publisher(MarkerArray, "markers", qos.RELIABLE)
         self.pub_diag = self.create_publisher(diagnostics.DiagnosticArray, "/diagnostics", qos.RELIABLE)
-        self.create_subscription(JointState, "joint_states", self._on_states, qos.STREAM)
+        # the driver's 1 kHz streams are read from their serialized bytes (hexa_ros.cdr): cheaper than message objects
+        self.create_subscription(JointState, "joint_states", self._on_states, qos.STREAM, raw=True)
         if mcfg.time_source != "stamp":
-            self.create_subscription(MotorCurrents, "motor_currents", self._on_currents, qos.STREAM)
+            self.create_subscription(MotorCurrents, "motor_currents", self._on_currents, qos.STREAM, raw=True)
         self.create_subscription(PoseStamped, "plate_pose", self._on_pose, qos.STREAM)
         self.create_service(ResetObserver, "~/reset", self._on_reset)
         self.add_on_set_parameters_callback(self._on_set_parameters)
@@ -97,12 +99,22 @@ class ObserverNode(Node):
         return SetParametersResult(successful=True)
 
     # ------------------------------------------------------------------ inputs → monitor → outputs
-    def _on_states(self, msg: JointState) -> None:
-        self._publish(self.monitor.push_states(to_sec(msg.header.stamp), ordered_joints(msg, "position"),
-                                               ordered_joints(msg, "velocity"), ordered_joints(msg, "effort")))
+    def _on_states(self, data: bytes) -> None:
+        try:
+            t, names, pos, vel, eff = joint_state_from_cdr(data)
+        except CdrError:
+            self.monitor.rejects["bad_joint_names"] += 1
+            return
+        self._publish(self.monitor.push_states(t, ordered_values(names, pos), ordered_values(names, vel),
+                                               ordered_values(names, eff)))
 
-    def _on_currents(self, msg: MotorCurrents) -> None:
-        self._publish(self.monitor.push_currents(to_sec(msg.header.stamp), msg.board_time_us, msg.current))
+    def _on_currents(self, data: bytes) -> None:
+        try:
+            t, current, board_us = motor_currents_from_cdr(data)
+        except CdrError:
+            self.monitor.rejects["bad_currents"] += 1
+            return
+        self._publish(self.monitor.push_currents(t, board_us, current))
 
     def _on_pose(self, msg: PoseStamped) -> None:
         try:

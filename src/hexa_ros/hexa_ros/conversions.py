@@ -13,21 +13,23 @@ JOINT_NAMES = tuple(f"arm_{i}" for i in range(1, 7))
 UPSRPU_JOINTS = ("limb_1", "limb_2", "limb_3", "limb_4")
 
 
-def ordered_joints(msg: Any, field: str, names: tuple[str, ...] = JOINT_NAMES) -> np.ndarray | None:
-    """The values of `field` of a sensor_msgs/JointState ordered as `names` by msg.name (in message order when the
-    message has no names); None when the names or lengths do not fit."""
-    vals = getattr(msg, field)
+def ordered_values(msg_names: Any, vals: Any, names: tuple[str, ...] = JOINT_NAMES) -> np.ndarray | None:
+    """`vals` (one per name of `msg_names`) ordered as `names` (in message order when the message has no names);
+    None when the names or lengths do not fit."""
     if len(vals) != len(names):
         return None
-    msg_names = msg.name
-    if not msg_names:
-        return np.asarray(vals, dtype=float)
-    if len(msg_names) == len(names) and tuple(msg_names) == names:
+    if not len(msg_names) or tuple(msg_names) == names:
         return np.asarray(vals, dtype=float)
     if len(msg_names) != len(names) or set(msg_names) != set(names):
         return None
     idx = {n: k for k, n in enumerate(msg_names)}
     return np.asarray([vals[idx[n]] for n in names], dtype=float)
+
+
+def ordered_joints(msg: Any, field: str, names: tuple[str, ...] = JOINT_NAMES) -> np.ndarray | None:
+    """The values of `field` of a sensor_msgs/JointState ordered as `names` by msg.name (in message order when the
+    message has no names); None when the names or lengths do not fit."""
+    return ordered_values(msg.name, getattr(msg, field), names)
 
 
 def transform_from_pose_msg(pose: Any) -> np.ndarray:
