@@ -227,9 +227,9 @@ def upsrpu_indices_from_screws(desc: UpsrpuDescription, X: np.ndarray) -> Singul
 def hexa_indices(desc: Any, pose: np.ndarray, zeta: np.ndarray | None = None) -> SingularityReport:
     """det J_D and the fifteen Omega_ij of the Hexa at `pose` (x, y, z, alpha, beta, gamma).
 
-    Transmission wrench screws: unit force along each rod through its spherical joint (DESIGN.md). H1's
+    Transmission wrench screws: unit force along each rod through its spherical joint (DESIGN.md). The
     `constraint_jacobians` rows [n_i, r_i x n_i] are exactly these screws with moments about the plate centre
-    (H1's `rod_wrench_screws` gives the same screws about the base origin; Omega does not depend on the
+    (hexa6rus `rod_wrench_screws` gives the same screws about the base origin; Omega does not depend on the
     reference point, see the tests), so one call yields both J_D and the wrenches. `zeta` defaults to the IK.
     Since J_D t = J_I zeta_dot with t = (v_P, omega), OTS i is column i of J_D^-1 and its angular part is rows
     4-6; near an exact singularity the adjugate (SVD) form of `output_twist_screws` is used instead.

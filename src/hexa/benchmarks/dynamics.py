@@ -14,7 +14,7 @@ IDENT_TARGET_S = 1e-3
 
 
 def _recorded_run(n: int, dt: float = 0.001) -> dict:
-    """A run of the model robot on a smooth path (poses by IK of H1, rates from the twist), τ random-ish."""
+    """A run of the model robot on a smooth path (poses by inverse kinematics, rates from the twist), τ random-ish."""
     from hexa.dynamics.lagrange import HexaDynamicParameters, motion_from_plate
     from hexa.kinematics import hexa6rus as kin
     from hexa.robots.hexa_description import load_hexa

@@ -1,4 +1,4 @@
-"""Simulator benchmarks (issue 4): physics-only real-time factor at 1 kHz, per-frame render, whole sim at 30 fps."""
+"""Simulator benchmarks: physics-only real-time factor at 1 kHz, per-frame render, whole sim at 30 fps."""
 from __future__ import annotations
 
 import importlib.util

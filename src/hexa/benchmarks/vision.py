@@ -20,7 +20,7 @@ def _sample():
 
 @register("vision")
 def bench(quick: bool) -> list[BenchRow]:
-    """Per-frame latencies of the vision pipeline (targets of issue 7)."""
+    """Per-frame latencies of the vision pipeline (beside their targets)."""
     try:
         import torch
 

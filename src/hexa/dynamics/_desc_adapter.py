@@ -1,4 +1,4 @@
-"""The one place that reads the robot description (H1's HexaDescription) for the dynamics parameters."""
+"""The one place that reads the robot description (HexaDescription) for the dynamics parameters."""
 from __future__ import annotations
 
 from typing import Any

@@ -120,7 +120,7 @@ class HexaDynamicParameters:
 
     @classmethod
     def from_description(cls, desc: Any = None) -> HexaDynamicParameters:
-        """Parameters from H1's `HexaDescription` (default: `load_hexa()`); inertias are taken as given there."""
+        """Parameters from the robot description (default: `load_hexa()`); inertias are taken as given there."""
         if desc is None:
             from hexa.robots.hexa_description import load_hexa
 

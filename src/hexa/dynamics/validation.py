@@ -1,4 +1,4 @@
-"""Validation of the dynamics against MuJoCo (H4's simulator, built from the same YAML): runs and figures.
+"""Validation of the dynamics against MuJoCo (hexa.sim, built from the same YAML): runs and figures.
 
     python -m hexa.dynamics.validation [--json]      # the table of docs/dynamics.md
 
@@ -107,7 +107,7 @@ def free_motion_figures(run: SimRun, params: HexaDynamicParameters, skip: float 
 
 
 def adc_quantized_torques(tau: np.ndarray, K_t: float) -> np.ndarray:
-    """τ as the driver sees it: I = τ/K_t through H3's ACS712 + 10-bit ADC model and back (11.9 mN·m per count)."""
+    """τ as the driver sees it: I = τ/K_t through the ACS712 + 10-bit ADC model and back (11.9 mN·m per count)."""
     from hexa.protocol.sensor_model import CurrentSensorModel
 
     m = CurrentSensorModel()

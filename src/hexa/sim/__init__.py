@@ -1,4 +1,4 @@
-"""The simulated Hexa (issue 4): MuJoCo physics built from the robot description, two RGB-D cameras, scripted
+"""The simulated Hexa: MuJoCo physics built from the robot description, two RGB-D cameras, scripted
 collisions (YAML scenarios), ground truth, and virtual Arduino boards on ptys. See docs/simulator.md.
 
     from hexa.sim import Simulator, build_mjcf

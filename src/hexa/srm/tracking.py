@@ -1,7 +1,7 @@
 """The 3D tracking system of seed 003 sec 2.4: platform pose X_c from marker sets, and simulated markers.
 
 Each platform carries a rigid body of markers (three define its frame, one is redundant). The measured
-positions (world frame of the tracking system) are registered to the marker model with H6's weighted
+positions (world frame of the tracking system) are registered to the marker model with the weighted
 Kabsch fit; X_c is the mobile frame expressed in the fixed frame, projected on the robot's four DOF
 (x_m, z_m, theta, psi) with R = R_y(theta) R_z(psi).
 """
