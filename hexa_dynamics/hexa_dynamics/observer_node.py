@@ -13,17 +13,17 @@ import math
 import sys
 from typing import Any
 
-from geometry_msgs.msg import Point, PoseStamped
+from geometry_msgs.msg import PoseStamped
 from hexa_msgs.msg import CollisionEvent, MotorCurrents, Residual
 from hexa_msgs.srv import ResetObserver
-from hexa_ros import diagnostics, node, qos
+from hexa_ros import diagnostics, markers, node, qos
 from hexa_ros.cdr import CdrError, joint_state_from_cdr, motor_currents_from_cdr
 from hexa_ros.conversions import JOINT_NAMES, fill_pose_msg, hexa_pose_from_msg, ordered_values
 from hexa_ros.stamps import to_sec, to_stamp
 from rcl_interfaces.msg import SetParametersResult
 from rclpy.node import Node
 from sensor_msgs.msg import JointState
-from visualization_msgs.msg import Marker, MarkerArray
+from visualization_msgs.msg import MarkerArray
 
 from hexa.dynamics.monitor import ESTIMATOR_KEYS, CollisionMonitor, MonitorConfig
 from hexa.dynamics.observer import ObserverConfig
@@ -44,10 +44,8 @@ class ObserverNode(Node):
         p = self.declare_parameter
         obs, est = ObserverConfig(), EstimatorConfig()
         desc = load_hexa(str(p("description", "").value) or None)
-        clock = str(p("board_clock", "auto").value)
-        if clock not in ("auto", "sim", "track"):
-            raise ValueError(f"parameter board_clock must be 'auto', 'sim' or 'track', got {clock!r}")
-        sim = clock == "sim" or (clock == "auto" and bool(self.get_parameter("use_sim_time").value))
+        sim = MonitorConfig.sim_clock_of(str(p("board_clock", "auto").value),
+                                         bool(self.get_parameter("use_sim_time").value))
         mcfg = MonitorConfig(zeta_source=str(p("zeta_source", "estimator").value),
                              time_source=str(p("time_source", "auto").value), sim_clock=sim,
                              pose_delay=float(p("pose_delay", 0.5).value),
@@ -168,15 +166,10 @@ class ObserverNode(Node):
 
     def _markers(self, out: Any, stamp: Any) -> MarkerArray:
         """The residual force as an arrow at the plate (green; red in collision)."""
-        P, F, k = out.pose[:3], out.wrench[:3], float(self.set["marker_scale"])
-        m = Marker(ns="residual_force", id=0, type=Marker.ARROW, action=Marker.ADD)
-        m.header.stamp, m.header.frame_id = stamp, self.frame_id
-        m.points = [Point(x=float(P[0]), y=float(P[1]), z=float(P[2])),
-                    Point(x=float(P[0] + k * F[0]), y=float(P[1] + k * F[1]), z=float(P[2] + k * F[2]))]
-        m.scale.x, m.scale.y, m.scale.z = 0.006, 0.012, 0.015     # shaft and head diameters, head length (m)
-        m.pose.orientation.w = 1.0
-        m.color.r, m.color.g, m.color.b, m.color.a = (1.0, 0.1, 0.1, 1.0) if out.in_collision else (0.1, 0.8, 0.2, 0.8)
-        return MarkerArray(markers=[m])
+        P, F = out.pose[:3], out.wrench[:3]
+        rgba = (1.0, 0.1, 0.1, 1.0) if out.in_collision else (0.1, 0.8, 0.2, 0.8)
+        return MarkerArray(markers=[markers.arrow("residual_force", self.frame_id, stamp, P,
+                                                  P + float(self.set["marker_scale"]) * F, rgba)])
 
     def _on_reset(self, req: Any, resp: Any) -> Any:
         resp.message = self.monitor.reset(bool(req.recalibrate), float(self.set["calibration_duration"]))
@@ -185,14 +178,10 @@ class ObserverNode(Node):
         return resp
 
     def _diagnostics(self) -> None:
-        values = self.monitor.counters()
-        values["events_sent"] = self.events_sent
-        active = bool(values["in_collision"])
-        level, msg = (diagnostics.WARN, "in collision") if active else (diagnostics.OK, "ok")
-        if values["accepted"] == 0:
-            level, msg = diagnostics.WARN, "no accepted joint_states yet"
-        self.pub_diag.publish(diagnostics.array(self, [diagnostics.status(self.get_fully_qualified_name(), level,
-                                                                          msg, values)]))
+        level, msg = self.monitor.health()
+        values = {**self.monitor.counters(), "events_sent": self.events_sent}
+        st = diagnostics.status(self.get_fully_qualified_name(), getattr(diagnostics, level), msg, values)
+        self.pub_diag.publish(diagnostics.array(self, [st]))
 
 
 def _value(v: Any) -> Any:

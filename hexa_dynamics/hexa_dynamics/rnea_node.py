@@ -17,7 +17,7 @@ from typing import Any
 
 import numpy as np
 from diagnostic_msgs.msg import DiagnosticArray
-from geometry_msgs.msg import Point, PoseStamped
+from geometry_msgs.msg import PoseStamped
 from hexa_msgs.msg import CollisionEvent, Contact, ContactWrench
 from rcl_interfaces.msg import ParameterDescriptor
 from rclpy.node import Node
@@ -26,7 +26,7 @@ from visualization_msgs.msg import Marker, MarkerArray
 
 import hexa_ros.node
 from hexa.dynamics.contact_force import ContactForce, ContactForceConfig, ContactForceTracker, LocatedContact
-from hexa_ros import diagnostics, qos
+from hexa_ros import diagnostics, markers, qos
 from hexa_ros.conversions import hexa_pose_from_msg, ordered_joints
 from hexa_ros.stamps import to_sec, to_stamp
 
@@ -43,10 +43,6 @@ PARAMETERS = {"description": ("", "robot YAML; empty = the packaged hexa.yaml"),
               "arm_friction": (0.2, "Coulomb coefficient mu of friction_cone (>= 0)"),
               "marker_scale": (0.02, "force arrow length per newton (m/N)"),
               "frame_id": ("base", "frame of the contact points and forces")}
-
-
-def _point(v: np.ndarray) -> Point:
-    return Point(x=float(v[0]), y=float(v[1]), z=float(v[2]))
 
 
 class RneaNode(Node):
@@ -111,7 +107,7 @@ class RneaNode(Node):
                               condition=f.condition, observable=f.observable, residual_norm=f.residual_norm,
                               force_model=f.force_model)
             w.header.stamp, w.header.frame_id = to_stamp(f.time), self.frame_id
-            w.point = _point(f.point)
+            w.point = markers.point(f.point)
             w.force.x, w.force.y, w.force.z = (float(v) for v in f.force)
             self.pub_wrench.publish(w)
             self.published += 1
@@ -119,19 +115,11 @@ class RneaNode(Node):
                 self.pub_markers.publish(self._markers(f, w.header.stamp))
 
     def _markers(self, f: ContactForce, stamp: Any) -> MarkerArray:
-        s = Marker(ns="contact_point", id=0, type=Marker.SPHERE, action=Marker.ADD)
-        s.header.stamp, s.header.frame_id = stamp, self.frame_id
-        s.pose.position = _point(f.point)
-        s.pose.orientation.w = 1.0
-        s.scale.x = s.scale.y = s.scale.z = 0.015
-        s.color.r, s.color.g, s.color.b, s.color.a = 1.0, 0.8, 0.0, 1.0
-        a = Marker(ns="contact_force", id=0, type=Marker.ARROW, action=Marker.ADD)
-        a.header = s.header
-        a.points = [s.pose.position, _point(f.point + self.marker_scale * f.force)]
-        a.pose.orientation.w = 1.0
-        a.scale.x, a.scale.y, a.scale.z = 0.006, 0.012, 0.015     # shaft and head diameters, head length (m)
-        a.color.r, a.color.g, a.color.b, a.color.a = (1.0, 0.2, 0.2, 1.0) if f.observable else (1.0, 0.6, 0.2, 1.0)
-        return MarkerArray(markers=[s, a])
+        rgba = (1.0, 0.2, 0.2, 1.0) if f.observable else (1.0, 0.6, 0.2, 1.0)
+        return MarkerArray(markers=[
+            markers.sphere("contact_point", self.frame_id, stamp, f.point, 0.015, (1.0, 0.8, 0.0, 1.0)),
+            markers.arrow("contact_force", self.frame_id, stamp, f.point, f.point + self.marker_scale * f.force,
+                          rgba)])
 
     def _diagnostics(self) -> None:
         t = self.tracker

@@ -84,6 +84,17 @@ class MonitorConfig:
     reseed_distance: float = 0.005
     command_delay: float = 0.0
 
+    @staticmethod
+    def sim_clock_of(board_clock: str, use_sim_time: bool) -> bool:
+        """Whether board time is sim time: "sim", "track" (follow the host stamps), or "auto" (sim under sim time).
+
+        Raises:
+            ValueError: another mode, named.
+        """
+        if board_clock not in ("auto", "sim", "track"):
+            raise ValueError(f"board_clock must be 'auto', 'sim' or 'track', got {board_clock!r}")
+        return board_clock == "sim" or (board_clock == "auto" and use_sim_time)
+
     def __post_init__(self) -> None:
         if self.zeta_source not in ZETA_SOURCES:
             raise ValueError(f"zeta_source must be 'estimator' or 'measured', got {self.zeta_source!r}")
@@ -258,6 +269,12 @@ class CollisionMonitor:
             except ObserverError as exc:
                 self.log.append(f"recalibration failed: {exc}")
         return MonitorSample(t, out, zeta, zeta_dot, tau)
+
+    def health(self) -> tuple[str, str]:
+        """("OK" | "WARN", message) for diagnostics: WARN before the first accepted sample and while in collision."""
+        if self.observer.accepted == 0:
+            return "WARN", "no accepted joint_states yet"
+        return ("WARN", "in collision") if self.observer.detector.active else ("OK", "ok")
 
     def counters(self) -> dict[str, Any]:
         """Counters for diagnostics: accepted samples, events, rejects by reason of each stage."""
