@@ -406,8 +406,8 @@ class ZetaEstimator:
 
 class SampleSequencer:
     """Deterministic ordering of the three input streams of the live nodes: the result depends only on message
-    stamps and contents, never on the order in which DDS delivers the topics (issue 8: a replayed bag gives the
-    same events every time).
+    stamps and contents, never on the order in which DDS delivers the topics, so a replayed bag gives the same
+    events every time.
 
     Streams: current samples (motor_currents: header stamp, board time t, τ), joint_states (header stamp, commanded
     angles, velocity, effort) and camera plate poses (image stamp). The driver publishes one motor_currents and one

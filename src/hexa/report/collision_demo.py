@@ -141,7 +141,7 @@ def compute_metrics(d: CaseData, r_low: float = 2.0, desc=None, plate_equivalent
                     ) -> CaseMetrics:
     """Detection delay, link/chain, contact point error and force RMSE of one case against the ground truth.
 
-    Two delays: from the first instant a true force component exceeds r_low (the issue's definition), and — with
+    Two delays: from the first instant a true force component exceeds r_low (the detection-delay definition), and — with
     truth_pose — from the first instant the true plate-equivalent wrench W = J_Dᵀ F, which the residual estimates,
     exceeds the observer's thresholds on any axis, or (with truth_zeta) its servo torques J_ζ⁻ᵀ W exceed the servo
     thresholds (the observer's own lag; for arm and rod contacts only part of the force reaches the plate
