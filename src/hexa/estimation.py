@@ -223,7 +223,7 @@ class ZetaEstimator:
         if u is None or tq is None:
             self._reject("bad_shape")
             return None
-        if not (math.isfinite(t) and np.all(np.isfinite(u)) and np.all(np.isfinite(tq))):
+        if not (math.isfinite(t) and all(map(math.isfinite, u.tolist())) and all(map(math.isfinite, tq.tolist()))):
             self._reject("non_finite")
             return None
         sv = self.servo
@@ -284,10 +284,10 @@ class ZetaEstimator:
         q_free, q_stall = cfg.accel_sigma ** 2, cfg.stall_accel_sigma ** 2
         r_stall = cfg.stall_sigma ** 2
         stall_measured = cfg.stall_sigma > 0.0
-        xs, Ps = self._x.tolist(), self._P.tolist()
-        for i, (xi, Pi, ci, ti, fi) in enumerate(zip(xs, Ps, c.tolist(), tq.tolist(), free.tolist())):
-            z, zd, b = xi
-            (p00, p01, p02), (_, p11, p12), (_, _, p22) = Pi
+        xs, Ps = self._x.reshape(-1).tolist(), self._P.reshape(-1).tolist()   # flat: cheaper both ways
+        for i, (ci, ti, fi) in enumerate(zip(c.tolist(), tq.tolist(), free.tolist())):
+            z, zd, b = xs[3 * i:3 * i + 3]
+            p00, p01, p02, _, p11, p12, _, _, p22 = Ps[9 * i:9 * i + 9]
             qa = q_free if fi else q_stall
             z += h * zd
             n00 = p00 + 2.0 * h * p01 + h2 * p11 + qa * (h3 / 3.0)
@@ -305,10 +305,10 @@ class ZetaEstimator:
                 z, zd, b = z + ph0 * g, zd + ph1 * g, b + ph2 * g
                 n00, n01, n02 = n00 - ph0 * ph0 / S, n01 - ph0 * ph1 / S, n02 - ph0 * ph2 / S
                 n11, n12, n22 = n11 - ph1 * ph1 / S, n12 - ph1 * ph2 / S, n22 - ph2 * ph2 / S
-            xs[i] = [z, zd, b]
-            Ps[i] = [[n00, n01, n02], [n01, n11, n12], [n02, n12, n22]]
-        self._x = np.array(xs)
-        self._P = np.array(Ps)
+            xs[3 * i:3 * i + 3] = z, zd, b
+            Ps[9 * i:9 * i + 9] = n00, n01, n02, n01, n11, n12, n02, n12, n22
+        self._x = np.array(xs).reshape(6, 3)
+        self._P = np.array(Ps).reshape(6, 3, 3)
 
     def _estimate(self) -> ArmEstimate:
         return ArmEstimate(time=self._t, zeta=self._x[:, 0].copy(), zeta_dot=self._x[:, 1].copy(),

@@ -33,9 +33,10 @@ def _gesv():
     return _GESV
 
 
-def solve6(M: list[list[float]], b: Sequence[float]) -> Vec:
-    """x with M x = b for a 6×6 M (LAPACK gesv: the cheapest call for one small system)."""
-    _, _, x, info = (_GESV or _gesv())(np.array(M), np.array(b, dtype=float))
+def solve6(M: list[list[float]] | np.ndarray, b: Sequence[float]) -> Vec:
+    """x with M x = b for a 6×6 M, nested lists or an array (LAPACK gesv: the cheapest call for one small system;
+    it factorizes a copy, M is not changed)."""
+    _, _, x, info = (_GESV or _gesv())(np.asarray(M, dtype=float), np.asarray(b, dtype=float))
     if info != 0:
         raise KernelError("singular 6x6 system")
     return x.tolist()
@@ -215,7 +216,7 @@ class SampleKernel:
 
     def terms(self, geo: list, zd: Sequence[float] | None, tau: Sequence[float], p: Sequence[float],
               R: Sequence[float], twist: Sequence[float] | None = None,
-              jacobian: list[list[float]] | None = None) -> tuple[Vec, Vec, Vec]:
+              jacobian: list[list[float]] | np.ndarray | None = None) -> tuple[Vec, Vec, Vec]:
         """(V, π, u) for one sample with geometry `geo` (from geometry/track_pose); the twist is J_ζ⁻¹ζ̇, or
         `twist` as given (then ζ̇ = J_ζ V). `jacobian`: chain_jacobian_rows(geo) if the caller has it already.
 

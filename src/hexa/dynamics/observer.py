@@ -326,7 +326,7 @@ class _ArmSample:
     R: tuple
     V: list
     Q: NDArray | None
-    J: list  # J_ζ rows (chain_jacobian_rows): the twist and the servo-torque residual both use them
+    J: NDArray  # J_ζ (6×6, chain_jacobian_rows): the twist and the servo-torque residual both use it
 
 
 class ResidualObserver:
@@ -351,6 +351,7 @@ class ResidualObserver:
         self._zeta_est: list[float] | None = None
         self.form = form
         self._K = np.asarray(self.config.gains, dtype=float)
+        self._lag = (math.nan, np.ones(6))  # (Δt, exp(−K Δt)): the sample spacing repeats, the exponentials too
         self._kernel = SampleKernel(params)
         self.detector = CollisionDetector(self.config)
         self.rejected: dict[str, int] = {k: 0 for k in REJECT_REASONS}
@@ -375,6 +376,7 @@ class ResidualObserver:
         """Take new gains, thresholds and detector timing at run time; the residual and the pose tracking go on."""
         self.config = config
         self._K = np.asarray(config.gains, dtype=float)
+        self._lag = (math.nan, np.ones(6))
         self.detector.config = config
         self.detector.set_thresholds(config.thresholds)
         self.detector.set_servo_thresholds(config.servo_thresholds)
@@ -537,7 +539,9 @@ class ResidualObserver:
         w_bar -= self._offset
         if self._calib is not None:
             self._calib.append(w_bar)
-        a = np.exp(-self._K * dt)
+        if dt != self._lag[0]:
+            self._lag = (dt, np.exp(-self._K * dt))
+        a = self._lag[1]
         self.r = a * self.r + (1.0 - a) * w_bar
         return self._output(t, s, geo)
 
@@ -561,7 +565,7 @@ class ResidualObserver:
     def _evaluate(self, t, z, tq, zd, p, R, geo, zeta_ddot, V=None) -> _ArmSample:
         s = _ArmSample()
         s.t, s.zeta, s.tau, s.zeta_dot, s.p, s.R = t, z, tq, zd, p, R
-        s.J = chain_jacobian_rows(geo)
+        s.J = np.array(chain_jacobian_rows(geo))
         if self.form == "momentum":
             s.V, s.pi, s.u = self._kernel.terms(geo, zd, tq, p, R, twist=V, jacobian=s.J)
             s.Q = None
@@ -589,7 +593,7 @@ class ResidualObserver:
         return s
 
 
-def servo_torque_residual(geo: list, r: NDArray, jacobian: list[list[float]] | None = None) -> NDArray:
+def servo_torque_residual(geo: list, r: NDArray, jacobian: list[list[float]] | NDArray | None = None) -> NDArray:
     """The residual as servo torques, τ_r = J_ζ⁻ᵀ r (N·m): the torques the servos deliver beyond the model.
 
     The reduced model's generalized force of the servo torques is u = J_ζᵀ τ (seed 000 eqs 17, 23), so a plate-
@@ -599,7 +603,7 @@ def servo_torque_residual(geo: list, r: NDArray, jacobian: list[list[float]] | N
     (chain_jacobian_rows(geo)) if the caller has them already."""
     try:
         rows = chain_jacobian_rows(geo) if jacobian is None else jacobian
-        return np.array(solve6(np.array(rows).T, r))
+        return np.array(solve6(np.asarray(rows).T, r))
     except KernelError:
         return np.full(6, np.nan)
 
