@@ -83,3 +83,29 @@ def rotation_angle(R_a: np.ndarray, R_b: np.ndarray) -> float:
     """Angle (rad) of the relative rotation R_aᵀ·R_b."""
     c = (np.trace(np.asarray(R_a).T @ np.asarray(R_b)) - 1.0) / 2.0
     return float(np.arccos(np.clip(c, -1.0, 1.0)))
+
+
+def fit_plane(points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Least-squares plane through points given as columns (3, N), N ≥ 3: (centroid c, unit normal n).
+
+    n is the eigenvector of the smallest eigenvalue of the 3×3 scatter matrix Σ (p − c)(p − c)ᵀ — the last right-
+    singular vector of the centred points, from a 3×3 problem instead of an SVD of the N×3 matrix (the same plane to
+    rounding). Its sign is arbitrary; callers orient it.
+
+    Raises:
+        RigidFitError: fewer than 3 points or non-finite values.
+
+    Example:
+        >>> c, n = fit_plane(np.array([[0., 1, 0, 1], [0, 0, 1, 1], [2, 2, 2, 2]]))
+        >>> c.tolist(), np.abs(n).round(12).tolist()
+        ([0.5, 0.5, 2.0], [0.0, 0.0, 1.0])
+    """
+    P = np.asarray(points, dtype=float)
+    if P.ndim != 2 or P.shape[0] != 3 or P.shape[1] < 3:
+        raise RigidFitError(f"need points as columns (3, N) with N >= 3; got {P.shape}")
+    if not np.all(np.isfinite(P)):
+        raise RigidFitError("points contain non-finite values")
+    c = P.mean(axis=1)
+    D = P - c[:, None]
+    _, v = np.linalg.eigh(D @ D.T)
+    return c, v[:, 0]
