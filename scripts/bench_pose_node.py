@@ -6,9 +6,10 @@
                                                 [--ros-args -p roi_from_detector:=false ...]
 
 Renders `--frames` top-camera frames (colour + aligned depth, with the simulator's noise) along the circle
-trajectory, or loads them from `--cache`; turns them into the sensor_msgs/Image and CameraInfo objects a subscription
-delivers (serialised and deserialised once, outside the timing); then feeds camera_info, colour and depth of each
-frame to the node's callbacks in-process and measures time.process_time() per frame. As in the live graph, one
+trajectory, or loads them from `--cache`; turns them into what the node's subscriptions deliver (the images as
+serialized bytes: the node subscribes to them raw; CameraInfo as a message), outside the timing; then feeds
+camera_info, colour and depth of each frame to the node's callbacks in-process and measures time.process_time() per
+frame. As in the live graph, one
 subscriber listens to `plate_pose`, nobody to `plate_detections` and `plate_pose_cov`. The poses published are saved
 with `--out` (to check that a change leaves them unchanged) and the median / mean / 95th percentile per frame are
 printed, best of `--repeat` passes. Arguments after `--ros-args` go to the node (its parameters).
@@ -79,7 +80,7 @@ def main() -> int:
     import rclpy
     from geometry_msgs.msg import PoseStamped
     from rclpy.serialization import deserialize_message, serialize_message
-    from sensor_msgs.msg import CameraInfo, Image
+    from sensor_msgs.msg import CameraInfo
 
     from hexa.sim import Simulator
     from hexa_vision.common import camera_info_msg, image_msg
@@ -100,10 +101,12 @@ def main() -> int:
     for k, (rgb, depth) in enumerate(zip(rgbs, depths)):
         stamp = probe.get_clock().now().to_msg()
         stamp.sec, stamp.nanosec = 100 + k // 30, (k % 30) * 33_333_333
-        msgs.append(tuple(deserialize_message(serialize_message(m), type(m)) for m in (
-            camera_info_msg(cam, frame, stamp), image_msg(rgb, "rgb8", frame, stamp),
-            image_msg(depth, "16UC1", frame, stamp))))
-    assert isinstance(msgs[0][0], CameraInfo) and isinstance(msgs[0][1], Image)
+        info = camera_info_msg(cam, frame, stamp)
+        # the node subscribes to the images raw (their serialized bytes) and to camera_info as a message
+        msgs.append((deserialize_message(serialize_message(info), CameraInfo),
+                     serialize_message(image_msg(rgb, "rgb8", frame, stamp)),
+                     serialize_message(image_msg(depth, "16UC1", frame, stamp))))
+    assert isinstance(msgs[0][0], CameraInfo) and isinstance(msgs[0][1], bytes)
 
     poses: list[list[float]] = []
     publish = node.pub_pose.publish

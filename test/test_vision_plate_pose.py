@@ -94,3 +94,48 @@ def test_frames_without_camera_info_or_markers_are_counted_as_rejects(frame) -> 
     assert out is not None and out.fit is None
     assert est.counters() == {"no camera_info": 1, "frames": 1, "marker fit rejected": 1}
     assert est.rejected() == 2
+
+
+def _moving_frames(n: int) -> list[tuple[tuple, tuple]]:
+    """A plate moving 3 mm and 0.6° per frame (0.09 m/s at 30 fps), with depth noise."""
+    out = []
+    for k in range(n):
+        rgb, depth = render_plate(_pose_T(0.02 - 0.003 * k, -0.01 + 0.002 * k, -0.55, 0.1 + 0.01 * k, -0.1, 0.05),
+                                  noise_rel=0.002, seed=k)
+        depth_mm = np.nan_to_num(depth * 1000.0, nan=0.0).round().astype(np.uint16)
+        c, d = numpy_to_image(rgb, "rgb8"), numpy_to_image(depth_mm, "16UC1")
+        out.append(((c.height, c.width, c.encoding, c.is_bigendian, c.step, c.data),
+                    (d.height, d.width, d.encoding, d.is_bigendian, d.step, d.data)))
+    return out
+
+
+def test_a_tracked_plate_is_searched_around_its_last_pose_with_the_detectors_poses() -> None:
+    frames = _moving_frames(6)
+    poses = {}
+    for track_age in (0.0, 0.1):                    # 0: the detector's box every frame (the reference)
+        det = FakeDetector(_plate_box())
+        est = PlatePoseEstimator(LAYOUT, "cam_top", CAM.T_base_camera, det, track_age=track_age)
+        est.set_camera_info(CAM.width, CAM.height, CAM.K.reshape(-1).tolist())
+        fits = []
+        for k, (color, depth) in enumerate(frames):
+            est.add_color(k / 30.0, *color, detections_wanted=False)
+            fits.append(est.add_depth(k / 30.0, *depth, detections_wanted=False).fit)
+        assert all(f is not None for f in fits)
+        poses[track_age] = np.array([f.T for f in fits])
+        assert det.calls == (6 if track_age == 0.0 else 1)
+        assert est.counters()["tracked boxes"] == (0 if track_age == 0.0 else 5) and est.rejected() == 0
+    np.testing.assert_allclose(poses[0.1], poses[0.0], rtol=0, atol=1e-12)
+
+
+def test_an_old_fit_or_wanted_boxes_bring_the_detector_back(frame) -> None:
+    color, depth = frame
+    det = FakeDetector(_plate_box())
+    est = PlatePoseEstimator(LAYOUT, "cam_top", CAM.T_base_camera, det)
+    est.set_camera_info(CAM.width, CAM.height, CAM.K.reshape(-1).tolist())
+    for stamp, wanted in ((1.0, False), (1.05, False), (1.3, False), (1.33, True)):
+        est.add_color(stamp, *color, detections_wanted=wanted)
+        out = est.add_depth(stamp, *depth, detections_wanted=wanted)
+        assert out.fit is not None
+    assert det.calls == 3                             # 1.0 (first), 1.3 (last fit 0.25 s old), 1.33 (boxes wanted)
+    assert est.counters()["tracked boxes"] == 2       # 1.05 and 1.33
+    assert len(out.detections) == 1

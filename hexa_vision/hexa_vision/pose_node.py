@@ -7,7 +7,8 @@ covariance), `/diagnostics` (frames, fits, rejects by reason). Bad input is coun
 `plate_detections` and `plate_pose_cov` are built only while someone subscribes to them (the detector itself runs
 only when its box is used or its boxes are subscribed). The work is hexa.vision.plate_pose.PlatePoseEstimator's.
 Parameters: camera ("cam_top"), robot_description (YAML path, "" = default), detector ("auto" | "onnx" | "torch" |
-"off"), roi_from_detector (true: search markers only in the best box, padded by 20 %).
+"off"), roi_from_detector (true: search markers only in a box: around the last pose's markers while the plate is
+tracked — the last fit at most 0.1 s old —, else the detector's best box padded by 20 %).
 """
 from __future__ import annotations
 

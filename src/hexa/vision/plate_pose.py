@@ -15,7 +15,7 @@ if TYPE_CHECKING:
     from hexa.vision.detector import Detection, PlateDetector
 
 #: counters that count work done, not rejected input
-_WORK_COUNTERS = ("frames", "detections", "poses")
+_WORK_COUNTERS = ("frames", "detections", "poses", "tracked boxes")
 
 
 @dataclass
@@ -33,23 +33,31 @@ class PlatePoseEstimator:
 
     Bad input is counted by reason in `counters()` and skipped, never raised. The detector runs when its box is
     used (`roi_from_detector`) or its boxes are wanted (`detections_wanted` of `add_color` / `add_depth`): no
-    detector work for a frame whose boxes nobody uses.
+    detector work for a frame whose boxes nobody uses. While the plate is tracked (an accepted fit at most `track_age`
+    s before the frame), the markers are searched around that fit's markers projected into the image instead of in
+    the detector's box, and the detector runs only when its boxes are wanted: the box it would give holds the same
+    markers, so the pose is the same.
 
     Args:
         layout: the plate's marker layout.
         camera: camera name ("cam_top").
         T_base_camera: extrinsics of the colour optical frame (4x4).
         detector: the plate detector, or None (markers searched in the whole frame).
-        roi_from_detector: search the markers in the best box, padded by `roi_pad` of its size on each side; the
-            whole frame again when no fit is found there.
+        roi_from_detector: search the markers in a box — the tracked box or the detector's best box, padded by
+            `roi_pad` of its size on each side; the whole frame again when no fit is found there.
+        track_age: largest age (s) of the last accepted fit that gives the tracked box (0: never tracked).
+        track_margin: pixels added around the projected marker discs for the motion between frames.
     """
 
     def __init__(self, layout: MarkerLayout, camera: str, T_base_camera: np.ndarray,
-                 detector: PlateDetector | None = None, roi_from_detector: bool = True, roi_pad: float = 0.2) -> None:
+                 detector: PlateDetector | None = None, roi_from_detector: bool = True, roi_pad: float = 0.2,
+                 track_age: float = 0.1, track_margin: float = 24.0) -> None:
         self.layout = layout
         self.detector = detector
         self.roi_from_detector = roi_from_detector
         self.roi_pad = roi_pad
+        self.track_age, self.track_margin = float(track_age), float(track_margin)
+        self._last_fit: tuple[float, np.ndarray] | None = None   # (stamp, T_base_plate) of the newest accepted fit
         self.assembler = FrameAssembler(camera, T_base_camera)
         self.markers: MarkerDetector | None = None
         self._counters: Counter[str] = Counter()
@@ -81,18 +89,39 @@ class PlatePoseEstimator:
         pw, ph = self.roi_pad * (b[2] - b[0]), self.roi_pad * (b[3] - b[1])
         return (b[0] - pw, b[1] - ph, b[2] + pw, b[3] + ph)
 
+    def tracked_box(self, stamp: float) -> tuple[float, float, float, float] | None:
+        """The marker search box from the newest accepted fit when it is at most `track_age` s before `stamp`: the
+        layout's markers at that pose projected into the image, padded by two disc radii and `track_margin` px; None
+        when there is no such fit or a marker projects behind the camera."""
+        if self._last_fit is None or self.markers is None or not self.roi_from_detector:
+            return None
+        t_fit, T = self._last_fit
+        if not 0.0 <= stamp - t_fit <= self.track_age:
+            return None
+        cam = self.markers.camera
+        uv, z = cam.project(self.layout.points @ T[:3, :3].T + T[:3, 3])
+        if not (np.all(z > 0) and np.all(np.isfinite(uv))):
+            return None
+        pad = 2.0 * float(cam.K[0, 0]) * self.layout.radius / float(z.min()) + self.track_margin
+        (u0, v0), (u1, v1) = uv.min(axis=0) - pad, uv.max(axis=0) + pad
+        return (float(u0), float(v0), float(u1), float(v1))
+
     def process(self, frame: RGBDFrame, detections_wanted: bool = True) -> PlatePose:
         """Detector (when its output is used) and marker fit of one RGB-D frame."""
         c = self._counters
         c["frames"] += 1
         out = PlatePose(frame.stamp)
-        if self.detector is not None and (self.roi_from_detector or detections_wanted):
+        roi = self.tracked_box(frame.stamp)
+        if roi is not None:
+            c["tracked boxes"] += 1
+        if self.detector is not None and (detections_wanted or (self.roi_from_detector and roi is None)):
             out.detections = self.detector.detect(frame.rgb)
             c["detections"] += len(out.detections)
         if self.markers is None:
             c["no camera_info"] += 1
             return out
-        roi = self.detector_box(out.detections)
+        if roi is None:
+            roi = self.detector_box(out.detections)
         try:
             fit, _ = self.markers.estimate(frame.rgb, frame.depth, roi)
             if not fit.ok and roi is not None:
@@ -104,6 +133,7 @@ class PlatePoseEstimator:
             c["marker fit rejected"] += 1
             return out
         c["poses"] += 1
+        self._last_fit = (frame.stamp, fit.T)
         if fit.rejected:
             c["markers rejected as outliers"] += len(fit.rejected)
         out.fit = fit
