@@ -16,7 +16,7 @@ from typing import Any
 from geometry_msgs.msg import PoseStamped
 from hexa_msgs.msg import CollisionEvent, MotorCurrents, Residual
 from hexa_msgs.srv import ResetObserver
-from hexa_ros import diagnostics, markers, node, qos
+from hexa_ros import cdr, diagnostics, markers, node, qos
 from hexa_ros.cdr import CdrError, joint_state_from_cdr, motor_currents_from_cdr
 from hexa_ros.conversions import JOINT_NAMES, fill_pose_msg, hexa_pose_from_msg, ordered_values
 from hexa_ros.stamps import to_sec, to_stamp
@@ -123,23 +123,21 @@ class ObserverNode(Node):
         self._publish(self.monitor.push_pose(to_sec(msg.header.stamp), pose))
 
     def _publish(self, samples: list) -> None:
+        det = self.monitor.observer.detector
         for s in samples:
             out, stamp = s.residual, to_stamp(s.time)
-            w = out.wrench
-            r = Residual(r=out.r_zyz.tolist(), threshold=self.monitor.observer.detector.thresholds.tolist(),
-                         over=out.over.tolist(), servo_torque=out.servo_torque.tolist(),
-                         servo_threshold=self.monitor.observer.detector.servo_thresholds.tolist(),
-                         servo_over=out.servo_over.tolist(), in_collision=bool(out.in_collision))
-            r.header.stamp, r.header.frame_id = stamp, self.frame_id
-            r.wrench.force.x, r.wrench.force.y, r.wrench.force.z = (float(v) for v in w[:3])
-            r.wrench.torque.x, r.wrench.torque.y, r.wrench.torque.z = (float(v) for v in w[3:])
-            self.pub_residual.publish(r)
+            w = out.wrench.tolist()
+            # both per-sample outputs published as their serialized bytes (hexa_ros.cdr): the message objects cost
+            # more to build and convert than the observer's update
+            self.pub_residual.publish(cdr.residual_to_cdr(
+                stamp.sec, stamp.nanosec, self.frame_id, out.r_zyz.tolist(), w[:3], w[3:], det.thresholds.tolist(),
+                out.over.tolist(), out.servo_torque.tolist(), det.servo_thresholds.tolist(), out.servo_over.tolist(),
+                bool(out.in_collision)))
             for ev in out.events:
                 self._event(ev)
-            js = JointState(name=list(JOINT_NAMES), position=s.zeta.tolist(), effort=s.tau.tolist(),
-                            velocity=[] if s.zeta_dot is None else s.zeta_dot.tolist())
-            js.header.stamp = stamp
-            self.pub_zeta.publish(js)
+            self.pub_zeta.publish(cdr.joint_state_to_cdr(
+                stamp.sec, stamp.nanosec, "", JOINT_NAMES, s.zeta.tolist(),
+                [] if s.zeta_dot is None else s.zeta_dot.tolist(), s.tau.tolist()))
             if s.time - self.last["pose"] >= 1.0 / max(float(self.set["pose_estimate_rate_hz"]), 1e-3):
                 self.last["pose"] = s.time
                 ps = PoseStamped()

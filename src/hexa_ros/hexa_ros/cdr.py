@@ -150,3 +150,53 @@ def motor_currents_from_cdr(buf: bytes | memoryview) -> tuple[float, np.ndarray,
     r.skip_u16s(6)                              # raw ADC counts
     r.u32()                                     # sequence
     return sec + 1e-9 * nanosec, current, r.u32()
+
+
+# ---------------------------------------------------------------------- writing (the observer's per-sample outputs)
+_LE_HEADER = b"\x00\x01\x00\x00"               # CDR, little endian, as rmw_fastrtps writes it
+
+
+def _header_cdr(sec: int, nanosec: int, frame_id: str) -> bytearray:
+    """Encapsulation + std_msgs/Header; fields after it align from offset 4."""
+    name = frame_id.encode("utf-8") + b"\x00"
+    out = bytearray(_LE_HEADER)
+    out += struct.pack("<iII", sec, nanosec, len(name))
+    out += name
+    return out
+
+
+def _pad(out: bytearray, n: int) -> None:
+    out += b"\x00" * ((-(len(out) - 4)) % n)
+
+
+_RESIDUAL_BODY = struct.Struct("<6d3d3d6d6?2x6d6d6??")
+
+
+def residual_to_cdr(sec: int, nanosec: int, frame_id: str, r, force, torque, threshold, over, servo_torque,
+                    servo_threshold, servo_over, in_collision: bool) -> bytes:
+    """A serialized hexa_msgs/Residual (the bytes rclpy would publish for the same fields; `publish(bytes)` sends
+    them as they are): building the message object costs more than the sample's whole observer update."""
+    out = _header_cdr(sec, nanosec, frame_id)
+    _pad(out, 8)
+    out += _RESIDUAL_BODY.pack(*r, *force, *torque, *threshold, *over, *servo_torque, *servo_threshold,
+                               *servo_over, in_collision)
+    return bytes(out)
+
+
+def joint_state_to_cdr(sec: int, nanosec: int, frame_id: str, names, position, velocity, effort) -> bytes:
+    """A serialized sensor_msgs/JointState (the bytes rclpy would publish for the same fields)."""
+    out = _header_cdr(sec, nanosec, frame_id)
+    _pad(out, 4)
+    out += struct.pack("<I", len(names))
+    for n in names:
+        b = n.encode("utf-8") + b"\x00"
+        _pad(out, 4)
+        out += struct.pack("<I", len(b))
+        out += b
+    for seq in (position, velocity, effort):
+        _pad(out, 4)
+        out += struct.pack("<I", len(seq))
+        if len(seq):
+            _pad(out, 8)
+            out += struct.pack(f"<{len(seq)}d", *seq)
+    return bytes(out)
