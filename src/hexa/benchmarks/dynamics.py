@@ -1,5 +1,5 @@
-"""Benchmarks of the Hexa dynamics: observer update per sample (≤ 100 µs), batch residual over a recorded run
-(≥ 50k samples/s) and Newton–Euler identification per call (≤ 1 ms)."""
+"""Benchmarks of the Hexa dynamics: observer update per sample (≤ 100 µs, in CPU time so that it holds on a loaded
+machine), batch residual over a recorded run (≥ 50k samples/s) and Newton–Euler identification per call (≤ 1 ms)."""
 from __future__ import annotations
 
 import time
@@ -44,7 +44,7 @@ def _per_sample(run: dict, n: int, pose_every: int, repeat: int = 3, kinematics:
         obs = ResidualObserver(run["prm"], ObserverConfig(kinematics=kinematics))
         t, z, zd, tau, pose = run["t"], run["zeta"], run["zeta_dot"], run["tau"], run["pose"]
         obs.update_pose(-1e-3, pose[0])
-        t0 = time.perf_counter()
+        t0 = time.process_time()
         if kinematics == "pose":
             for k in range(n):
                 if k % pose_every == 0:
@@ -58,7 +58,7 @@ def _per_sample(run: dict, n: int, pose_every: int, repeat: int = 3, kinematics:
                 if k % pose_every == 0:
                     obs.update_pose(t[k], pose[k])
                 obs.update_arm(t[k], z[k], tau[k], zd[k])
-        best = min(best, (time.perf_counter() - t0) / n)
+        best = min(best, (time.process_time() - t0) / n)
         if sum(obs.rejected.values()):
             raise RuntimeError(f"benchmark samples rejected: {obs.rejected}")
     return best
