@@ -3,7 +3,11 @@ eqs 23-26) on the driver's sample streams.
 
 Sub `joint_states`, `motor_currents` (hexa_ros.qos.STREAM), `plate_pose`; pub `residual` (one per accepted sample),
 `collision` (START/END, reliable), `zeta_estimate` (JointState: ζ̂, ζ̂̇ and the τ used), `plate_pose_estimate`
-(the plate pose tracked from ζ̂, at pose_estimate_rate_hz), `markers` (only while subscribed), `/diagnostics`.
+(the plate pose tracked from ζ̂, at pose_estimate_rate_hz), `markers` (only while subscribed), `/diagnostics`;
+standard types beside them: `external_wrench` (geometry_msgs/WrenchStamped, the residual in `plate`) and
+`external_joint_torques` (JointState effort: the residual in servo space), one per sample while subscribed;
+`collision_state` (the last CollisionEvent, transient local; END with id 0 before the first collision); /tf (base →
+plate, arm_i, rod_i at pose_estimate_rate_hz) and /tf_static (the cameras of the robot YAML: hexa.frames).
 Service `~/reset`. Parameters: hexa_bringup/config/hexa_params.yaml (`/**/observer`) and docs/observer_node.md.
 """
 from __future__ import annotations
@@ -13,18 +17,20 @@ import math
 import sys
 from typing import Any
 
-from geometry_msgs.msg import PoseStamped
+from geometry_msgs.msg import PoseStamped, WrenchStamped
 from hexa_msgs.msg import CollisionEvent, MotorCurrents, Residual
 from hexa_msgs.srv import ResetObserver
 from hexa_ros import diagnostics, markers, node, qos
 from hexa_ros.cdr import CdrError, joint_state_from_cdr, motor_currents_from_cdr
-from hexa_ros.conversions import JOINT_NAMES, fill_pose_msg, hexa_pose_from_msg, ordered_values
+from hexa_ros.conversions import JOINT_NAMES, fill_pose_msg, hexa_pose_from_msg, ordered_values, wrench_stamped
 from hexa_ros.stamps import to_sec, to_stamp
+from hexa_ros.tf import TfPublisher
 from rcl_interfaces.msg import SetParametersResult
 from rclpy.node import Node
 from sensor_msgs.msg import JointState
 from visualization_msgs.msg import MarkerArray
 
+from hexa import frames
 from hexa.dynamics.monitor import ESTIMATOR_KEYS, CollisionMonitor, MonitorConfig
 from hexa.dynamics.observer import ObserverConfig
 from hexa.estimation import EstimatorConfig
@@ -62,6 +68,12 @@ class ObserverNode(Node):
         self.events_sent = 0
         self.pub_residual = self.create_publisher(Residual, "residual", qos.STREAM)
         self.pub_collision = self.create_publisher(CollisionEvent, "collision", qos.EVENT)
+        self.pub_state = self.create_publisher(CollisionEvent, "collision_state", qos.LATCHED)
+        self.pub_state.publish(CollisionEvent(event=CollisionEvent.END, id=0))
+        self.pub_wrench = self.create_publisher(WrenchStamped, "external_wrench", qos.STREAM)
+        self.pub_torques = self.create_publisher(JointState, "external_joint_torques", qos.STREAM)
+        self.desc, self.tf = desc, TfPublisher(self)
+        self.tf.send_static(frames.static_transforms(desc))
         self.pub_zeta = self.create_publisher(JointState, "zeta_estimate", qos.STREAM)
         self.pub_pose = self.create_publisher(PoseStamped, "plate_pose_estimate", qos.RELIABLE)
         self.pub_markers = self.create_publisher(MarkerArray, "markers", qos.RELIABLE)
@@ -134,6 +146,7 @@ class ObserverNode(Node):
             r.wrench.force.x, r.wrench.force.y, r.wrench.force.z = (float(v) for v in w[:3])
             r.wrench.torque.x, r.wrench.torque.y, r.wrench.torque.z = (float(v) for v in w[3:])
             self.pub_residual.publish(r)
+            self._standard(out, stamp)
             for ev in out.events:
                 self._event(ev)
             js = JointState(name=list(JOINT_NAMES), position=s.zeta.tolist(), effort=s.tau.tolist(),
@@ -146,6 +159,7 @@ class ObserverNode(Node):
                 ps.header.stamp, ps.header.frame_id = stamp, self.frame_id
                 fill_pose_msg(ps.pose, rotation_zyx(*out.pose[3:6]), out.pose[:3])
                 self.pub_pose.publish(ps)
+                self.tf.send(frames.robot_transforms(self.desc, out.pose, s.zeta), stamp)
             due = s.time - self.last["marker"] >= 1.0 / max(float(self.set["marker_rate_hz"]), 1e-3)
             if (due or out.events) and self.pub_markers.get_subscription_count() > 0:
                 self.last["marker"] = s.time
@@ -160,9 +174,20 @@ class ObserverNode(Node):
                            peak=float(ev.peak), duration=float(ev.duration))
         c.header.stamp, c.header.frame_id = to_stamp(ev.time), self.frame_id
         self.pub_collision.publish(c)
+        self.pub_state.publish(c)
         self.events_sent += 1
         self.get_logger().warn(f"collision {ev.id} {ev.kind} on {ev.axis_name}: {ev.value:.3f} (peak {ev.peak:.3f}, "
                                f"onset {ev.onset:.3f} s)")
+
+    def _standard(self, out: Any, stamp: Any) -> None:
+        """The residual as a WrenchStamped in `plate` (moment about the plate centre) and as servo-space efforts."""
+        if self.pub_wrench.get_subscription_count() > 0:
+            R = rotation_zyx(*out.pose[3:6])
+            self.pub_wrench.publish(wrench_stamped(frames.PLATE, stamp, R.T @ out.wrench[:3], R.T @ out.wrench[3:]))
+        if self.pub_torques.get_subscription_count() > 0:
+            js = JointState(name=list(JOINT_NAMES), effort=out.servo_torque.tolist())
+            js.header.stamp = stamp
+            self.pub_torques.publish(js)
 
     def _markers(self, out: Any, stamp: Any) -> MarkerArray:
         """The residual force as an arrow at the plate (green; red in collision)."""

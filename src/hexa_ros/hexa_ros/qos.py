@@ -15,3 +15,8 @@ EVENT = QoSProfile(depth=20, reliability=ReliabilityPolicy.RELIABLE, history=His
 #: states a late subscriber must see at once: reliable, transient local, keep last 1
 LATCHED = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE, history=HistoryPolicy.KEEP_LAST,
                      durability=DurabilityPolicy.TRANSIENT_LOCAL)
+#: /tf: reliable, keep last 100, volatile (tf2_ros' TransformBroadcaster)
+TF = QoSProfile(depth=100, reliability=ReliabilityPolicy.RELIABLE, history=HistoryPolicy.KEEP_LAST)
+#: /tf_static: reliable, transient local, keep last 1 (tf2_ros' StaticTransformBroadcaster: one message holds every
+#: static transform of the node)
+TF_STATIC = LATCHED
