@@ -32,6 +32,7 @@ from hexa.protocol.link import CONNECTED
 from hexa.robots.hexa_description import load_hexa
 from hexa_ros import diagnostics, qos
 from hexa_ros.conversions import JOINT_NAMES
+from hexa_ros.node import DESCRIPTION, DESCRIPTION_PARAM, descriptor
 
 
 def _after(delay: float, fn: Callable[..., None], *args: Any, **kwargs: Any) -> threading.Timer:
@@ -52,7 +53,7 @@ class DriverNode(Node):
             self.cfg = cfg = load_driver_config(
                 self.declare_parameter("config", str(default_driver_config_path()), fixed).value)
             cfg.update({k: self.declare_parameter(k, cfg[k], fixed).value for k in SCALAR_KEYS})
-            desc = load_hexa(self.declare_parameter("robot_description", "", fixed).value or None)
+            desc = load_hexa(self.declare_parameter(DESCRIPTION, "", descriptor(DESCRIPTION_PARAM)).value or None)
         except ParameterException as exc:
             raise ValueError(str(exc)) from exc
         if sorted(cfg["joint_names"]) != sorted(JOINT_NAMES):

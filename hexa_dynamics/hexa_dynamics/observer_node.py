@@ -8,7 +8,8 @@ standard types beside them: `external_wrench` (geometry_msgs/WrenchStamped, the 
 `external_joint_torques` (JointState effort: the residual in servo space), one per sample while subscribed;
 `collision_state` (the last CollisionEvent, transient local; END with id 0 before the first collision); /tf (base →
 plate, arm_i, rod_i at pose_estimate_rate_hz) and /tf_static (the cameras of the robot YAML: hexa.frames).
-Service `~/reset`. Parameters: hexa_bringup/config/hexa_params.yaml (`/**/observer`) and docs/observer_node.md.
+Service `~/reset`. Parameters: hexa_dynamics.observer_params (descriptors; start-up ones read-only), defaults in
+hexa_bringup/config/hexa_params.yaml (`/**/observer`), docs/observer_node.md.
 """
 from __future__ import annotations
 
@@ -24,6 +25,7 @@ from hexa_ros import diagnostics, markers, node, qos
 from hexa_ros.cdr import CdrError, joint_state_from_cdr, motor_currents_from_cdr
 from hexa_ros.conversions import JOINT_NAMES, fill_pose_msg, hexa_pose_from_msg, ordered_values, wrench_stamped
 from hexa_ros.stamps import to_sec, to_stamp
+from hexa_ros.node import DESCRIPTION, declare_parameters
 from hexa_ros.tf import TfPublisher
 from rcl_interfaces.msg import SetParametersResult
 from rclpy.node import Node
@@ -36,10 +38,9 @@ from hexa.dynamics.observer import ObserverConfig
 from hexa.estimation import EstimatorConfig
 from hexa.kinematics.hexa6rus import rotation_zyx
 from hexa.robots.hexa_description import load_hexa
+from hexa_dynamics.observer_params import observer_parameters
 
 OBSERVER_KEYS = ("gains", "thresholds", "servo_thresholds", "release_ratio", "min_duration")
-RUNTIME = set(OBSERVER_KEYS) | set(ESTIMATOR_KEYS) | {"reseed_distance", "calibration_duration", "marker_rate_hz",
-                                                       "marker_scale", "pose_estimate_rate_hz"}
 
 
 class ObserverNode(Node):
@@ -47,23 +48,17 @@ class ObserverNode(Node):
 
     def __init__(self, **kwargs: Any) -> None:
         super().__init__("observer", **kwargs)
-        p = self.declare_parameter
-        obs, est = ObserverConfig(), EstimatorConfig()
-        desc = load_hexa(str(p("description", "").value) or None)
-        sim = MonitorConfig.sim_clock_of(str(p("board_clock", "auto").value),
-                                         bool(self.get_parameter("use_sim_time").value))
-        mcfg = MonitorConfig(zeta_source=str(p("zeta_source", "estimator").value),
-                             time_source=str(p("time_source", "auto").value), sim_clock=sim,
-                             pose_delay=float(p("pose_delay", 0.5).value),
-                             reseed_distance=float(p("reseed_distance", 0.005).value),
-                             command_delay=float(p("command_delay", 0.0).value))
-        ocfg = ObserverConfig(**{k: _value(p(k, getattr(obs, k)).value) for k in OBSERVER_KEYS},
-                              max_gap=float(p("max_gap", obs.max_gap).value))
-        ecfg = EstimatorConfig(**{k: float(p(k, float(getattr(est, k))).value) for k in ESTIMATOR_KEYS})
+        v = declare_parameters(self, observer_parameters())
+        desc = load_hexa(str(v[DESCRIPTION]) or None)
+        sim = MonitorConfig.sim_clock_of(str(v["board_clock"]), bool(self.get_parameter("use_sim_time").value))
+        mcfg = MonitorConfig(zeta_source=str(v["zeta_source"]), time_source=str(v["time_source"]), sim_clock=sim,
+                             **{k: float(v[k]) for k in ("pose_delay", "reseed_distance", "command_delay")})
+        ocfg = ObserverConfig(**{k: _value(v[k]) for k in OBSERVER_KEYS}, max_gap=float(v["max_gap"]))
+        ecfg = EstimatorConfig(**{k: float(v[k]) for k in ESTIMATOR_KEYS})
         self.monitor = CollisionMonitor(desc, mcfg, ocfg, ecfg)   # raises ValueError naming a bad value
-        self.set = {k: p(k, d).value for k, d in (("calibration_duration", 1.0), ("marker_rate_hz", 10.0),
-                                                 ("marker_scale", 0.02), ("pose_estimate_rate_hz", 100.0))}
-        self.frame_id = str(p("frame_id", "base").value)
+        self.set = {k: v[k] for k in ("calibration_duration", "marker_rate_hz", "marker_scale",
+                                      "pose_estimate_rate_hz")}
+        self.frame_id = str(v["frame_id"])
         self.last = {"marker": -math.inf, "pose": -math.inf}
         self.events_sent = 0
         self.pub_residual = self.create_publisher(Residual, "residual", qos.STREAM)
@@ -94,8 +89,6 @@ class ObserverNode(Node):
         ocfg, ecfg, reseed = m.observer.config, m.estimator.config, None
         try:
             for prm in params:
-                if prm.name not in RUNTIME:
-                    return SetParametersResult(successful=False, reason=f"{prm.name} is read at start-up only")
                 if prm.name in OBSERVER_KEYS:
                     ocfg = dataclasses.replace(ocfg, **{prm.name: _value(prm.value)})
                 elif prm.name in ESTIMATOR_KEYS:
