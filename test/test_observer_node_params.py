@@ -64,6 +64,7 @@ def test_params_file_has_a_block_per_node_and_only_keys_the_nodes_declare(rcl):
         declared = set(re.findall(r'(?:declare_parameter|\bp)\(\s*"(\w+)"', src))
         if re.search(r"declare_parameter\(DESCRIPTION\b", src):     # hexa_ros.node's robot-YAML parameter
             declared.add("description")
+        declared |= set(re.findall(r'^\s+"(\w+)": Param\(', src, re.M))   # a PARAMETERS table of hexa_ros.node.Param
         if name == "driver":
             declared |= {"uno_port", "mega_port", "baud", "stream_rate_hz", "command_rate_hz", "max_speed"}
         assert set(blocks[name]) <= declared, (name, set(blocks[name]) - declared)
@@ -154,11 +155,12 @@ def test_every_parameter_has_a_description_and_only_runtime_ones_are_writable(rc
     from hexa_dynamics.observer_node import ObserverNode
     from hexa_dynamics.observer_params import RUNTIME
     from hexa_dynamics.rnea_node import RneaNode
+    from hexa_dynamics.singularity_node import SingularityNode
     from hexa_dynamics.trajectory_node import TrajectoryNode
     from hexa_vision.isolation_node import IsolationNode
     from hexa_vision.pose_node import PoseNode
 
-    for cls in (ObserverNode, RneaNode, TrajectoryNode, PoseNode, IsolationNode):
+    for cls in (ObserverNode, RneaNode, TrajectoryNode, PoseNode, IsolationNode, SingularityNode):
         node = cls()
         rcl.append(node)
         names = [n for n in node._parameters if n != "use_sim_time"]
