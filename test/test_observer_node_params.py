@@ -214,3 +214,12 @@ def test_hexa_param_set_on_a_read_only_parameter_prints_the_reason(procs, ros_en
             break
     assert r is not None and r.returncode == 1 and "read-only parameter: collision_policy" in r.stderr, r.stderr
     assert "Traceback" not in r.stderr
+
+
+def test_every_driver_parameter_has_a_description():
+    from hexa.protocol.driver_core import SCALAR_KEYS
+    from hexa_driver.driver_params import TEXT, driver_descriptor
+
+    assert set(SCALAR_KEYS) | {"config"} <= set(TEXT)
+    d = driver_descriptor("max_speed", 1.5)
+    assert d.read_only and d.description.startswith("rad/s")

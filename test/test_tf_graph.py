@@ -1,6 +1,6 @@
 """`hexa bringup sim` on TF: an independent listener receives /tf_static (cameras), /tf (plate, arms, rods) and
-external_wrench; composing its transforms (as a tf2 lookup does) gives the robot YAML's camera poses within 1 mm and
-a robot whose rods close on the plate joints."""
+external_wrench / external_joint_torques; composing its transforms (as a tf2 lookup does) gives the robot YAML's camera
+poses within 1 mm and a robot whose rods close on the plate joints; a late joiner gets the latched states."""
 from __future__ import annotations
 
 import json
@@ -70,5 +70,13 @@ def test_bringup_sim_publishes_tf_and_external_wrench_for_an_independent_listene
         C = plate[:3, :3] @ desc.C[i] + plate[:3, 3]
         assert np.linalg.norm(rod[:3, 3] + desc.l_d * rod[:3, 0] - C) < 2e-3               # loop closure (m)
     assert 0.1 < -plate[2, 3] < 0.6                                                          # plate below the base
-    # the residual as a wrench in the plate frame, finite
+    # the residual as a wrench in the plate frame, and in servo space
     assert all(w["frame_id"] == frames.PLATE and np.all(np.isfinite(w["force"])) for w in r["wrenches"])
+    assert r["torques"][-1]["name"] == [f"arm_{i}" for i in range(1, 7)] and len(r["torques"][-1]["effort"]) == 6
+    # a late joiner gets the cameras, the collision state and the trajectory state at once (transient local)
+    late = procs.start([PY, "test/tf_listener_peer.py", "30", "--latched"], env)
+    out, err = late.communicate(timeout=60)
+    assert late.returncode == 0, (out[-2000:], err[-2000:])
+    s = json.loads(out.strip().splitlines()[-1])["states"]
+    assert s["collision"][0] in (0, 1) and s["trajectory"] in (
+        "waiting", "waiting_for_pose", "approaching", "running", "held", "retracting", "resuming", "finished")

@@ -1,7 +1,9 @@
 """An independent TF listener (as RViz or Foxglove): subscribes to /tf_static (transient local, late join), /tf and
 /hexa/external_wrench with tf2's QoS, and prints one JSON line once it holds every frame asked for and a wrench.
 
-Usage: tf_listener_peer.py TIMEOUT_S FRAME [FRAME ...]
+Usage: tf_listener_peer.py TIMEOUT_S FRAME [FRAME ...]   (also waits for external_joint_torques)
+       tf_listener_peer.py TIMEOUT_S --latched              (a late joiner: /tf_static, collision_state and
+                                                              trajectory_state, all transient local)
 """
 from __future__ import annotations
 
@@ -16,10 +18,14 @@ def main() -> int:
     apply_defaults()
     import rclpy
     from geometry_msgs.msg import WrenchStamped
+    from hexa_msgs.msg import CollisionEvent
+    from sensor_msgs.msg import JointState
+    from std_msgs.msg import String
     from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
     from tf2_msgs.msg import TFMessage
 
-    timeout, wanted = float(sys.argv[1]), set(sys.argv[2:])
+    timeout, latched = float(sys.argv[1]), sys.argv[2:] == ["--latched"]
+    wanted = {"cam_top_link", "cam_side_link"} if latched else set(sys.argv[2:])
     rclpy.init()
     node = rclpy.create_node("tf_listener_peer")
     static = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.TRANSIENT_LOCAL)
@@ -41,13 +47,27 @@ def main() -> int:
     node.create_subscription(TFMessage, "/tf_static", lambda m: on_tf(m, "tf_static"), static)
     node.create_subscription(TFMessage, "/tf", lambda m: on_tf(m, "tf"), dynamic)
     node.create_subscription(WrenchStamped, "/hexa/external_wrench", on_wrench, dynamic)
+    torques: list[dict] = []
+    node.create_subscription(JointState, "/hexa/external_joint_torques",
+                             lambda m: torques.append({"name": list(m.name), "effort": list(m.effort)}), dynamic)
+    states: dict[str, object] = {}
+    node.create_subscription(CollisionEvent, "/hexa/collision_state",
+                             lambda m: states.update(collision=[m.event, m.id]), static)
+    node.create_subscription(String, "/hexa/trajectory_state", lambda m: states.update(trajectory=m.data), static)
+
+    def done() -> bool:
+        if latched:
+            return wanted <= frames.keys() and len(states) == 2
+        return wanted <= frames.keys() and bool(wrenches) and bool(torques)
+
     t_end = time.monotonic() + timeout
-    while time.monotonic() < t_end and not (wanted <= frames.keys() and wrenches):
+    while time.monotonic() < t_end and not done():
         rclpy.spin_once(node, timeout_sec=0.1)
-    print(json.dumps({"frames": frames, "wrenches": wrenches[-5:], "type": TFMessage.__module__}), flush=True)
+    print(json.dumps({"frames": frames, "wrenches": wrenches[-5:], "torques": torques[-2:], "states": states,
+                      "type": TFMessage.__module__}), flush=True)
     node.destroy_node()
     rclpy.try_shutdown()
-    return 0 if wanted <= frames.keys() and wrenches else 1
+    return 0 if done() else 1
 
 
 if __name__ == "__main__":
