@@ -7,7 +7,7 @@ Sub `joint_states`, `motor_currents` (hexa_ros.qos.STREAM), `plate_pose`; pub `r
 standard types beside them: `external_wrench` (geometry_msgs/WrenchStamped, the residual in `plate`) and
 `external_joint_torques` (JointState effort: the residual in servo space), one per sample while subscribed;
 `collision_state` (the last CollisionEvent, transient local; END with id 0 before the first collision); /tf (base →
-plate, arm_i, rod_i at pose_estimate_rate_hz) and /tf_static (the cameras of the robot YAML: hexa.frames).
+plate, arm_i, rod_i at tf_rate_hz) and /tf_static (the cameras of the robot YAML: hexa.frames).
 Service `~/reset`. Parameters: hexa_dynamics.observer_params (descriptors; start-up ones read-only), defaults in
 hexa_bringup/config/hexa_params.yaml (`/**/observer`), docs/observer_node.md.
 """
@@ -57,9 +57,9 @@ class ObserverNode(Node):
         ecfg = EstimatorConfig(**{k: float(v[k]) for k in ESTIMATOR_KEYS})
         self.monitor = CollisionMonitor(desc, mcfg, ocfg, ecfg)   # raises ValueError naming a bad value
         self.set = {k: v[k] for k in ("calibration_duration", "marker_rate_hz", "marker_scale",
-                                      "pose_estimate_rate_hz")}
+                                      "pose_estimate_rate_hz", "tf_rate_hz")}
         self.frame_id = str(v["frame_id"])
-        self.last = {"marker": -math.inf, "pose": -math.inf}
+        self.last = {"marker": -math.inf, "pose": -math.inf, "tf": -math.inf}
         self.events_sent = 0
         self.pub_residual = self.create_publisher(Residual, "residual", qos.STREAM)
         self.pub_collision = self.create_publisher(CollisionEvent, "collision", qos.EVENT)
@@ -152,6 +152,8 @@ class ObserverNode(Node):
                 ps.header.stamp, ps.header.frame_id = stamp, self.frame_id
                 fill_pose_msg(ps.pose, rotation_zyx(*out.pose[3:6]), out.pose[:3])
                 self.pub_pose.publish(ps)
+            if s.time - self.last["tf"] >= 1.0 / max(float(self.set["tf_rate_hz"]), 1e-3):
+                self.last["tf"] = s.time
                 self.tf.send(frames.robot_transforms(self.desc, out.pose, s.zeta), stamp)
             due = s.time - self.last["marker"] >= 1.0 / max(float(self.set["marker_rate_hz"]), 1e-3)
             if (due or out.events) and self.pub_markers.get_subscription_count() > 0:

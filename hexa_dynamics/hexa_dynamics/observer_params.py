@@ -9,7 +9,7 @@ from hexa_ros.node import DESCRIPTION, DESCRIPTION_PARAM, Param
 #: the parameters the observer applies on a running node (hexa.dynamics.monitor.CollisionMonitor.configure)
 RUNTIME = ("gains", "thresholds", "servo_thresholds", "release_ratio", "min_duration", "accel_sigma", "torque_sigma",
            "camera_sigma", "bias_walk", "saturation", "stall_sigma", "reseed_distance", "calibration_duration",
-           "marker_rate_hz", "marker_scale", "pose_estimate_rate_hz")
+           "marker_rate_hz", "marker_scale", "pose_estimate_rate_hz", "tf_rate_hz")
 
 
 def observer_parameters() -> dict[str, Param]:
@@ -45,6 +45,8 @@ def observer_parameters() -> dict[str, Param]:
         "calibration_duration": Param(1.0, "s averaged by ~/reset with recalibrate=true", range=(0.01, 60.0)),
         "marker_rate_hz": Param(10.0, "residual force arrow rate on `markers`", range=(0.0, 1000.0)),
         "marker_scale": Param(0.02, "arrow length per newton (m/N)", range=(0.0, 1.0)),
-        "pose_estimate_rate_hz": Param(100.0, "plate_pose_estimate and /tf rate (Hz)", range=(0.001, 1000.0)),
+        "pose_estimate_rate_hz": Param(100.0, "plate_pose_estimate rate (Hz of sample time)", range=(0.001, 1000.0)),
+        "tf_rate_hz": Param(30.0, "/tf rate of the plate, arm and rod frames (Hz of sample time)",
+                            range=(0.001, 1000.0)),
         "frame_id": Param("base", "frame of residual, collision and plate_pose_estimate")}
     return {k: Param(p.default, p.description, k in RUNTIME, p.range, p.choices) for k, p in table.items()}
