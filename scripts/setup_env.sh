@@ -1,6 +1,7 @@
 #!/usr/bin/env bash
-# One idempotent set-up for `make test` and `make demo`: venv, pinned wheels, CMake export repair, hexa_msgs build,
-# hexa Python packages, AVR toolchain. Each step is skipped when its inputs have not changed (stamps in .venv/.stamps).
+# One idempotent set-up for `make test` and `make demo`: venv, pinned wheels, CMake export repair, hexa_msgs and
+# tf2_msgs builds, hexa Python packages, AVR toolchain. Each step is skipped when its inputs have not changed (stamps in
+# .venv/.stamps).
 set -euo pipefail
 cd "$(dirname "$0")/.."
 ROOT=$(pwd)
@@ -65,19 +66,24 @@ if ! fresh cmake-fix "$PYINC:$NPINC"; then
   mark cmake-fix "$PYINC:$NPINC"
 fi
 
-# 5. hexa_msgs with colcon (settings in colcon.meta), installed into the venv prefix (no runtime env vars needed).
-h=$(hash_of hexa_msgs/CMakeLists.txt hexa_msgs/package.xml hexa_msgs/msg/* hexa_msgs/srv/* colcon.meta)
-if ! fresh msgs "$h" || ! "$VENV/bin/python" -c 'import hexa_msgs.msg' 2>/dev/null; then
-  log "building hexa_msgs (colcon)"
+# 5. The interface packages with colcon (settings in colcon.meta), installed into the venv prefix (no runtime env vars
+#    needed): hexa_msgs, and tf2_msgs (third_party/tf2_msgs, ROS 2 Jazzy's source: no tf2_msgs wheel exists) so that
+#    /tf and /tf_static carry the standard tf2_msgs/msg/TFMessage type.
+MSG_PKGS=(hexa_msgs third_party/tf2_msgs)
+h=$(for p in "${MSG_PKGS[@]}"; do cat "$p/CMakeLists.txt" "$p/package.xml" "$p"/msg/* "$p"/srv/* "$p"/action/* \
+      2>/dev/null; done | cat - colcon.meta | sha256sum | cut -c1-16)
+if ! fresh msgs "$h" || ! "$VENV/bin/python" -c 'import hexa_msgs.msg, tf2_msgs.msg' 2>/dev/null; then
+  log "building ${MSG_PKGS[*]} (colcon)"
   mkdir -p build
   (
     export AMENT_PREFIX_PATH="$VENV" CMAKE_PREFIX_PATH="$VENV" PATH="$VENV/bin:$PATH"
     export PYTHONPATH="$VENV/lib/python3.11/site-packages"
-    "$VENV/bin/colcon" --log-base build/log build --base-paths hexa_msgs --build-base build/colcon \
+    "$VENV/bin/colcon" --log-base build/log build --base-paths "${MSG_PKGS[@]}" --build-base build/colcon \
       --install-base "$VENV" --merge-install --metas colcon.meta --event-handlers console_cohesion- summary- \
-      > build/colcon-hexa_msgs.log 2>&1 || { tail -40 build/colcon-hexa_msgs.log >&2; exit 1; }
+      > build/colcon-msgs.log 2>&1 || { tail -40 build/colcon-msgs.log >&2; exit 1; }
   )
-  "$VENV/bin/python" -c 'import hexa_msgs.msg' || { echo "setup: hexa_msgs built but not importable" >&2; exit 1; }
+  "$VENV/bin/python" -c 'import hexa_msgs.msg, tf2_msgs.msg' \
+    || { echo "setup: hexa_msgs/tf2_msgs built but not importable" >&2; exit 1; }
   mark msgs "$h"
 fi
 

@@ -32,11 +32,12 @@ def test_service_call_holds_and_resumes_the_trajectory_node(procs, ros_env):
 
 
 def test_param_set_then_get_round_trips_on_a_running_node(procs, ros_env):
-    procs.start([PY, "-m", "hexa_dynamics.trajectory_node", "--ros-args", "-r", "__ns:=/hexa"], ros_env)
-    rc, _out, err = _hexa(procs, ros_env, "param", "set", "/hexa/trajectory", "retract_distance", "0.035",
+    """A runtime parameter (the observer's marker_scale); start-up ones refuse a set (test_observer_node_params)."""
+    procs.start([PY, "-m", "hexa_dynamics.observer_node", "--ros-args", "-r", "__ns:=/hexa"], ros_env)
+    rc, _out, err = _hexa(procs, ros_env, "param", "set", "/hexa/observer", "marker_scale", "0.035",
                           "--timeout", "30")
     assert rc == 0, err
-    rc, out, err = _hexa(procs, ros_env, "param", "get", "/hexa/trajectory", "retract_distance")
+    rc, out, err = _hexa(procs, ros_env, "param", "get", "/hexa/observer", "marker_scale")
     assert rc == 0 and json.loads(out) == 0.035, err
-    rc, _out, err = _hexa(procs, ros_env, "param", "get", "/hexa/trajectory", "no_such_parameter")
+    rc, _out, err = _hexa(procs, ros_env, "param", "get", "/hexa/observer", "no_such_parameter")
     assert rc == 1 and "no parameter 'no_such_parameter'" in err

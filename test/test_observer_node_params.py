@@ -1,5 +1,6 @@
 """hexa_params.yaml against the nodes: every key exists with the node's declared default; the observer's runtime
-parameter callback changes the detector and the estimator, rejects bad values and start-up-only keys (in-process)."""
+parameter callback changes the detector and the estimator, rejects bad values and start-up-only keys (in-process);
+every parameter has a descriptor, and a read-only one refuses a runtime set with the reason (`hexa param set` too)."""
 from __future__ import annotations
 
 import re
@@ -61,6 +62,9 @@ def test_params_file_has_a_block_per_node_and_only_keys_the_nodes_declare(rcl):
             continue
         src = (REPO / path).read_text()
         declared = set(re.findall(r'(?:declare_parameter|\bp)\(\s*"(\w+)"', src))
+        if re.search(r"declare_parameter\(DESCRIPTION\b", src):     # hexa_ros.node's robot-YAML parameter
+            declared.add("description")
+        declared |= set(re.findall(r'^\s+"(\w+)": Param\(', src, re.M))   # a PARAMETERS table of hexa_ros.node.Param
         if name == "driver":
             declared |= {"uno_port", "mega_port", "baud", "stream_rate_hz", "command_rate_hz", "max_speed"}
         assert set(blocks[name]) <= declared, (name, set(blocks[name]) - declared)
@@ -145,3 +149,77 @@ def test_reset_with_recalibrate_removes_a_rest_offset(rcl):
     after = np.abs(outs[-1][1][:3]).max()
     assert before > 0.5                                # N: the wrong I₀ is visible
     assert after < 0.1 and np.abs(node.monitor.observer.offset[:3]).max() > 0.5
+
+
+def test_every_parameter_has_a_description_and_only_runtime_ones_are_writable(rcl):
+    from hexa_dynamics.observer_node import ObserverNode
+    from hexa_dynamics.observer_params import RUNTIME
+    from hexa_dynamics.rnea_node import RneaNode
+    from hexa_dynamics.singularity_node import SingularityNode
+    from hexa_dynamics.trajectory_node import TrajectoryNode
+    from hexa_vision.isolation_node import IsolationNode
+    from hexa_vision.pose_node import PoseNode
+
+    for cls in (ObserverNode, RneaNode, TrajectoryNode, PoseNode, IsolationNode, SingularityNode):
+        node = cls()
+        rcl.append(node)
+        names = [n for n in node._parameters if n != "use_sim_time"]
+        assert "description" in names, cls.__name__               # the robot YAML, one name on every node
+        for d in node.describe_parameters(names):
+            assert d.description, (cls.__name__, d.name)
+            assert d.read_only == (cls is not ObserverNode or d.name not in RUNTIME), (cls.__name__, d.name)
+    traj = next(n for n in rcl if isinstance(n, TrajectoryNode))
+    (rate,) = traj.describe_parameters(["rate_hz"])
+    assert rate.floating_point_range and rate.floating_point_range[0].to_value == 1000.0
+    (policy,) = traj.describe_parameters(["collision_policy"])
+    assert "hold, retract, ignore" in policy.additional_constraints
+
+
+def test_a_start_up_parameter_refuses_a_runtime_set_with_the_reason(rcl):
+    from rclpy.parameter import Parameter
+
+    from hexa_dynamics.trajectory_node import TrajectoryNode
+
+    node = TrajectoryNode()
+    rcl.append(node)
+    (res,) = node.set_parameters([Parameter("collision_policy", value="ignore")])
+    assert not res.successful and "read-only" in res.reason and "collision_policy" in res.reason
+    assert node.get_parameter("collision_policy").value == "hold"
+    assert node.runner.player.policy == "hold"
+
+
+@pytest.mark.parametrize("override, shown", [(("rate_hz", 5000.0), "rate_hz"),
+                                             (("collision_policy", "stop"), "'stop'")])
+def test_a_start_up_value_out_of_range_or_choices_is_a_configuration_error_naming_it(rcl, override, shown):
+    from rclpy.parameter import Parameter
+
+    from hexa_dynamics.trajectory_node import TrajectoryNode
+
+    with pytest.raises(ValueError, match=shown):
+        TrajectoryNode(parameter_overrides=[Parameter(override[0], value=override[1])])
+
+
+def test_hexa_param_set_on_a_read_only_parameter_prints_the_reason(procs, ros_env):
+    import subprocess
+    import sys
+    import time
+
+    procs.start([sys.executable, "-m", "hexa_dynamics.trajectory_node", "--ros-args", "-r", "__ns:=/hexa"], ros_env)
+    deadline, r = time.monotonic() + 40, None
+    while time.monotonic() < deadline:
+        r = subprocess.run([sys.executable, "-m", "hexa_bringup.cli", "param", "set", "/hexa/trajectory",
+                            "collision_policy", "ignore", "--timeout", "5"], env=ros_env, capture_output=True,
+                           text=True, timeout=30)
+        if "refused" in r.stderr or r.returncode == 0:
+            break
+    assert r is not None and r.returncode == 1 and "read-only parameter: collision_policy" in r.stderr, r.stderr
+    assert "Traceback" not in r.stderr
+
+
+def test_every_driver_parameter_has_a_description():
+    from hexa.protocol.driver_core import SCALAR_KEYS
+    from hexa_driver.driver_params import TEXT, driver_descriptor
+
+    assert set(SCALAR_KEYS) | {"config"} <= set(TEXT)
+    d = driver_descriptor("max_speed", 1.5)
+    assert d.read_only and d.description.startswith("rad/s")

@@ -57,7 +57,8 @@ def test_a_contact_arriving_after_the_collision_ended_is_identified_over_the_who
 
 def test_rnea_node_turns_its_messages_into_tracker_calls_and_results_into_contact_wrench(ros_domain_id, monkeypatch):
     """zeta_estimate with the joints in any name order, plate_pose, collision and contact reach the tracker as plain
-    values; each result leaves as a ContactWrench stamped with its sample time; markers only with a subscriber."""
+    values; each result leaves as a ContactWrench stamped with its sample time, and as a WrenchStamped in the `contact`
+frame that /tf puts at the point; markers only with a subscriber."""
     import numpy as np
     import rclpy
     from geometry_msgs.msg import PoseStamped
@@ -83,6 +84,9 @@ def test_rnea_node_turns_its_messages_into_tracker_calls_and_results_into_contac
         wrenches, markers = [], []
         monkeypatch.setattr(node.pub_wrench, "publish", wrenches.append)
         monkeypatch.setattr(node.pub_markers, "publish", markers.append)
+        forces, tfs = [], []
+        monkeypatch.setattr(node.pub_force, "publish", forces.append)
+        monkeypatch.setattr(node.tf.pub, "publish", tfs.append)
         ref = ContactForceTracker(node.tracker.desc, node.tracker.config)
         zeta, zeta_dot, _ = hexa6rus.inverse_kinematics_derivatives(ref.desc, pose, pose_dot, pose_ddot)
         ps = PoseStamped()
@@ -116,6 +120,15 @@ def test_rnea_node_turns_its_messages_into_tracker_calls_and_results_into_contac
             assert to_sec(w.header.stamp) == pytest.approx(f.time, abs=1e-9) and w.collision_id == 5
             assert [w.force.x, w.force.y, w.force.z] == pytest.approx(f.force.tolist(), abs=1e-9)
             assert (w.link, w.chain, w.rank, w.force_model) == (Contact.PLATE, 0, f.rank, f.force_model)
+        # the same force as a WrenchStamped in frame `contact`, which /tf places at the point at the same stamp
+        assert len(forces) == len(tfs) == len(expected)
+        for cf, tf, f in zip(forces, tfs, expected):
+            (tr,) = tf.transforms
+            assert cf.header.frame_id == tr.child_frame_id == "contact" and tr.header.frame_id == "base"
+            assert to_sec(cf.header.stamp) == to_sec(tr.header.stamp) == pytest.approx(f.time, abs=1e-9)
+            assert [cf.wrench.force.x, cf.wrench.force.y, cf.wrench.force.z] == pytest.approx(f.force.tolist())
+            t3 = tr.transform.translation
+            assert [t3.x, t3.y, t3.z] == pytest.approx(f.point.tolist()) and tr.transform.rotation.w == 1.0
         js = JointState(name=names, position=[0.0] * 6, effort=[0.0] * 6)   # no velocity
         node._on_zeta(js)
         js = JointState(name=list("abcdef"), position=[0.0] * 6, velocity=[0.0] * 6, effort=[0.0] * 6)

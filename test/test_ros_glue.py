@@ -39,7 +39,7 @@ def test_composed_nodes_keep_their_names_and_parameters_and_stop_on_ctrl_c(procs
 
     params = tmp_path / "p.yaml"
     params.write_text("/**/observer:\n  ros__parameters:\n    min_duration: 0.03\n"
-                      "/**/singularity:\n  ros__parameters:\n    omega_limit: 7.5\n")
+                      "/**/singularity:\n  ros__parameters:\n    omega_limit: 0.075\n")
     p = procs.start([PY, "-m", "hexa_ros.compose", "observer=hexa_dynamics.observer_node:ObserverNode",
                      "singularity=hexa_dynamics.singularity_node:SingularityNode", "--ros-args", "-r",
                      "__ns:=/glue", "--params-file", str(params)], ros_env)
@@ -53,7 +53,7 @@ def test_composed_nodes_keep_their_names_and_parameters_and_stop_on_ctrl_c(procs
                 got[node] = r.stdout.strip()
         time.sleep(0.5)
     assert "0.03" in got.get("/glue/observer", ""), got
-    assert "7.5" in got.get("/glue/singularity", ""), got
+    assert "0.075" in got.get("/glue/singularity", ""), got
     assert p.poll() is None
     p.send_signal(signal.SIGINT)
     _out, err = p.communicate(timeout=15)

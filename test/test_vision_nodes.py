@@ -216,3 +216,26 @@ def test_bag_camera_republishes_recorded_frames(tmp_path, ros_env, procs, rclpy_
                  "-p", f"path:={bag}", "-p", "loop:=true"], ros_env)
     assert _wait(rclpy_node, lambda: len(got) >= 2 and infos, 30.0), "no depth image republished from the bag"
     assert np.array_equal(from_message(got[-1]), depth) and infos[-1].width == 32
+
+
+def test_camera_node_image_qos_parameter_sets_the_publishers_reliability(tmp_path, ros_env, procs, rclpy_node) -> None:
+    """image_qos:=reliable (realsense-ros' <stream>_qos): the graph reports RELIABLE publishers, and a RELIABLE
+    subscriber (which never matches a best-effort publisher) receives the frames; a bad value is named at start."""
+    from rclpy.qos import QoSProfile, ReliabilityPolicy
+    from sensor_msgs.msg import Image
+
+    cv2.imwrite(str(tmp_path / "color_0000.png"), np.zeros((480, 640, 3), np.uint8))
+    cv2.imwrite(str(tmp_path / "depth_0000.png"), np.full((480, 640), 500, np.uint16))
+    frames: list[Image] = []
+    rclpy_node.create_subscription(Image, "/hexa/cam_top/color/image_raw", frames.append,
+                                   QoSProfile(depth=5, reliability=ReliabilityPolicy.RELIABLE))
+    procs.start([PY, "-m", "hexa_vision.camera_node", "--ros-args", "-r", "__ns:=/hexa", "-p", "source:=folder",
+                 "-p", f"path:={tmp_path}", "-p", "rate:=10.0", "-p", "image_qos:=reliable"], ros_env)
+    assert _wait(rclpy_node, lambda: len(frames) >= 2, 30.0), "a RELIABLE subscriber got no frame"
+    info = rclpy_node.get_publishers_info_by_topic("/hexa/cam_top/color/image_raw")
+    assert info and all(i.qos_profile.reliability == ReliabilityPolicy.RELIABLE for i in info)
+    assert frames[-1].header.frame_id == "cam_top_color_optical_frame"
+    bad = procs.start([PY, "-m", "hexa_vision.camera_node", "--ros-args", "-p", "source:=folder",
+                       "-p", f"path:={tmp_path}", "-p", "image_qos:=fast"], ros_env)
+    _out, err = bad.communicate(timeout=30)
+    assert bad.returncode == 2 and "image_qos" in err and "'fast'" in err and "Traceback" not in err, err

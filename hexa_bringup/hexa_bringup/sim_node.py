@@ -6,7 +6,8 @@ cam_{top,side}/aligned_depth_to_color/image_raw (16UC1 mm) and its camera_info (
 (WrenchStamped: force at the contact point), sim/contact_truth (hexa_msgs/Contact), sim/plate_pose_truth
 (PoseStamped), sim/joint_states_truth (JointState: ζ, ζ̇, τ); /clock. All stamps are sim time; the output is
 deterministic for a given seed. The virtual Uno/Mega serial ports appear at `link_dir` (boards: true).
-Parameters: hexa_bringup/config/hexa_params.yaml (`/**/sim`) and docs/simulator.md.
+Parameters: PARAMETERS below (start-up only, read-only), hexa_bringup/config/hexa_params.yaml (`/**/sim`) and
+docs/simulator.md.
 """
 from __future__ import annotations
 
@@ -17,6 +18,7 @@ from geometry_msgs.msg import PoseStamped, WrenchStamped
 from hexa_msgs.msg import Contact
 from hexa_ros import qos
 from hexa_ros.conversions import JOINT_NAMES, fill_pose_msg
+from hexa_ros.node import Param, declare_parameters
 from hexa_ros.stamps import to_stamp
 from rclpy.node import Node
 from rosgraph_msgs.msg import Clock
@@ -30,33 +32,47 @@ from hexa.sim.simulator import LINK_CODES
 from hexa.vision.images import fill_message
 
 
+PARAMETERS = {
+    "scenario": Param("plate", "none | plate | arm | rod | scenario YAML path"),
+    "seed": Param(0, "seed of noise and randomized scenarios", range=(0, 2**31 - 1)),
+    "randomize": Param(False, "draw the scenario's collision from its ranges with `seed`"),
+    "real_time_factor": Param(1.0, "sim s per wall s; 0 = as fast as possible", range=(0.0, 100.0)),
+    "max_lag": Param(MAX_LAG, "wall s behind the pace before the lost time is dropped instead of caught up",
+                     range=(0.0, 10.0)),
+    "trajectory": Param("", "with scenario none: start at rest at this trajectory's start pose (empty = home)"),
+    "camera_rate_hz": Param(30.0, "camera frames per sim s", range=(0.1, 120.0)),
+    "cameras": Param(True, "render and publish both RGB-D cameras"),
+    "clock_rate_hz": Param(250.0, "/clock messages per sim s", range=(1.0, 10000.0)),
+    "truth_rate_hz": Param(100.0, "sim/* ground-truth messages per sim s", range=(0.1, 10000.0)),
+    "boards": Param(True, "virtual Uno and Mega on pseudo-terminals at link_dir"),
+    "link_dir": Param("/tmp/hexa_sim", "folder of the virtual boards' serial links"),
+    "duration": Param(0.0, "sim s to run; 0 = until shut down", range=(0.0, 1e9)),
+    "lead_in": Param(0.0, "sim s at rest before the trajectory and the scenario start", range=(0.0, 1e6)),
+    "start_delay": Param(0.0, "wall s with sim time frozen at 0 while the graph starts", range=(0.0, 3600.0)),
+    "contact_model": Param("scripted", "scripted (the scenario's force at the point) | physical (a pushing capsule "
+                                       "through MuJoCo contacts)", choices=("scripted", "physical")),
+    "servo_frame_period": Param(-1.0, "s between servo set-point frames (0..0.1); < 0 = the description's",
+                                range=(-1.0, 0.1))}
+
+
 class SimNode(Node):
     """Publishers and parameters; SimRunner asks for the clock, the truth and the cameras (SimOutputs)."""
 
     def __init__(self, **kwargs: Any) -> None:
         super().__init__("sim", **kwargs)
-        p = self.declare_parameter
-        self.scenario = str(p("scenario", "plate").value)
-        self.seed = int(p("seed", 0).value)
-        rtf = float(p("real_time_factor", 1.0).value)
-        pacer = Pacer(rtf, float(p("max_lag", MAX_LAG).value))  # ValueError names a bad value
-        cam_rate = float(p("camera_rate_hz", 30.0).value)
-        cameras = bool(p("cameras", True).value)
-        clock_rate, truth_rate = float(p("clock_rate_hz", 250.0).value), float(p("truth_rate_hz", 100.0).value)
-        use_boards = bool(p("boards", True).value)
-        link_dir = str(p("link_dir", "/tmp/hexa_sim").value)
-        duration = float(p("duration", 0.0).value)
-        lead_in, start_delay = float(p("lead_in", 0.0).value), float(p("start_delay", 0.0).value)
-        contact_model = str(p("contact_model", "scripted").value)
-        frame = float(p("servo_frame_period", -1.0).value)
-        trajectory = str(p("trajectory", "").value) or None
+        v = declare_parameters(self, PARAMETERS)
+        self.scenario, self.seed, rtf, cameras = str(v["scenario"]), int(v["seed"]), float(v["real_time_factor"]), bool(
+            v["cameras"])
+        pacer = Pacer(rtf, float(v["max_lag"]))  # ValueError names a bad value
+        cam_rate, clock_rate, truth_rate = (float(v[k]) for k in ("camera_rate_hz", "clock_rate_hz", "truth_rate_hz"))
+        duration, start_delay, frame = float(v["duration"]), float(v["start_delay"]), float(v["servo_frame_period"])
         self.sim = Simulator(seed=self.seed, scenario=None if self.scenario in ("", "none") else self.scenario,
-                             cameras=cameras, randomize=bool(p("randomize", False).value), lead_in=lead_in,
-                             contact_model=contact_model, trajectory=trajectory,
+                             cameras=cameras, randomize=bool(v["randomize"]), lead_in=float(v["lead_in"]),
+                             contact_model=str(v["contact_model"]), trajectory=str(v["trajectory"]) or None,
                              servo_frame_period=None if frame < 0 else frame)
         self.runner = SimRunner(self.sim, pacer, clock_rate, truth_rate, cam_rate if cameras else None, duration,
                                 start_delay)
-        self.boards = VirtualBoards(self.sim, link_dir=link_dir).start() if use_boards else None
+        self.boards = VirtualBoards(self.sim, link_dir=str(v["link_dir"])).start() if v["boards"] else None
         self.clock_pub = self.create_publisher(Clock, "/clock", 10)
         self.cam_pubs = {}
         for name in ("cam_top", "cam_side"):

@@ -16,7 +16,6 @@ import numpy as np
 from diagnostic_msgs.msg import DiagnosticArray
 from hexa_msgs.msg import MotorCurrents
 from hexa_msgs.srv import CalibrateCurrents
-from rcl_interfaces.msg import ParameterDescriptor
 from rclpy.clock import Clock, ClockType
 from rclpy.exceptions import ParameterException
 from rclpy.node import Node
@@ -32,6 +31,8 @@ from hexa.protocol.link import CONNECTED
 from hexa.robots.hexa_description import load_hexa
 from hexa_ros import diagnostics, qos
 from hexa_ros.conversions import JOINT_NAMES
+from hexa_ros.node import DESCRIPTION, DESCRIPTION_PARAM, descriptor
+from hexa_driver.driver_params import driver_descriptor
 
 
 def _after(delay: float, fn: Callable[..., None], *args: Any, **kwargs: Any) -> threading.Timer:
@@ -47,12 +48,12 @@ class DriverNode(Node):
 
     def __init__(self, **kwargs) -> None:
         super().__init__("driver", **kwargs)
-        fixed = ParameterDescriptor(read_only=True)   # read at start-up only; a -p value of the wrong type is a
-        try:                                           # configuration error
-            self.cfg = cfg = load_driver_config(
-                self.declare_parameter("config", str(default_driver_config_path()), fixed).value)
-            cfg.update({k: self.declare_parameter(k, cfg[k], fixed).value for k in SCALAR_KEYS})
-            desc = load_hexa(self.declare_parameter("robot_description", "", fixed).value or None)
+        d = driver_descriptor          # read at start-up only (read-only); a -p value of the wrong type is a
+        try:                           # configuration error
+            path = str(default_driver_config_path())
+            self.cfg = cfg = load_driver_config(self.declare_parameter("config", path, d("config", path)).value)
+            cfg.update({k: self.declare_parameter(k, cfg[k], d(k, cfg[k])).value for k in SCALAR_KEYS})
+            desc = load_hexa(self.declare_parameter(DESCRIPTION, "", descriptor(DESCRIPTION_PARAM)).value or None)
         except ParameterException as exc:
             raise ValueError(str(exc)) from exc
         if sorted(cfg["joint_names"]) != sorted(JOINT_NAMES):

@@ -3,8 +3,13 @@ eqs 23-26) on the driver's sample streams.
 
 Sub `joint_states`, `motor_currents` (hexa_ros.qos.STREAM), `plate_pose`; pub `residual` (one per accepted sample),
 `collision` (START/END, reliable), `zeta_estimate` (JointState: ζ̂, ζ̂̇ and the τ used), `plate_pose_estimate`
-(the plate pose tracked from ζ̂, at pose_estimate_rate_hz), `markers` (only while subscribed), `/diagnostics`.
-Service `~/reset`. Parameters: hexa_bringup/config/hexa_params.yaml (`/**/observer`) and docs/observer_node.md.
+(the plate pose tracked from ζ̂, at pose_estimate_rate_hz), `markers` (only while subscribed), `/diagnostics`;
+standard types beside them: `external_wrench` (geometry_msgs/WrenchStamped, the residual in `plate`) and
+`external_joint_torques` (JointState effort: the residual in servo space), one per sample while subscribed;
+`collision_state` (the last CollisionEvent, transient local; END with id 0 before the first collision); /tf (base →
+plate, arm_i, rod_i at tf_rate_hz) and /tf_static (the cameras of the robot YAML: hexa.frames).
+Service `~/reset`. Parameters: hexa_dynamics.observer_params (descriptors; start-up ones read-only), defaults in
+hexa_bringup/config/hexa_params.yaml (`/**/observer`), docs/observer_node.md.
 """
 from __future__ import annotations
 
@@ -13,27 +18,29 @@ import math
 import sys
 from typing import Any
 
-from geometry_msgs.msg import PoseStamped
+from geometry_msgs.msg import PoseStamped, WrenchStamped
 from hexa_msgs.msg import CollisionEvent, MotorCurrents, Residual
 from hexa_msgs.srv import ResetObserver
 from hexa_ros import cdr, diagnostics, markers, node, qos
 from hexa_ros.cdr import CdrError, joint_state_from_cdr, motor_currents_from_cdr
-from hexa_ros.conversions import JOINT_NAMES, fill_pose_msg, hexa_pose_from_msg, ordered_values
+from hexa_ros.conversions import JOINT_NAMES, fill_pose_msg, hexa_pose_from_msg, ordered_values, wrench_stamped
 from hexa_ros.stamps import to_sec, to_stamp
+from hexa_ros.node import DESCRIPTION, declare_parameters
+from hexa_ros.tf import TfPublisher
 from rcl_interfaces.msg import SetParametersResult
 from rclpy.node import Node
 from sensor_msgs.msg import JointState
 from visualization_msgs.msg import MarkerArray
 
+from hexa import frames
 from hexa.dynamics.monitor import ESTIMATOR_KEYS, CollisionMonitor, MonitorConfig
 from hexa.dynamics.observer import ObserverConfig
 from hexa.estimation import EstimatorConfig
 from hexa.kinematics.hexa6rus import rotation_zyx
 from hexa.robots.hexa_description import load_hexa
+from hexa_dynamics.observer_params import observer_parameters
 
 OBSERVER_KEYS = ("gains", "thresholds", "servo_thresholds", "release_ratio", "min_duration")
-RUNTIME = set(OBSERVER_KEYS) | set(ESTIMATOR_KEYS) | {"reseed_distance", "calibration_duration", "marker_rate_hz",
-                                                       "marker_scale", "pose_estimate_rate_hz"}
 
 
 class ObserverNode(Node):
@@ -41,27 +48,27 @@ class ObserverNode(Node):
 
     def __init__(self, **kwargs: Any) -> None:
         super().__init__("observer", **kwargs)
-        p = self.declare_parameter
-        obs, est = ObserverConfig(), EstimatorConfig()
-        desc = load_hexa(str(p("description", "").value) or None)
-        sim = MonitorConfig.sim_clock_of(str(p("board_clock", "auto").value),
-                                         bool(self.get_parameter("use_sim_time").value))
-        mcfg = MonitorConfig(zeta_source=str(p("zeta_source", "estimator").value),
-                             time_source=str(p("time_source", "auto").value), sim_clock=sim,
-                             pose_delay=float(p("pose_delay", 0.5).value),
-                             reseed_distance=float(p("reseed_distance", 0.005).value),
-                             command_delay=float(p("command_delay", 0.0).value))
-        ocfg = ObserverConfig(**{k: _value(p(k, getattr(obs, k)).value) for k in OBSERVER_KEYS},
-                              max_gap=float(p("max_gap", obs.max_gap).value))
-        ecfg = EstimatorConfig(**{k: float(p(k, float(getattr(est, k))).value) for k in ESTIMATOR_KEYS})
+        v = declare_parameters(self, observer_parameters())
+        desc = load_hexa(str(v[DESCRIPTION]) or None)
+        sim = MonitorConfig.sim_clock_of(str(v["board_clock"]), bool(self.get_parameter("use_sim_time").value))
+        mcfg = MonitorConfig(zeta_source=str(v["zeta_source"]), time_source=str(v["time_source"]), sim_clock=sim,
+                             **{k: float(v[k]) for k in ("pose_delay", "reseed_distance", "command_delay")})
+        ocfg = ObserverConfig(**{k: _value(v[k]) for k in OBSERVER_KEYS}, max_gap=float(v["max_gap"]))
+        ecfg = EstimatorConfig(**{k: float(v[k]) for k in ESTIMATOR_KEYS})
         self.monitor = CollisionMonitor(desc, mcfg, ocfg, ecfg)   # raises ValueError naming a bad value
-        self.set = {k: p(k, d).value for k, d in (("calibration_duration", 1.0), ("marker_rate_hz", 10.0),
-                                                 ("marker_scale", 0.02), ("pose_estimate_rate_hz", 100.0))}
-        self.frame_id = str(p("frame_id", "base").value)
-        self.last = {"marker": -math.inf, "pose": -math.inf}
+        self.set = {k: v[k] for k in ("calibration_duration", "marker_rate_hz", "marker_scale",
+                                      "pose_estimate_rate_hz", "tf_rate_hz")}
+        self.frame_id = str(v["frame_id"])
+        self.last = {"marker": -math.inf, "pose": -math.inf, "tf": -math.inf}
         self.events_sent = 0
         self.pub_residual = self.create_publisher(Residual, "residual", qos.STREAM)
         self.pub_collision = self.create_publisher(CollisionEvent, "collision", qos.EVENT)
+        self.pub_state = self.create_publisher(CollisionEvent, "collision_state", qos.LATCHED)
+        self.pub_state.publish(CollisionEvent(event=CollisionEvent.END, id=0))
+        self.pub_wrench = self.create_publisher(WrenchStamped, "external_wrench", qos.STREAM)
+        self.pub_torques = self.create_publisher(JointState, "external_joint_torques", qos.STREAM)
+        self.desc, self.tf = desc, TfPublisher(self)
+        self.tf.send_static(frames.static_transforms(desc))
         self.pub_zeta = self.create_publisher(JointState, "zeta_estimate", qos.STREAM)
         self.pub_pose = self.create_publisher(PoseStamped, "plate_pose_estimate", qos.RELIABLE)
         self.pub_markers = self.create_publisher(MarkerArray, "markers", qos.RELIABLE)
@@ -82,8 +89,6 @@ class ObserverNode(Node):
         ocfg, ecfg, reseed = m.observer.config, m.estimator.config, None
         try:
             for prm in params:
-                if prm.name not in RUNTIME:
-                    return SetParametersResult(successful=False, reason=f"{prm.name} is read at start-up only")
                 if prm.name in OBSERVER_KEYS:
                     ocfg = dataclasses.replace(ocfg, **{prm.name: _value(prm.value)})
                 elif prm.name in ESTIMATOR_KEYS:
@@ -133,6 +138,7 @@ class ObserverNode(Node):
                 stamp.sec, stamp.nanosec, self.frame_id, out.r_zyz.tolist(), w[:3], w[3:], det.thresholds.tolist(),
                 out.over.tolist(), out.servo_torque.tolist(), det.servo_thresholds.tolist(), out.servo_over.tolist(),
                 bool(out.in_collision)))
+            self._standard(out, stamp)
             for ev in out.events:
                 self._event(ev)
             self.pub_zeta.publish(cdr.joint_state_to_cdr(
@@ -144,6 +150,9 @@ class ObserverNode(Node):
                 ps.header.stamp, ps.header.frame_id = stamp, self.frame_id
                 fill_pose_msg(ps.pose, rotation_zyx(*out.pose[3:6]), out.pose[:3])
                 self.pub_pose.publish(ps)
+            if s.time - self.last["tf"] >= 1.0 / max(float(self.set["tf_rate_hz"]), 1e-3):
+                self.last["tf"] = s.time
+                self.tf.send(frames.robot_transforms(self.desc, out.pose, s.zeta), stamp)
             due = s.time - self.last["marker"] >= 1.0 / max(float(self.set["marker_rate_hz"]), 1e-3)
             if (due or out.events) and self.pub_markers.get_subscription_count() > 0:
                 self.last["marker"] = s.time
@@ -158,9 +167,20 @@ class ObserverNode(Node):
                            peak=float(ev.peak), duration=float(ev.duration))
         c.header.stamp, c.header.frame_id = to_stamp(ev.time), self.frame_id
         self.pub_collision.publish(c)
+        self.pub_state.publish(c)
         self.events_sent += 1
         self.get_logger().warn(f"collision {ev.id} {ev.kind} on {ev.axis_name}: {ev.value:.3f} (peak {ev.peak:.3f}, "
                                f"onset {ev.onset:.3f} s)")
+
+    def _standard(self, out: Any, stamp: Any) -> None:
+        """The residual as a WrenchStamped in `plate` (moment about the plate centre) and as servo-space efforts."""
+        if self.pub_wrench.get_subscription_count() > 0:
+            R = rotation_zyx(*out.pose[3:6])
+            self.pub_wrench.publish(wrench_stamped(frames.PLATE, stamp, R.T @ out.wrench[:3], R.T @ out.wrench[3:]))
+        if self.pub_torques.get_subscription_count() > 0:
+            js = JointState(name=list(JOINT_NAMES), effort=out.servo_torque.tolist())
+            js.header.stamp = stamp
+            self.pub_torques.publish(js)
 
     def _markers(self, out: Any, stamp: Any) -> MarkerArray:
         """The residual force as an arrow at the plate (green; red in collision)."""

@@ -8,7 +8,9 @@ Topics (relative): sub `zeta_estimate` (sensor_msgs/JointState arm_1..arm_6: pos
 effort τ N·m; hexa_ros.qos.STREAM), `plate_pose` (geometry_msgs/PoseStamped, camera), `contact` (hexa_msgs/Contact),
 `collision` (hexa_msgs/CollisionEvent); pub `contact_wrench` (hexa_msgs/ContactWrench; STREAM: a backfill sends up
 to history·rate_hz at once), `contact_markers` (visualization_msgs/MarkerArray while subscribed: contact sphere and
-force arrow, DELETEALL on END), `/diagnostics` (1 Hz, rejects by reason).
+force arrow, DELETEALL on END), `contact_force` (geometry_msgs/WrenchStamped: the same force in frame `contact`,
+which /tf places at the contact point with base's axes, one transform per identification), `/diagnostics` (1 Hz,
+rejects by reason).
 """
 from __future__ import annotations
 
@@ -17,32 +19,36 @@ from typing import Any
 
 import numpy as np
 from diagnostic_msgs.msg import DiagnosticArray
-from geometry_msgs.msg import PoseStamped
+from geometry_msgs.msg import PoseStamped, WrenchStamped
 from hexa_msgs.msg import CollisionEvent, Contact, ContactWrench
-from rcl_interfaces.msg import ParameterDescriptor
 from rclpy.node import Node
 from sensor_msgs.msg import JointState
 from visualization_msgs.msg import Marker, MarkerArray
 
 import hexa_ros.node
+from hexa import frames
 from hexa.dynamics.contact_force import ContactForce, ContactForceConfig, ContactForceTracker, LocatedContact
 from hexa_ros import diagnostics, markers, qos
-from hexa_ros.conversions import hexa_pose_from_msg, ordered_joints
+from hexa_ros.node import DESCRIPTION, DESCRIPTION_PARAM, Param, declare_parameters
+from hexa_ros.conversions import hexa_pose_from_msg, ordered_joints, wrench_stamped
 from hexa_ros.stamps import to_sec, to_stamp
+from hexa_ros.tf import TfPublisher
 
 LINK_NAMES = {Contact.PLATE: "plate", Contact.ARM: "arm", Contact.ROD: "rod"}
 LINK_CODES = {v: k for k, v in LINK_NAMES.items()}
-PARAMETERS = {"description": ("", "robot YAML; empty = the packaged hexa.yaml"),
-              "rate_hz": (100.0, "identifications per second of sample time in a collision; 0 = on contacts only"),
-              "torque_window": (0.02, "s over which tau is averaged"),
-              "accel_tau": (0.02, "s, time constant of the low-pass derivative giving zeta_ddot"),
-              "require_collision": (True, "reject contacts outside a collision START..END"),
-              "history": (3.0, "s of states kept to identify late contacts (backfill); 0 = none"),
-              "arm_force_model": ("friction_cone", "what an arm force's two unobservable directions get: "
-                                  "friction_cone | object_axis | surface_normal | min_norm"),
-              "arm_friction": (0.2, "Coulomb coefficient mu of friction_cone (>= 0)"),
-              "marker_scale": (0.02, "force arrow length per newton (m/N)"),
-              "frame_id": ("base", "frame of the contact points and forces")}
+PARAMETERS = {DESCRIPTION: DESCRIPTION_PARAM,
+              "rate_hz": Param(100.0, "identifications per second of sample time in a collision; 0 = on contacts only",
+                               range=(0.0, 1000.0)),
+              "torque_window": Param(0.02, "s over which tau is averaged", range=(0.0, 1.0)),
+              "accel_tau": Param(0.02, "s, time constant of the low-pass derivative giving zeta_ddot",
+                                 range=(0.0, 1.0)),
+              "require_collision": Param(True, "reject contacts outside a collision START..END"),
+              "history": Param(3.0, "s of states kept to identify late contacts (backfill); 0 = none",
+                               range=(0.0, 60.0)),
+              "arm_force_model": Param("friction_cone", "what an arm force's two unobservable directions get"),
+              "arm_friction": Param(0.2, "Coulomb coefficient mu of friction_cone (>= 0)"),
+              "marker_scale": Param(0.02, "force arrow length per newton (m/N)", range=(0.0, 1.0)),
+              "frame_id": Param("base", "frame of the contact points and forces")}
 
 
 class RneaNode(Node):
@@ -52,15 +58,16 @@ class RneaNode(Node):
         super().__init__("rnea", **kwargs)
         from hexa.robots.hexa_description import load_hexa
 
-        cfg = {k: self.declare_parameter(k, d, ParameterDescriptor(description=text, read_only=True)).value
-               for k, (d, text) in PARAMETERS.items()}
-        desc = load_hexa(str(cfg.pop("description")) or None)
+        cfg = declare_parameters(self, PARAMETERS)
+        desc = load_hexa(str(cfg.pop(DESCRIPTION)) or None)
         self.marker_scale, self.frame_id = float(cfg.pop("marker_scale")), str(cfg.pop("frame_id"))
         self.tracker = ContactForceTracker(desc, ContactForceConfig(**cfg))
         self.rejects = {"bad_joint_names": 0, "no_velocity": 0, "bad_orientation": 0}
         self.published = 0
         self.pub_wrench = self.create_publisher(ContactWrench, "contact_wrench", qos.STREAM)
         self.pub_markers = self.create_publisher(MarkerArray, "contact_markers", qos.RELIABLE)
+        self.pub_force = self.create_publisher(WrenchStamped, "contact_force", qos.STREAM)
+        self.tf = TfPublisher(self)
         self.pub_diag = self.create_publisher(DiagnosticArray, "/diagnostics", qos.RELIABLE)
         self.create_subscription(JointState, "zeta_estimate", self._on_zeta, qos.STREAM)
         self.create_subscription(PoseStamped, "plate_pose", self._on_pose, qos.RELIABLE)
@@ -110,6 +117,8 @@ class RneaNode(Node):
             w.point = markers.point(f.point)
             w.force.x, w.force.y, w.force.z = (float(v) for v in f.force)
             self.pub_wrench.publish(w)
+            self.tf.send([(self.frame_id, frames.CONTACT, frames.transform(np.eye(3), f.point))], w.header.stamp)
+            self.pub_force.publish(wrench_stamped(frames.CONTACT, w.header.stamp, f.force))
             self.published += 1
             if not f.backfilled and self.pub_markers.get_subscription_count() > 0:  # markers show the present
                 self.pub_markers.publish(self._markers(f, w.header.stamp))

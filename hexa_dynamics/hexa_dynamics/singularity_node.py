@@ -23,6 +23,14 @@ import hexa_ros.node
 from hexa.singularity import SingularityMonitor
 from hexa_ros import diagnostics, qos
 from hexa_ros.conversions import hexa_pose_from_msg, points_from_pose_array, upsrpu_pose_from_msg
+from hexa_ros.node import DESCRIPTION, DESCRIPTION_PARAM, Param, declare_parameters
+
+
+PARAMETERS = {"robot": Param("", "hexa | upsrpu; empty = from the namespace (/hexa, /upsrpu)",
+                             choices=("", "hexa", "upsrpu")),
+              "input": Param("pose", "what the indices are computed from: pose | markers (3UPS+RPU)",
+                             choices=("pose", "markers")),
+              DESCRIPTION: DESCRIPTION_PARAM}
 
 
 class SingularityNode(Node):
@@ -30,13 +38,14 @@ class SingularityNode(Node):
 
     def __init__(self, **kwargs) -> None:
         super().__init__("singularity", **kwargs)
-        robot = str(self.declare_parameter("robot", "").value) or (
-            "upsrpu" if "upsrpu" in self.get_namespace() else "hexa")
-        mode = str(self.declare_parameter("input", "pose").value)
-        path = str(self.declare_parameter("description", "").value) or None
+        v = declare_parameters(self, PARAMETERS)
+        robot = str(v["robot"]) or ("upsrpu" if "upsrpu" in self.get_namespace() else "hexa")
+        mode, path = str(v["input"]), str(v[DESCRIPTION]) or None
         self.monitor = m = SingularityMonitor(robot, path)
-        m.det_jd_limit = float(self.declare_parameter("det_jd_limit", m.det_jd_limit).value)
-        m.omega_limit = float(self.declare_parameter("omega_limit", m.omega_limit).value)
+        limits = declare_parameters(self, {   # defaults: the description's limits (seed 003 Table 2)
+            "det_jd_limit": Param(float(m.det_jd_limit), "near-singular below this |det J_D|", range=(0.0, 1e12)),
+            "omega_limit": Param(float(m.omega_limit), "near-singular below this Omega_ij (rad)", range=(0.0, 1.6))})
+        m.det_jd_limit, m.omega_limit = float(limits["det_jd_limit"]), float(limits["omega_limit"])
         self.pub = self.create_publisher(SingularityIndices, "singularity", qos.RELIABLE)
         self.pub_diag = self.create_publisher(DiagnosticArray, "/diagnostics", qos.RELIABLE)
         self.rejected = 0

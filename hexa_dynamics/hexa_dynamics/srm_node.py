@@ -19,13 +19,25 @@ import time
 from diagnostic_msgs.msg import DiagnosticArray
 from geometry_msgs.msg import PoseArray, PoseStamped
 from hexa_msgs.srv import EnableSrm
-from rcl_interfaces.msg import ParameterDescriptor
 from rclpy.node import Node
 from sensor_msgs.msg import JointState
 
 import hexa_ros.node
 from hexa_ros import diagnostics, qos
 from hexa_ros.conversions import UPSRPU_JOINTS, points_from_pose_array, upsrpu_pose_from_msg
+from hexa_ros.node import DESCRIPTION, DESCRIPTION_PARAM, Param, declare_parameters
+
+
+# trajectory "1".."5" arrives as an integer from `-p trajectory:=2`: any type is accepted, its text used
+PARAMETERS = {DESCRIPTION: DESCRIPTION_PARAM,
+              "variant": Param(1, "Algorithm 1 variant (seed 003): 1 or 2", range=(1, 2)),
+              "trajectory": Param("", "reference trajectory 1..5 (seed 003); empty = none", dynamic_typing=True),
+              "input": Param("pose", "pose | markers", choices=("pose", "markers")),
+              "enabled": Param(False, "initial enable pin (then the enable_srm service)"),
+              "auto_enable_after": Param(-1.0, "s after the reference ends to set the enable pin; < 0 = never",
+                                         range=(-1.0, 1e6)),
+              "pose_timeout": Param(0.1, "largest age (s) of the measured pose that still counts as fresh",
+                                    range=(0.001, 10.0))}
 
 
 class SrmNode(Node):
@@ -36,16 +48,13 @@ class SrmNode(Node):
         from hexa.robots.upsrpu_description import load_upsrpu
         from hexa.srm.loop import ReleaseLoop
 
-        desc = load_upsrpu(str(self.declare_parameter("description", "").value) or None)
-        variant = int(self.declare_parameter("variant", 1).value)
-        # "1".."5" arrive as integers from `-p trajectory:=2`: accept any type and use its text
-        trajectory = str(self.declare_parameter("trajectory", "", ParameterDescriptor(dynamic_typing=True)).value
-                         or "")
-        mode = str(self.declare_parameter("input", "pose").value)
-        enabled = bool(self.declare_parameter("enabled", False).value)
-        auto_enable_after = float(self.declare_parameter("auto_enable_after", -1.0).value)
-        pose_timeout = float(self.declare_parameter("pose_timeout", 0.1).value)
-        rate = float(self.declare_parameter("rate_hz", 1.0 / desc.t_s).value)
+        v = declare_parameters(self, PARAMETERS)
+        desc = load_upsrpu(str(v[DESCRIPTION]) or None)
+        variant, trajectory, mode = int(v["variant"]), str(v["trajectory"] or ""), str(v["input"])
+        enabled, auto_enable_after, pose_timeout = bool(v["enabled"]), float(v["auto_enable_after"]), float(
+            v["pose_timeout"])
+        rate = float(declare_parameters(self, {"rate_hz": Param(1.0 / desc.t_s, "control rate (Hz); default 1/T_s",
+                                                                range=(1.0, 1000.0))})["rate_hz"])
         reference = None
         if trajectory:
             from hexa.srm.experiment import reference_path

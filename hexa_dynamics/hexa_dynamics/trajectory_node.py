@@ -2,21 +2,12 @@
 collisions (hold | retract along the residual | ignore), resuming on a service call.
 
 Thin adapter over hexa.trajectory_runner.TrajectoryRunner (clock, approach, requests) and its TrajectoryPlayer.
-Parameters (the fields of hexa.trajectory_runner.TrajectorySettings): `trajectory` ("circle" | "helix" | "ellipse" |
-"file"), `file` (CSV of t x y z alpha beta gamma in SI, for trajectory=file), `rate_hz` (100), `start_delay` (s after
-the first clock reading, 1.0), `start_time` (s, clock time of trajectory time 0; −1 = use start_delay; with the
-simulator's scenarios use 0.0 so that sim time = trajectory time), `loop` (false), `loop_blend` (s, 2.0: with loop, a
-trajectory that does not end where it starts — the helix — cross-fades onto its next cycle over this time instead of
-jumping), `collision_policy` ("hold"), `retract_distance` (m, 0.02), `retract_time` (s, 0.5), `max_step` (s, 0.03:
-the most trajectory time advances between two commands; when the node is late — a stalled host, sim time in bursts —
-the trajectory pauses instead of commanding a jump; 0 = no limit), `start_blend` (s, 1.0: the command blends from
-rest onto the trajectory, which starts moving at once as in the paper; 0 = velocity step at the start),
-`approach_speed` (rad/s, 0 = off: with > 0 nothing is commanded until a `plate_pose` arrives (used if ≤ 0.5 s old);
-from that measured pose the plate moves slowly — no arm faster than this — to the trajectory's start pose, then the
-trajectory starts; `hexa bringup robot` sets 0.3), `approach_tolerance` (rad, 0.02: no approach when every arm is
-this close), and `description` (robot YAML path, default packaged).
+Parameters: PARAMETERS below (the fields of hexa.trajectory_runner.TrajectorySettings and `description`), all read
+at start-up (read-only: a set on the running node is refused). With the simulator's scenarios use start_time 0.0 so
+that sim time = trajectory time; `hexa bringup robot` sets approach_speed 0.3.
 Topics (relative): pub `joint_commands` (sensor_msgs/JointState, arm_1..arm_6, ζ rad and ζ̇ rad/s),
-`trajectory_state` (std_msgs/String: waiting | waiting_for_pose | approaching | running | held | retracting |
+`trajectory_state` (std_msgs/String, transient local: a late subscriber gets the current state; waiting |
+waiting_for_pose | approaching | running | held | retracting |
 resuming | finished); sub `collision` (hexa_msgs/CollisionEvent, reliable), `residual`
 (hexa_msgs/Residual, only with collision_policy "retract", for its direction), `plate_pose`
 (geometry_msgs/PoseStamped, only with approach_speed > 0, until the approach is planned).
@@ -25,7 +16,6 @@ Services: `~/resume`, `~/hold` (std_srvs/Trigger). `/diagnostics`.
 from __future__ import annotations
 
 import sys
-from dataclasses import fields
 
 import numpy as np
 from diagnostic_msgs.msg import DiagnosticArray
@@ -39,8 +29,32 @@ from std_srvs.srv import Trigger
 import hexa_ros.node
 from hexa.trajectory_runner import WARN_STATES, TrajectoryRunner, TrajectorySettings
 from hexa_ros import diagnostics, qos
+from hexa_ros.node import DESCRIPTION, DESCRIPTION_PARAM, Param, declare_parameters
 from hexa_ros.conversions import JOINT_NAMES, hexa_pose_from_msg
 from hexa_ros.stamps import to_sec
+
+PARAMETERS = {
+    "trajectory": Param("circle", "seed 000 eqs 37, 40, 41, or a pose file", choices=("circle", "helix", "ellipse",
+                                                                                     "file")),
+    "file": Param("", "CSV of t x y z alpha beta gamma (SI) for trajectory=file"),
+    "rate_hz": Param(100.0, "joint_commands per second", range=(1.0, 1000.0)),
+    "start_delay": Param(1.0, "s after the first clock reading before the trajectory starts", range=(0.0, 3600.0)),
+    "start_time": Param(-1.0, "s, clock time of trajectory time 0; < 0 = use start_delay", range=(-1.0, 1e9)),
+    "loop": Param(False, "restart at the end"),
+    "loop_blend": Param(2.0, "s; with loop, cross-fade onto the next cycle (the helix ends 5 cm higher)",
+                        range=(0.0, 60.0)),
+    "collision_policy": Param("hold", "on collision START; resume with ~/resume",
+                              choices=("hold", "retract", "ignore")),
+    "retract_distance": Param(0.02, "m along the residual force (policy retract)", range=(0.0, 0.1)),
+    "retract_time": Param(0.5, "s the retraction takes", range=(0.01, 10.0)),
+    "max_step": Param(0.03, "s; most trajectory time per command: a late node pauses, never jumps (0 = no limit)",
+                      range=(0.0, 1.0)),
+    "start_blend": Param(1.0, "s; blend from rest onto the trajectory (0 = velocity step)", range=(0.0, 10.0)),
+    "approach_speed": Param(0.0, "rad/s; > 0: wait for plate_pose, move from it to the start pose at most this fast "
+                                 "(0 = off)", range=(0.0, 2.0)),
+    "approach_tolerance": Param(0.02, "rad; no approach when every arm is this close to the start pose",
+                                range=(0.0, 1.0)),
+    DESCRIPTION: DESCRIPTION_PARAM}
 
 
 class TrajectoryNode(Node):
@@ -50,12 +64,12 @@ class TrajectoryNode(Node):
         super().__init__("trajectory", **kwargs)
         from hexa.robots.hexa_description import load_hexa
 
-        d = TrajectorySettings()    # one parameter per field, its default the field's
-        s = TrajectorySettings(**{f.name: self.declare_parameter(f.name, getattr(d, f.name)).value for f in fields(d)})
-        desc_path = str(self.declare_parameter("description", "").value) or None
+        v = declare_parameters(self, PARAMETERS)
+        desc_path = str(v.pop(DESCRIPTION)) or None
+        s = TrajectorySettings(**v)
         self.runner = TrajectoryRunner.from_settings(load_hexa(desc_path), s, self._log)
         self.pub = self.create_publisher(JointState, "joint_commands", qos.RELIABLE)
-        self.pub_state = self.create_publisher(String, "trajectory_state", qos.RELIABLE)
+        self.pub_state = self.create_publisher(String, "trajectory_state", qos.LATCHED)
         self.pub_diag = self.create_publisher(DiagnosticArray, "/diagnostics", qos.RELIABLE)
         self.create_subscription(CollisionEvent, "collision", self._on_collision, qos.EVENT)
         if s.collision_policy == "retract":

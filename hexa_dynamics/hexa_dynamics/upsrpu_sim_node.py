@@ -24,6 +24,7 @@ from std_msgs.msg import Header
 import hexa_ros.node
 from hexa_ros import diagnostics, qos
 from hexa_ros.conversions import UPSRPU_JOINTS, upsrpu_pose_to_msg_fields
+from hexa_ros.node import DESCRIPTION, DESCRIPTION_PARAM, Param, declare_parameters
 
 
 def _pose_msg(X: np.ndarray) -> Pose:
@@ -53,17 +54,23 @@ class UpsrpuSimNode(Node):
         from hexa.srm.plant import SimulatedUpsrpu, half_sine_push
         from hexa.srm.tracking import tracking_model
 
-        self.desc = load_upsrpu(str(self.declare_parameter("description", "").value) or None)
-        X0 = list(self.declare_parameter("initial_pose", [float(v) for v in self.desc.home]).value)
+        self.desc = load_upsrpu(str(declare_parameters(self, {DESCRIPTION: DESCRIPTION_PARAM})[DESCRIPTION]) or None)
+        self.tracking = tracking_model(self.desc)
+        v = declare_parameters(self, {
+            "initial_pose": Param([float(x) for x in self.desc.home], "x_m (m), z_m (m), theta, psi (rad)"),
+            "rate_hz": Param(1.0 / self.desc.t_s, "simulation and publishing rate (Hz)", range=(1.0, 10000.0)),
+            "push_at": Param(-1.0, "s at which a 2 s half-sine push starts; < 0 = none", range=(-1.0, 1e6)),
+            "push_force": Param(10.0, "N, the push's peak force", range=(0.0, 1000.0)),
+            "publish_markers": Param(True, "publish the motion-capture marker positions"),
+            "marker_noise": Param(float(self.tracking.marker_noise), "m, marker position noise (1 sigma)",
+                                  range=(0.0, 0.1)),
+            "seed": Param(0, "noise seed", range=(0, 2**31 - 1))})
+        X0 = list(v["initial_pose"])
         if len(X0) != 4:
             raise ValueError(f"parameter initial_pose must have 4 values (x_m, z_m, theta, psi), got {X0}")
-        rate = float(self.declare_parameter("rate_hz", 1.0 / self.desc.t_s).value)
-        push_at = float(self.declare_parameter("push_at", -1.0).value)
-        push_force = float(self.declare_parameter("push_force", 10.0).value)
-        self.publish_markers = bool(self.declare_parameter("publish_markers", True).value)
-        self.tracking = tracking_model(self.desc)
-        self.noise = float(self.declare_parameter("marker_noise", self.tracking.marker_noise).value)
-        self.rng = np.random.default_rng(int(self.declare_parameter("seed", 0).value))
+        rate, push_at, push_force = float(v["rate_hz"]), float(v["push_at"]), float(v["push_force"])
+        self.publish_markers, self.noise = bool(v["publish_markers"]), float(v["marker_noise"])
+        self.rng = np.random.default_rng(int(v["seed"]))
         push = half_sine_push(push_at, 2.0, np.array([push_force, 0, 0, 0.1 * push_force])) if push_at >= 0 else None
         self.plant = SimulatedUpsrpu(self.desc, np.array(X0, dtype=float), push=push)
         self.q_d = self.plant.q.copy()

@@ -2,11 +2,8 @@
 
 Topics (relative to the node namespace, e.g. /hexa): `<camera>/color/image_raw` (rgb8), `<camera>/color/camera_info`,
 `<camera>/aligned_depth_to_color/image_raw` (16UC1 mm, 0 invalid), frame `<camera>_color_optical_frame`;
-sensor-data QoS. The simulator publishes the same topics itself (no camera node needed in sim mode).
-
-Parameters: source ("folder" | "bag" | "realsense"), camera ("cam_top"), path (folder or bag), rate (Hz for folder;
-playback speed factor for bag), loop (bool), serial (RealSense serial number, "" = the first device),
-robot_description (YAML path; intrinsics for folder sources).
+QoS from `image_qos` (best_effort as sensor data, or reliable). The simulator publishes the same topics itself (no
+camera node needed in sim mode). Parameters: PARAMETERS below (start-up only, read-only).
 Folder layout: color_<n>.png (8-bit RGB) + depth_<n>.png (16-bit, mm) pairs, sorted by <n>; optional
 camera_info.yaml (width, height, k[9]) overrides the description's intrinsics. The sources are hexa.vision.sources'.
 """
@@ -23,24 +20,33 @@ import hexa_ros.node
 from hexa.vision.camera import CameraModel
 from hexa.vision.sources import BagSource, FolderSource, RealSenseSource, SourceError
 from hexa_ros import qos
+from hexa_ros.node import DESCRIPTION, DESCRIPTION_PARAM, Param, declare_parameters
 from hexa_vision.common import camera_info_msg, description_cameras, image_msg
+
+from hexa import frames
+
+PARAMETERS = {"source": Param("folder", "where the frames come from", choices=("folder", "bag", "realsense")),
+              "camera": Param("cam_top", "camera name: topic prefix and frames <camera>_link, ..."),
+              "path": Param("", "folder of color_<n>.png + depth_<n>.png (16-bit mm) pairs, or a bag"),
+              "rate": Param(15.0, "Hz for a folder; playback speed factor for a bag", range=(0.01, 1000.0)),
+              "loop": Param(True, "restart the folder or bag at its end"),
+              "serial": Param("", "RealSense serial number; empty = the first device"),
+              "image_qos": Param("best_effort", "image and camera_info reliability (realsense-ros <stream>_qos)",
+                                 choices=qos.IMAGE_QOS),
+              DESCRIPTION: DESCRIPTION_PARAM}
 
 
 class CameraNode(Node):
     def __init__(self, **kwargs) -> None:
         super().__init__("hexa_camera", **kwargs)
-        self.source = self.declare_parameter("source", "folder").value
-        self.cam_name = self.declare_parameter("camera", "cam_top").value
-        self.path = self.declare_parameter("path", "").value
-        self.rate = float(self.declare_parameter("rate", 15.0).value)
-        self.loop = bool(self.declare_parameter("loop", True).value)
-        self.serial = str(self.declare_parameter("serial", "").value)
-        desc_path = self.declare_parameter("robot_description", "").value
-        self.frame = f"{self.cam_name}_color_optical_frame"
-        c = self.cam_name
-        self.pub_color = self.create_publisher(Image, f"{c}/color/image_raw", qos.SENSOR)
-        self.pub_info = self.create_publisher(CameraInfo, f"{c}/color/camera_info", qos.SENSOR)
-        self.pub_depth = self.create_publisher(Image, f"{c}/aligned_depth_to_color/image_raw", qos.SENSOR)
+        v = declare_parameters(self, PARAMETERS)
+        self.source, self.cam_name, self.path, self.serial = v["source"], v["camera"], v["path"], v["serial"]
+        self.rate, self.loop, desc_path = float(v["rate"]), bool(v["loop"]), v[DESCRIPTION]
+        self.frame = frames.camera_optical_frame(self.cam_name)
+        c, image_qos = self.cam_name, qos.image_profile(v["image_qos"])
+        self.pub_color = self.create_publisher(Image, f"{c}/color/image_raw", image_qos)
+        self.pub_info = self.create_publisher(CameraInfo, f"{c}/color/camera_info", image_qos)
+        self.pub_depth = self.create_publisher(Image, f"{c}/aligned_depth_to_color/image_raw", image_qos)
         self.published = 0
         self._bag: BagSource | None = None
         self._realsense: RealSenseSource | None = None

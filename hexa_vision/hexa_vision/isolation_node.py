@@ -23,6 +23,7 @@ from diagnostic_msgs.msg import DiagnosticArray
 from geometry_msgs.msg import PoseStamped
 from hexa_ros import diagnostics, node, qos, stamps
 from hexa_ros.conversions import transform_from_pose_msg
+from hexa_ros.node import DESCRIPTION, DESCRIPTION_PARAM
 from rcl_interfaces.msg import ParameterDescriptor
 from rclpy.node import Node
 from sensor_msgs.msg import CameraInfo, Image
@@ -45,7 +46,7 @@ class IsolationNode(Node):
             return self.declare_parameter(name, default, ParameterDescriptor(description=description,
                                                                              read_only=True)).value
 
-        desc_path = p("robot_description", "", "robot YAML ('' = packaged)")
+        desc_path = p(DESCRIPTION, DESCRIPTION_PARAM.default, DESCRIPTION_PARAM.description)
         self.want_debug = bool(p("debug_image", True, "publish the debug mosaic of onset pairs"))
         self.sched = IsolationScheduler(
             CAMERAS, background_delay=p("background_delay", 1.0, "s of frames before the backgrounds"),

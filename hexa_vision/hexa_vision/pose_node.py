@@ -6,9 +6,8 @@ Subscribes (sensor-data QoS) `<camera>/color/image_raw`, `<camera>/aligned_depth
 covariance), `/diagnostics` (frames, fits, rejects by reason). Bad input is counted and skipped, never fatal.
 `plate_detections` and `plate_pose_cov` are built only while someone subscribes to them (the detector itself runs
 only when its box is used or its boxes are subscribed). The work is hexa.vision.plate_pose.PlatePoseEstimator's.
-Parameters: camera ("cam_top"), robot_description (YAML path, "" = default), detector ("auto" | "onnx" | "torch" |
-"off"), roi_from_detector (true: search markers only in a box: around the last pose's markers while the plate is
-tracked — the last fit at most 0.1 s old —, else the detector's best box padded by 20 %).
+Parameters: PARAMETERS below (start-up only, read-only). While the plate is tracked (the last fit at most
+0.1 s old) the markers are searched around the last pose's markers, else in the detector's best box padded by 20 %.
 """
 from __future__ import annotations
 
@@ -19,28 +18,32 @@ import numpy as np
 from diagnostic_msgs.msg import DiagnosticArray
 from geometry_msgs.msg import PoseStamped, PoseWithCovarianceStamped
 from builtin_interfaces.msg import Time
-from rcl_interfaces.msg import ParameterDescriptor
 from rclpy.node import Node
 from sensor_msgs.msg import CameraInfo, Image
 
 import hexa_ros.node
+from hexa import frames
 from hexa.vision.plate_pose import PlatePose, PlatePoseEstimator
 from hexa_msgs.msg import PlateDetection, PlateDetections
 from hexa_ros import diagnostics, qos
 from hexa_ros.cdr import CdrError, image_from_cdr
 from hexa_ros.conversions import fill_pose_msg
+from hexa_ros.node import DESCRIPTION, DESCRIPTION_PARAM, Param, declare_parameters
 from hexa_vision.common import description_cameras
+
+# `-p detector:=off` arrives as YAML false: any type is accepted
+PARAMETERS = {"camera": Param("cam_top", "camera whose images are read (topic prefix)"),
+              "detector": Param("auto", "plate detector back-end: auto | onnx | torch | off", dynamic_typing=True),
+              "roi_from_detector": Param(True, "search markers only in the best detector box, padded by 20 %"),
+              DESCRIPTION: DESCRIPTION_PARAM}
 
 
 class PoseNode(Node):
     def __init__(self, **kwargs) -> None:
         super().__init__("hexa_vision_pose", **kwargs)
-        self.cam_name = self.declare_parameter("camera", "cam_top").value
-        desc_path = self.declare_parameter("robot_description", "").value
-        # `-p detector:=off` arrives as YAML false: accept any type
-        backend = self.declare_parameter("detector", "auto", ParameterDescriptor(dynamic_typing=True)).value
-        backend = "off" if backend is False else str(backend)
-        roi_from_detector = bool(self.declare_parameter("roi_from_detector", True).value)
+        v = declare_parameters(self, PARAMETERS)
+        self.cam_name, desc_path, roi_from_detector = v["camera"], v[DESCRIPTION], bool(v["roi_from_detector"])
+        backend = "off" if v["detector"] is False else str(v["detector"])
         from hexa.robots.hexa_description import load_hexa
         from hexa.vision.markers import MarkerLayout
 
@@ -56,7 +59,7 @@ class PoseNode(Node):
             except Exception as exc:  # noqa: BLE001 - markers still work without the detector
                 self.get_logger().warning(f"plate detector unavailable ({exc}); markers searched in the whole frame")
         self.estimator = PlatePoseEstimator(layout, self.cam_name, T, detector, roi_from_detector)
-        self.det_frame = f"{self.cam_name}_color_optical_frame"
+        self.det_frame = frames.camera_optical_frame(self.cam_name)
         c = self.cam_name
         self.create_subscription(Image, f"{c}/color/image_raw", self._on_color, qos.SENSOR, raw=True)
         self.create_subscription(Image, f"{c}/aligned_depth_to_color/image_raw", self._on_depth, qos.SENSOR, raw=True)

@@ -38,9 +38,21 @@ def transform_from_pose_msg(pose: Any) -> np.ndarray:
     Raises:
         ValueError: the orientation is zero or not finite.
     """
-    o, p = pose.orientation, pose.position
+    return _transform(pose.orientation, pose.position)
+
+
+def transform_from_transform_msg(transform: Any) -> np.ndarray:
+    """4x4 transform T_parent_child of a geometry_msgs/Transform (e.g. TransformStamped.transform on /tf).
+
+    Raises:
+        ValueError: the rotation is zero or not finite.
+    """
+    return _transform(transform.rotation, transform.translation)
+
+
+def _transform(q: Any, p: Any) -> np.ndarray:
     T = np.eye(4)
-    T[:3, :3] = matrix_from_quaternion(o.x, o.y, o.z, o.w)
+    T[:3, :3] = matrix_from_quaternion(q.x, q.y, q.z, q.w)
     T[:3, 3] = (p.x, p.y, p.z)
     return T
 
@@ -51,6 +63,17 @@ def fill_pose_msg(pose: Any, R: np.ndarray, t: np.ndarray) -> Any:
     pose.position.x, pose.position.y, pose.position.z = (float(v) for v in t)
     pose.orientation.x, pose.orientation.y, pose.orientation.z, pose.orientation.w = (float(v) for v in q)
     return pose
+
+
+def wrench_stamped(frame_id: str, stamp: Any, force: Any, torque: Any = (0.0, 0.0, 0.0)) -> Any:
+    """geometry_msgs/WrenchStamped of force (N) and torque (N·m), both expressed in `frame_id`."""
+    from geometry_msgs.msg import WrenchStamped
+
+    w = WrenchStamped()
+    w.header.stamp, w.header.frame_id = stamp, frame_id
+    w.wrench.force.x, w.wrench.force.y, w.wrench.force.z = (float(v) for v in force)
+    w.wrench.torque.x, w.wrench.torque.y, w.wrench.torque.z = (float(v) for v in torque)
+    return w
 
 
 def hexa_pose_from_msg(pose: Any) -> np.ndarray:

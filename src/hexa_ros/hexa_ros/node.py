@@ -14,7 +14,8 @@ from __future__ import annotations
 
 import signal
 import sys
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Mapping, Sequence
+from dataclasses import dataclass
 from typing import Any
 
 #: exceptions a node's constructor raises for a user's configuration mistake (a bad parameter value, a missing
@@ -149,3 +150,70 @@ def _teardown(nodes: list[Any], executor: Any = None) -> None:
 def main(factory: Callable[..., Any], name: str, argv: list[str] | None = None) -> int:
     """The entry point of a single-node module: `def main(argv=None): return hexa_ros.node.main(Node, "x", argv)`."""
     return run([factory], name, argv)
+
+
+# ------------------------------------------------------------------------------------------ parameters
+#: the robot-YAML parameter of every node (in ROS `robot_description` is URDF XML, which this is not)
+DESCRIPTION = "description"
+
+
+@dataclass(frozen=True)
+class Param:
+    """A node parameter: its default, what it means (with its unit), and how it may change.
+
+    runtime: False (the default) marks it read-only, so a set on the running node is refused with rclpy's reason
+    ("read-only parameter"); True when the node applies a new value at once. range: (low, high) inclusive for a
+    number; choices: the accepted strings.
+    """
+
+    default: Any
+    description: str
+    runtime: bool = False
+    range: tuple[float, float] | None = None
+    choices: tuple[str, ...] = ()
+    dynamic_typing: bool = False
+
+
+#: the robot-YAML parameter's declaration, the same on every node
+DESCRIPTION_PARAM = Param("", "robot description YAML path (SI units); empty = the packaged one")
+
+
+def descriptor(p: Param) -> Any:
+    """The rcl_interfaces/ParameterDescriptor of `p` (description, read_only, range, choices)."""
+    from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor
+
+    d = ParameterDescriptor(description=p.description, read_only=not p.runtime, dynamic_typing=p.dynamic_typing)
+    if p.choices:
+        d.additional_constraints = "one of: " + ", ".join(p.choices)
+    if p.range is not None:
+        lo, hi = p.range
+        if isinstance(p.default, bool) or not isinstance(p.default, (int, float)):
+            d.additional_constraints = f"each value in [{lo:g}, {hi:g}]"
+        elif isinstance(p.default, int):
+            d.integer_range = [IntegerRange(from_value=int(lo), to_value=int(hi), step=0)]
+        else:
+            d.floating_point_range = [FloatingPointRange(from_value=float(lo), to_value=float(hi), step=0.0)]
+    return d
+
+
+def declare_parameters(node: Any, params: Mapping[str, Param]) -> dict[str, Any]:
+    """Declare `params` on `node` with their descriptors; their values (defaults overridden by the command line or
+    the parameters file).
+
+    Raises:
+        ValueError: a value has the wrong type, is out of its range or not one of its choices (names it).
+    """
+    from rclpy.exceptions import InvalidParameterTypeException, InvalidParameterValueException
+
+    values = {}
+    for name, p in params.items():
+        try:
+            v = node.declare_parameter(name, p.default, descriptor(p)).value
+        except (InvalidParameterTypeException, InvalidParameterValueException, TypeError) as exc:
+            raise ValueError(f"parameter {name}: {exc}") from None
+        if p.choices and v not in p.choices:
+            raise ValueError(f"parameter {name} must be one of {', '.join(p.choices)}; got {v!r}")
+        if p.range is not None and isinstance(v, (list, tuple)) and not all(p.range[0] <= x <= p.range[1] for x in v):
+            raise ValueError(f"parameter {name}: each value must be in [{p.range[0]:g}, {p.range[1]:g}]; got {v}")
+        values[name] = v
+    return values

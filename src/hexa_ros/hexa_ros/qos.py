@@ -15,3 +15,24 @@ EVENT = QoSProfile(depth=20, reliability=ReliabilityPolicy.RELIABLE, history=His
 #: states a late subscriber must see at once: reliable, transient local, keep last 1
 LATCHED = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE, history=HistoryPolicy.KEEP_LAST,
                      durability=DurabilityPolicy.TRANSIENT_LOCAL)
+#: /tf: reliable, keep last 100, volatile (tf2_ros' TransformBroadcaster)
+TF = QoSProfile(depth=100, reliability=ReliabilityPolicy.RELIABLE, history=HistoryPolicy.KEEP_LAST)
+#: /tf_static: reliable, transient local, keep last 1 (tf2_ros' StaticTransformBroadcaster: one message holds every
+#: static transform of the node)
+TF_STATIC = LATCHED
+#: the `image_qos` choices of a camera publisher (realsense-ros' `<stream>_qos`): best effort (SENSOR) or reliable
+IMAGE_QOS = ("best_effort", "reliable")
+
+
+def image_profile(name: str) -> QoSProfile:
+    """The publisher QoS of camera images for `name` in IMAGE_QOS (keep last 5 either way; a SENSOR subscriber
+    receives from both).
+
+    Raises:
+        ValueError: `name` is not one of IMAGE_QOS.
+    """
+    if name not in IMAGE_QOS:
+        raise ValueError(f"image_qos must be one of {', '.join(IMAGE_QOS)}; got {name!r}")
+    if name == "best_effort":
+        return SENSOR
+    return QoSProfile(depth=5, reliability=ReliabilityPolicy.RELIABLE, history=HistoryPolicy.KEEP_LAST)

@@ -1,0 +1,52 @@
+"""The observer node's parameters (hexa_ros.node.Param): defaults from the core's configurations, units, ranges, and
+which ones a running node takes (the rest are read-only: a set is refused with the reason)."""
+from __future__ import annotations
+
+from hexa.dynamics.observer import ObserverConfig
+from hexa.estimation import EstimatorConfig
+from hexa_ros.node import DESCRIPTION, DESCRIPTION_PARAM, Param
+
+#: the parameters the observer applies on a running node (hexa.dynamics.monitor.CollisionMonitor.configure)
+RUNTIME = ("gains", "thresholds", "servo_thresholds", "release_ratio", "min_duration", "accel_sigma", "torque_sigma",
+           "camera_sigma", "bias_walk", "saturation", "stall_sigma", "reseed_distance", "calibration_duration",
+           "marker_rate_hz", "marker_scale", "pose_estimate_rate_hz", "tf_rate_hz")
+
+
+def observer_parameters() -> dict[str, Param]:
+    """Name → Param of every observer parameter (hexa_bringup/config/hexa_params.yaml has the same defaults)."""
+    o, e = ObserverConfig(), EstimatorConfig()
+    def six(v: tuple) -> list[float]:
+        return [float(x) for x in v]
+
+    table = {
+        DESCRIPTION: DESCRIPTION_PARAM,
+        "zeta_source": Param("estimator", "estimator (hobby servos: joint_states.position is the command) | measured",
+                             choices=("estimator", "measured")),
+        "time_source": Param("auto", "sample time: auto (board clock of motor_currents when present) | board | stamp",
+                             choices=("auto", "board", "stamp")),
+        "board_clock": Param("auto", "board time: auto (= sim time under use_sim_time) | sim | track",
+                             choices=("auto", "sim", "track")),
+        "gains": Param(six(o.gains), "observer gains K_j (1/s), axes fx fy fz mx my mz", range=(0.0, 1e4)),
+        "thresholds": Param(six(o.thresholds), "r_low per axis (N, N*m)"),
+        "servo_thresholds": Param(six(o.servo_thresholds), "threshold on the residual as servo torques (N*m; 0 = off)"),
+        "release_ratio": Param(float(o.release_ratio), "an axis releases below release_ratio * r_low (hysteresis)"),
+        "min_duration": Param(float(o.min_duration), "s over threshold before START, all released before END"),
+        "max_gap": Param(float(o.max_gap), "s; a longer joint_states spacing restarts the integration",
+                         range=(1e-3, 10.0)),
+        "pose_delay": Param(0.5, "s; camera poses are applied at image stamp + pose_delay", range=(0.0, 5.0)),
+        "accel_sigma": Param(float(e.accel_sigma), "estimator: white-acceleration density (rad/s^1.5)"),
+        "torque_sigma": Param(float(e.torque_sigma), "estimator: servo-measurement noise as torque (N*m)"),
+        "camera_sigma": Param(float(e.camera_sigma), "estimator: noise of zeta from a camera pose (rad); 0 = off"),
+        "bias_walk": Param(float(e.bias_walk), "estimator: random walk of the servo-model offset (rad/sqrt(s))"),
+        "saturation": Param(float(e.saturation), "estimator: |tau| > saturation * torque_max = stalled servo"),
+        "stall_sigma": Param(float(e.stall_sigma), "estimator: a stalled servo's sample as a weak measurement (rad)"),
+        "command_delay": Param(0.0, "s from the commanded angle to the servo's set-point", range=(0.0, 1.0)),
+        "reseed_distance": Param(0.005, "m; a camera pose this far from the tracked pose re-seeds the tracking"),
+        "calibration_duration": Param(1.0, "s averaged by ~/reset with recalibrate=true", range=(0.01, 60.0)),
+        "marker_rate_hz": Param(10.0, "residual force arrow rate on `markers`", range=(0.0, 1000.0)),
+        "marker_scale": Param(0.02, "arrow length per newton (m/N)", range=(0.0, 1.0)),
+        "pose_estimate_rate_hz": Param(100.0, "plate_pose_estimate rate (Hz of sample time)", range=(0.001, 1000.0)),
+        "tf_rate_hz": Param(30.0, "/tf rate of the plate, arm and rod frames (Hz of sample time)",
+                            range=(0.001, 1000.0)),
+        "frame_id": Param("base", "frame of residual, collision and plate_pose_estimate")}
+    return {k: Param(p.default, p.description, k in RUNTIME, p.range, p.choices) for k, p in table.items()}
