@@ -195,4 +195,6 @@ def test_robot_mode_with_numeric_serials_and_no_hardware_starts_names_what_is_mi
     assert "Traceback" not in console and "InvalidParameterTypeException" not in console, console[-3000:]
     for s in serials:
         assert f"RealSense {s}" in console, f"{s} not named on the console"
+    for port in (uno, mega):
+        assert f"at {port}: open failed" in console, f"{port} not named on the console"
     assert max(attempts) >= 2 or "retrying" in console
