@@ -29,7 +29,7 @@ firmware: setup
 
 # Lint first (pyflakes + pycodestyle, settings in pyproject.toml), then the tests.
 # pytest exit code 5 means "no tests collected": that is a failure here, not a pass.
-test: setup firmware
+test: setup-robot firmware
 	@$(VENV)/bin/ruff check --quiet . || { echo "make test: ruff found problems (see above)" >&2; exit 1; }
 	@set -o pipefail; $(PY) -m pytest test/ -q -p no:cacheprovider $(PYTEST_ARGS); rc=$$?; \
 	if [ $$rc -eq 5 ]; then echo "make test: pytest collected no tests" >&2; exit 1; fi; exit $$rc

@@ -133,7 +133,7 @@ def test_colcon_builds_the_repository_and_a_user_package_and_the_installed_node_
                        env=env, cwd=tmp_path, capture_output=True, text=True, timeout=300)
     assert r.returncode == 0, r.stdout[-3000:] + r.stderr[-3000:]
     print(f"colcon build: {time.monotonic() - t0:.1f} s")
-    for pkg, exes in {"hexa_bringup": ["hexa", "hexa-sim"], "hexa_driver": ["hexa-driver"],
+    for pkg, exes in {"hexa_bringup": ["hexa", "hexa-sim", "hexa-view"], "hexa_driver": ["hexa-driver"],
                       "hexa_dynamics": ["hexa-observer", "hexa-rnea", "hexa-singularity", "hexa-trajectory"],
                       "hexa_vision": ["hexa-camera", "hexa-vision-pose", "hexa-vision-isolation"],
                       "my_listener": ["listener"]}.items():

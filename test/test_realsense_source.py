@@ -12,9 +12,13 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-rs = pytest.importorskip("pyrealsense2")
+from hexa.vision.sources import RealSenseSource
 
-from hexa.vision.sources import RealSenseSource  # noqa: E402
+try:
+    import pyrealsense2 as rs
+except ImportError:   # the recording tests need it (make setup-robot); robot mode without cameras does not
+    rs = None
+needs_rs = pytest.mark.skipif(rs is None, reason="pyrealsense2 not installed (make setup-robot)")
 
 PY = sys.executable
 W, H, FPS = 64, 48, 30
@@ -24,7 +28,7 @@ DEPTH_FX, DEPTH_PPX, COLOR_FX, COLOR_PPX = 50.0, 28.0, 55.0, 32.0
 SERIAL = "012345678901"
 
 
-def _intrinsics(fx: float, ppx: float) -> "rs.intrinsics":
+def _intrinsics(fx: float, ppx: float):
     i = rs.intrinsics()
     i.width, i.height, i.fx, i.fy, i.ppx, i.ppy = W, H, fx, fx, ppx, H / 2
     i.model, i.coeffs = rs.distortion.brown_conrady, [0.0] * 5
@@ -84,6 +88,7 @@ def _aligned_edge(depth_mm: np.ndarray) -> float:
     return float(cols.min())
 
 
+@needs_rs
 def test_realsense_source_plays_a_recording_with_depth_aligned_to_colour(recording):
     src = RealSenseSource("cam_top", playback=str(recording))
     pairs = []
@@ -143,6 +148,7 @@ def _listen(env: dict[str, str], topics: dict[str, type], seconds: float, until=
     return got
 
 
+@needs_rs
 def test_camera_node_publishes_a_recording_in_the_realsense_ros_layout(recording, procs, ros_env):
     from sensor_msgs.msg import CameraInfo, Image
 

@@ -203,8 +203,9 @@ class RealSenseSource:
         try:
             import pyrealsense2 as rs  # type: ignore[import-not-found]
         except ImportError as exc:
-            raise SourceError("source 'realsense' needs the optional pyrealsense2 package (make setup-robot, or "
-                              "pip install -r requirements/robot.txt)") from exc
+            raise SourceError(f"RealSense {self.serial or '(first device)'}: source 'realsense' needs the optional "
+                              "pyrealsense2 package (make setup-robot, or pip install -r requirements/robot.txt)"
+                              ) from exc
         cfg = rs.config()
         if self.playback:
             if not Path(self.playback).is_file():
