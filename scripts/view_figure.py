@@ -70,8 +70,7 @@ def main(argv: list[str]) -> int:
     last: dict[str, int] = {}
     for m in by["/diagnostics"]:
         for s in m.data["status"]:
-            lv = s["level"]       # a ROS `byte`: JSON carries it as a one-item list
-            last[s["name"]] = int(lv[0] if isinstance(lv, list) else lv)
+            last[s["name"]] = int(s["level"])
     names = sorted(last)[:12]
     ax.barh(range(len(names)), [1] * len(names), color=[("g", "orange", "r", "grey")[min(last[n], 3)] for n in names])
     ax.set_yticks(range(len(names)), [n[-38:] for n in names], fontsize=6)

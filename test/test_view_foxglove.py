@@ -133,7 +133,9 @@ def test_view_serves_the_simulated_graph_to_a_foxglove_client(procs, ros_env):
     assert abs(arrow.pose.orientation.y) == pytest.approx(np.sqrt(0.5), abs=1e-6), "arrow not turned to -z"
     assert res["r"][5] is None, "NaN must reach JSON as null"
     diag = [m.data for m in msgs if m.topic == "/diagnostics"]
-    assert any(s["name"].startswith("/hexa/view") for d in diag for s in d["status"])
+    mine = [s for d in diag for s in d["status"] if s["name"].startswith("/hexa/view")]
+    assert mine and mine[-1]["level"] == 0 and int(dict((kv["key"], kv["value"]) for kv in mine[-1]["values"])[
+        "forwarded"]) > 0
     assert view.poll() is None
     stop.set()
     publisher.join(timeout=5)

@@ -11,7 +11,6 @@ Parameters: `port` (8765; 0 = any free port, printed), `host` ("127.0.0.1"; "0.0
 """
 from __future__ import annotations
 
-import math
 import sys
 from pathlib import Path
 from typing import Any
@@ -21,10 +20,10 @@ from rcl_interfaces.msg import ParameterDescriptor
 from rclpy.node import Node
 
 import hexa_ros.node
-from hexa_bringup.msgutil import get_message_class, message_to_dict
+from hexa_bringup.foxglove_messages import frame_transforms, json_payload, ns_time, scene_from_markers
+from hexa_bringup.msgutil import get_message_class
 from hexa_ros import diagnostics, qos
 from hexa_ros.cdr import CdrError, image_from_cdr
-from hexa_ros.stamps import to_sec
 
 LAYOUT = Path(__file__).resolve().parent / "config" / "foxglove_layout.json"
 CAMERAS = ("cam_top", "cam_side")
@@ -35,66 +34,6 @@ JSON_TOPICS = {"residual": "hexa_msgs/msg/Residual", "collision": "hexa_msgs/msg
                "singularity": "hexa_msgs/msg/SingularityIndices", "/diagnostics": "diagnostic_msgs/msg/DiagnosticArray"}
 MARKER_TOPICS = ("markers", "contact_markers")
 POSE_FRAMES = {"plate_pose": "plate", "plate_pose_estimate": "plate_estimate"}
-
-
-def json_safe(value: Any) -> Any:
-    """`value` with every NaN or infinite float as None (JSON has neither)."""
-    if isinstance(value, float):
-        return value if math.isfinite(value) else None
-    if isinstance(value, dict):
-        return {k: json_safe(v) for k, v in value.items()}
-    if isinstance(value, list):
-        return [json_safe(v) for v in value]
-    return value
-
-
-def _ns_time(stamp: Any) -> int:
-    return int(round(to_sec(stamp) * 1e9))
-
-
-def _ts(stamp: Any) -> Any:
-    from foxglove.messages import Timestamp
-
-    return Timestamp(sec=int(stamp.sec), nsec=int(stamp.nanosec))
-
-
-def _pose(position: Any, orientation: Any) -> Any:
-    from foxglove.messages import Pose, Quaternion, Vector3
-
-    return Pose(position=Vector3(x=position.x, y=position.y, z=position.z),
-                orientation=Quaternion(x=orientation.x, y=orientation.y, z=orientation.z, w=orientation.w))
-
-
-def scene_from_markers(msg: Any) -> Any:
-    """foxglove.SceneUpdate of a visualization_msgs/MarkerArray's ARROW (two points) and SPHERE markers."""
-    from foxglove.messages import (ArrowPrimitive, Color, Pose, Quaternion, SceneEntity, SceneUpdate, SpherePrimitive,
-                                   Vector3)
-
-    entities = []
-    for m in msg.markers:
-        c = Color(r=m.color.r, g=m.color.g, b=m.color.b, a=m.color.a)
-        arrows, spheres = [], []
-        if m.type == m.ARROW and len(m.points) == 2:
-            a, b = (np.array([p.x, p.y, p.z]) for p in m.points)
-            d = b - a
-            n = float(np.linalg.norm(d))
-            if n > 0:      # the arrow's +x turned onto d: the shortest rotation, as a quaternion
-                u = d / n
-                axis, w = np.cross([1.0, 0.0, 0.0], u), 1.0 + u[0]
-                q = np.array([*axis, w]) if w > 1e-9 else np.array([0.0, 0.0, 1.0, 0.0])
-                q /= np.linalg.norm(q)
-                head = min(m.scale.z, n)
-                arrows.append(ArrowPrimitive(
-                    pose=Pose(position=Vector3(x=a[0], y=a[1], z=a[2]),
-                              orientation=Quaternion(x=q[0], y=q[1], z=q[2], w=q[3])),
-                    shaft_length=n - head, shaft_diameter=m.scale.x, head_length=head, head_diameter=m.scale.y,
-                    color=c))
-        elif m.type == m.SPHERE:
-            spheres.append(SpherePrimitive(pose=_pose(m.pose.position, m.pose.orientation),
-                                           size=Vector3(x=m.scale.x, y=m.scale.y, z=m.scale.z), color=c))
-        entities.append(SceneEntity(timestamp=_ts(m.header.stamp), frame_id=m.header.frame_id, id=f"{m.ns}/{m.id}",
-                                    arrows=arrows, spheres=spheres))
-    return SceneUpdate(entities=entities)
 
 
 class ViewNode(Node):
@@ -158,8 +97,8 @@ class ViewNode(Node):
     def _log(self, ch: Any, msg: Any) -> None:
         if ch.has_sinks():
             header = getattr(msg, "header", None)
-            when = {"log_time": _ns_time(header.stamp)} if header is not None else {}
-            ch.log(json_safe(message_to_dict(msg)), **when)
+            when = {"log_time": ns_time(header.stamp)} if header is not None else {}
+            ch.log(json_payload(msg), **when)
             self.counters["forwarded"] += 1
 
     def _on_image(self, cam: str, ch: Any, buf: bytes) -> None:
@@ -191,17 +130,11 @@ class ViewNode(Node):
 
     def _markers(self, ch: Any, msg: Any) -> None:
         if ch.has_sinks() and msg.markers:
-            ch.log(scene_from_markers(msg), log_time=_ns_time(msg.markers[0].header.stamp))
+            ch.log(scene_from_markers(msg), log_time=ns_time(msg.markers[0].header.stamp))
 
     def _transforms(self, items: list[tuple[Any, str, str, Any, Any]]) -> None:
-        from foxglove.messages import FrameTransform, FrameTransforms, Quaternion, Vector3
-
-        if not self.tf.has_sinks() or not items:
-            return
-        tfs = [FrameTransform(timestamp=_ts(st), parent_frame_id=parent, child_frame_id=child,
-                              translation=Vector3(x=t.x, y=t.y, z=t.z), rotation=Quaternion(x=q.x, y=q.y, z=q.z, w=q.w))
-               for st, parent, child, t, q in items]
-        self.tf.log(FrameTransforms(transforms=tfs), log_time=_ns_time(items[0][0]))
+        if self.tf.has_sinks() and items:
+            self.tf.log(frame_transforms(items), log_time=ns_time(items[0][0]))
 
     def _on_pose(self, child: str, msg: Any) -> None:
         self._transforms([(msg.header.stamp, msg.header.frame_id or "base", child, msg.pose.position,
