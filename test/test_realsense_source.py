@@ -120,6 +120,13 @@ def test_realsense_source_names_an_absent_serial_and_retries():
     assert src.poll() is None and src.attempts == 2 and not src.connected
 
 
+def test_realsense_source_without_pyrealsense2_names_the_package_and_the_serial(monkeypatch):
+    monkeypatch.setitem(sys.modules, "pyrealsense2", None)      # import fails as when it is not installed
+    src = RealSenseSource("cam_side", serial="012345678902", clock=lambda: 0.0)
+    assert src.poll() is None and not src.connected
+    assert "012345678902" in src.status and "pyrealsense2" in src.status and "make setup-robot" in src.status
+
+
 def _listen(env: dict[str, str], topics: dict[str, type], seconds: float, until=None) -> dict[str, list]:
     os.environ.update(env)
     import rclpy
