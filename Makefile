@@ -6,7 +6,7 @@ export MUJOCO_GL ?= egl
 export PYTHONDONTWRITEBYTECODE := 1
 PYTEST_ARGS ?=
 
-.PHONY: setup test lint demo bench firmware clean help
+.PHONY: setup setup-robot test lint demo bench firmware clean help
 
 help:
 	@echo "make demo   - set up, then run the main job on the simulated robot (hexa demo)"
@@ -14,9 +14,14 @@ help:
 	@echo "make bench  - set up, run the benchmarks (hexa bench)"
 	@echo "make firmware - build the Arduino firmware (.hex) with Debian's AVR toolchain"
 	@echo "make setup  - only the set-up (venv, ROS 2 Jazzy wheels, hexa_msgs, toolchains)"
+	@echo "make setup-robot - the set-up plus the robot mode's optional packages (pyrealsense2)"
 
 setup:
 	@bash scripts/setup_env.sh
+
+# Robot mode's optional packages (requirements/robot.txt: pyrealsense2), on top of the set-up.
+setup-robot: setup
+	@$(PY) -m pip install --disable-pip-version-check -q -r requirements/robot.txt
 
 firmware: setup
 	@if [ -f hexa_driver/firmware/Makefile ]; then $(MAKE) --no-print-directory -C hexa_driver/firmware; \
@@ -24,7 +29,7 @@ firmware: setup
 
 # Lint first (pyflakes + pycodestyle, settings in pyproject.toml), then the tests.
 # pytest exit code 5 means "no tests collected": that is a failure here, not a pass.
-test: setup firmware
+test: setup-robot firmware
 	@$(VENV)/bin/ruff check --quiet . || { echo "make test: ruff found problems (see above)" >&2; exit 1; }
 	@set -o pipefail; $(PY) -m pytest test/ -q -p no:cacheprovider $(PYTEST_ARGS); rc=$$?; \
 	if [ $$rc -eq 5 ]; then echo "make test: pytest collected no tests" >&2; exit 1; fi; exit $$rc

@@ -79,6 +79,7 @@ class DriverNode(Node):
         self.create_timer(self.sched.min_interval, self._flush, clock=Clock(clock_type=ClockType.STEADY_TIME))
         self.uno.start()
         self.mega.start()
+        self._said: dict[str, str] = {}
         self.get_logger().info(f"uno={cfg['uno_port']} mega={cfg['mega_port']} rate={cfg['stream_rate_hz']} Hz")
 
     def close(self) -> None:
@@ -161,6 +162,11 @@ class DriverNode(Node):
         self.pub_diag.publish(diagnostics.array(self, [
             diagnostics.status(r.name, getattr(diagnostics, r.level), r.message, r.values, r.hardware_id)
             for r in reports]))
+        for board, link in (("uno", self.uno), ("mega", self.mega)):   # an absent port: named once per new error
+            err = link.stats.last_error if link.stats.state != CONNECTED else ""
+            if err and err != self._said.get(board):
+                self.get_logger().warning(f"{board} board at {link.port}: {err}; retrying")
+            self._said[board] = err
 
 
 def main(args: list[str] | None = None) -> int:

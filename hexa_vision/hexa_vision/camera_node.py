@@ -1,9 +1,12 @@
 """hexa-camera: publishes one RGB-D camera in the realsense-ros layout from a PNG folder, a bag, or a RealSense.
 
 Topics (relative to the node namespace, e.g. /hexa): `<camera>/color/image_raw` (rgb8), `<camera>/color/camera_info`,
-`<camera>/aligned_depth_to_color/image_raw` (16UC1 mm, 0 invalid), frame `<camera>_color_optical_frame`;
-QoS from `image_qos` (best_effort as sensor data, or reliable). The simulator publishes the same topics itself (no
-camera node needed in sim mode). Parameters: PARAMETERS below (start-up only, read-only).
+`<camera>/aligned_depth_to_color/image_raw` (16UC1 mm, 0 invalid) and `<camera>/aligned_depth_to_color/camera_info`
+(the colour stream's, as realsense-ros publishes it), frame `<camera>_color_optical_frame`; QoS from `image_qos`
+(best_effort as sensor data, or reliable); `/diagnostics` (the source's state: an absent RealSense is named by its
+serial and retried). The simulator publishes the same topics itself (no camera node needed in sim mode).
+Parameters: PARAMETERS below (start-up only, read-only); with source realsense, `path` names a librealsense
+recording (.db3/.bag) played instead of a device.
 Folder layout: color_<n>.png (8-bit RGB) + depth_<n>.png (16-bit, mm) pairs, sorted by <n>; optional
 camera_info.yaml (width, height, k[9]) overrides the description's intrinsics. The sources are hexa.vision.sources'.
 """
@@ -13,13 +16,14 @@ import sys
 import threading
 
 import numpy as np
+from diagnostic_msgs.msg import DiagnosticArray
 from rclpy.node import Node
 from sensor_msgs.msg import CameraInfo, Image
 
 import hexa_ros.node
 from hexa.vision.camera import CameraModel
 from hexa.vision.sources import BagSource, FolderSource, RealSenseSource, SourceError
-from hexa_ros import qos
+from hexa_ros import diagnostics, qos
 from hexa_ros.node import DESCRIPTION, DESCRIPTION_PARAM, Param, declare_parameters
 from hexa_vision.common import camera_info_msg, description_cameras, image_msg
 
@@ -30,7 +34,8 @@ PARAMETERS = {"source": Param("folder", "where the frames come from", choices=("
               "path": Param("", "folder of color_<n>.png + depth_<n>.png (16-bit mm) pairs, or a bag"),
               "rate": Param(15.0, "Hz for a folder; playback speed factor for a bag", range=(0.01, 1000.0)),
               "loop": Param(True, "restart the folder or bag at its end"),
-              "serial": Param("", "RealSense serial number; empty = the first device"),
+              # dynamic typing: ROS parses `serial:=123456789012` as an integer; a serial is a string of digits
+              "serial": Param("", "RealSense serial number; empty = the first device", dynamic_typing=True),
               "image_qos": Param("best_effort", "image and camera_info reliability (realsense-ros <stream>_qos)",
                                  choices=qos.IMAGE_QOS),
               DESCRIPTION: DESCRIPTION_PARAM}
@@ -40,13 +45,16 @@ class CameraNode(Node):
     def __init__(self, **kwargs) -> None:
         super().__init__("hexa_camera", **kwargs)
         v = declare_parameters(self, PARAMETERS)
-        self.source, self.cam_name, self.path, self.serial = v["source"], v["camera"], v["path"], v["serial"]
+        self.source, self.cam_name, self.path, self.serial = v["source"], v["camera"], v["path"], str(v["serial"] or "")
         self.rate, self.loop, desc_path = float(v["rate"]), bool(v["loop"]), v[DESCRIPTION]
         self.frame = frames.camera_optical_frame(self.cam_name)
         c, image_qos = self.cam_name, qos.image_profile(v["image_qos"])
         self.pub_color = self.create_publisher(Image, f"{c}/color/image_raw", image_qos)
         self.pub_info = self.create_publisher(CameraInfo, f"{c}/color/camera_info", image_qos)
         self.pub_depth = self.create_publisher(Image, f"{c}/aligned_depth_to_color/image_raw", image_qos)
+        self.pub_depth_info = self.create_publisher(CameraInfo, f"{c}/aligned_depth_to_color/camera_info", image_qos)
+        self.pub_diag = self.create_publisher(DiagnosticArray, "/diagnostics", qos.RELIABLE)
+        self._said = ""
         self.published = 0
         self._bag: BagSource | None = None
         self._realsense: RealSenseSource | None = None
@@ -56,19 +64,23 @@ class CameraNode(Node):
         elif self.source == "bag":
             self._bag = BagSource(self.path, c, self.rate, self.loop)
             self._bag_pubs = {"color/image_raw": self.pub_color, "color/camera_info": self.pub_info,
-                              "aligned_depth_to_color/image_raw": self.pub_depth}
+                              "aligned_depth_to_color/image_raw": self.pub_depth,
+                              "aligned_depth_to_color/camera_info": self.pub_depth_info}
             threading.Thread(target=self._run_bag, daemon=True).start()
         elif self.source == "realsense":
-            self._realsense = RealSenseSource(c, self.serial)
+            self._realsense = RealSenseSource(c, self.serial, playback=self.path, loop=self.loop)
             self.create_timer(1.0 / 60.0, self._tick_realsense)
+            self.create_timer(1.0, self._diagnostics)
         else:
             raise SourceError(f"unknown source {self.source!r}; use folder, bag or realsense")
 
-    def _publish(self, rgb: np.ndarray, depth_mm: np.ndarray, model: CameraModel) -> None:
+    def _publish(self, rgb: np.ndarray, depth_mm: np.ndarray, model: CameraModel, fields: dict | None = None) -> None:
         stamp = self.get_clock().now().to_msg()
+        info = camera_info_msg(model, self.frame, stamp, fields)
         self.pub_color.publish(image_msg(rgb, "rgb8", self.frame, stamp))
+        self.pub_info.publish(info)
         self.pub_depth.publish(image_msg(depth_mm, "16UC1", self.frame, stamp))
-        self.pub_info.publish(camera_info_msg(model, self.frame, stamp))
+        self.pub_depth_info.publish(info)
         self.published += 1
 
     def _tick_folder(self) -> None:
@@ -93,9 +105,21 @@ class CameraNode(Node):
                 self.get_logger().error(f"bag playback ended: {exc}")
 
     def _tick_realsense(self) -> None:
-        pair = self._realsense.poll()
+        rs = self._realsense
+        pair = rs.poll()
+        if rs.status != self._said:       # each change of state once on the console (absent, streaming, lost)
+            (self.get_logger().info if rs.connected else self.get_logger().warning)(f"{self.cam_name}: {rs.status}")
+            self._said = rs.status
         if pair is not None:
-            self._publish(*pair, self._realsense.model)
+            self._publish(*pair, rs.model, rs.info_fields)
+
+    def _diagnostics(self) -> None:
+        rs = self._realsense
+        level = diagnostics.OK if rs.connected else diagnostics.ERROR
+        st = diagnostics.status(f"{self.get_fully_qualified_name()}: {self.cam_name} RealSense", level, rs.status,
+                                {"serial": self.serial or "(first device)", "attempts": rs.attempts,
+                                 "frames": rs.frames, "published": self.published}, hardware_id=self.serial)
+        self.pub_diag.publish(diagnostics.array(self, [st]))
 
     def close(self) -> None:
         if self._bag is not None:

@@ -27,11 +27,12 @@ def image_msg(array: np.ndarray, encoding: str, frame_id: str, stamp: Any):
     return msg
 
 
-def camera_info_msg(cam: CameraModel, frame_id: str, stamp: Any):
-    """sensor_msgs/CameraInfo (plumb_bob, no distortion) of a camera model."""
+def camera_info_msg(cam: CameraModel, frame_id: str, stamp: Any, fields: dict | None = None):
+    """sensor_msgs/CameraInfo (plumb_bob, no distortion) of a camera model, or of `fields` when given (e.g. a
+    RealSense's own, hexa.vision.sources.realsense_camera_info_fields)."""
     from sensor_msgs.msg import CameraInfo
 
-    f = cam.camera_info_fields()
+    f = fields or cam.camera_info_fields()
     msg = CameraInfo()
     msg.header.stamp = stamp
     msg.header.frame_id = frame_id

@@ -51,7 +51,8 @@ def mode_node_args(args: argparse.Namespace) -> dict[str, list[str]]:
         node_args["driver"] = ["-p", f"uno_port:={args.uno}", "-p", f"mega_port:={args.mega}"]
         serials = list(args.cameras) + [""] * (2 - len(args.cameras))
         for (name, cam), serial in zip((("camera_top", "cam_top"), ("camera_side", "cam_side")), serials):
-            node_args[name] = ["-p", "source:=realsense", "-p", f"camera:={cam}", "-p", f"serial:={serial}"]
+            # quoted: unquoted digits would reach the node as an integer (and lose leading zeros)
+            node_args[name] = ["-p", "source:=realsense", "-p", f"camera:={cam}", "-p", f"serial:='{serial}'"]
     if args.mode in ("robot", "sim"):
         speed = args.approach_speed if args.approach_speed is not None else (
             ROBOT_APPROACH_SPEED if args.mode == "robot" else None)

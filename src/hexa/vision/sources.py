@@ -152,46 +152,126 @@ def depth_to_mm(depth: np.ndarray, scale_mm: float) -> np.ndarray:
     return np.clip(np.rint(d), 0, 65535).astype(np.uint16)
 
 
+def realsense_camera_info_fields(intr) -> dict:
+    """sensor_msgs/CameraInfo fields of a pyrealsense2 intrinsics as realsense-ros fills them (base_realsense_node:
+    K and P from fx, fy, ppx, ppy; R identity; "equidistant" with 4 coefficients for Kannala-Brandt, else "plumb_bob"
+    with 5). The aligned depth's camera_info is the colour stream's: depth is resampled onto the colour image."""
+    k = [intr.fx, 0.0, intr.ppx, 0.0, intr.fy, intr.ppy, 0.0, 0.0, 1.0]
+    p = [intr.fx, 0.0, intr.ppx, 0.0, 0.0, intr.fy, intr.ppy, 0.0, 0.0, 0.0, 1.0, 0.0]
+    kb4 = "kannala" in str(intr.model).lower()
+    n = 4 if kb4 else 5
+    return {"width": int(intr.width), "height": int(intr.height),
+            "distortion_model": "equidistant" if kb4 else "plumb_bob", "d": [float(c) for c in list(intr.coeffs)[:n]],
+            "k": [float(v) for v in k], "r": [1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0], "p": [float(v) for v in p]}
+
+
 class RealSenseSource:
-    """An Intel RealSense (pyrealsense2): 640x480 colour and depth at 30 fps, depth aligned to colour.
+    """An Intel RealSense (pyrealsense2): colour (rgb8) and depth (z16) at `width`x`height`, `fps`, depth aligned to
+    colour with rs.align as realsense-ros' `align_depth` does; or a librealsense recording (`playback`, .db3/.bag).
+
+    A camera that is absent (or pyrealsense2 missing) does not raise: `poll()` retries every `retry_period` seconds
+    and `status` says what is missing, naming the serial number, until the device streams.
 
     Args:
         name: camera name (for the model).
-        serial: device serial number ("" = the first device; two cameras on one PC: one source per serial).
-
-    Raises:
-        SourceError: pyrealsense2 is not installed.
+        serial: device serial number as a string ("" = the first device; leading zeros matter).
+        playback: a librealsense recording to play instead of a device (once, or looping with `loop`).
     """
 
-    def __init__(self, name: str, serial: str = "", width: int = 640, height: int = 480, fps: int = 30) -> None:
+    def __init__(self, name: str, serial: str = "", width: int = 640, height: int = 480, fps: int = 30,
+                 playback: str = "", loop: bool = False, retry_period: float = 2.0,
+                 clock: Callable[[], float] | None = None) -> None:
+        import time
+
+        self.name, self.serial, self.playback, self.loop = name, str(serial), str(playback), bool(loop)
+        self.size, self.fps, self.retry_period = (int(width), int(height)), int(fps), float(retry_period)
+        self._clock = clock or time.monotonic
+        self._pipe = None
+        self._next_try = 0.0
+        self.model: CameraModel | None = None
+        self.info_fields: dict | None = None
+        self.attempts = 0
+        self.frames = 0
+        self.device = ""
+        self.status = f"RealSense {self.serial or '(first device)'}: not opened yet"
+
+    @property
+    def connected(self) -> bool:
+        return self._pipe is not None
+
+    def _open(self) -> None:
         try:
             import pyrealsense2 as rs  # type: ignore[import-not-found]
         except ImportError as exc:
-            raise SourceError("source 'realsense' needs the optional pyrealsense2 package (pip install "
-                              "pyrealsense2; not installed here) — use source:=folder or source:=bag") from exc
-        self._pipe = rs.pipeline()
+            raise SourceError(f"RealSense {self.serial or '(first device)'}: source 'realsense' needs the optional "
+                              "pyrealsense2 package (make setup-robot, or pip install -r requirements/robot.txt)"
+                              ) from exc
         cfg = rs.config()
-        if serial:
-            cfg.enable_device(serial)
-        cfg.enable_stream(rs.stream.color, width, height, rs.format.rgb8, fps)
-        cfg.enable_stream(rs.stream.depth, width, height, rs.format.z16, fps)
-        profile = self._pipe.start(cfg)
+        if self.playback:
+            if not Path(self.playback).is_file():
+                raise SourceError(f"RealSense recording {self.playback} does not exist")
+            cfg.enable_device_from_file(self.playback, repeat_playback=self.loop)
+        else:
+            serials = [d.get_info(rs.camera_info.serial_number) for d in rs.context().query_devices()]
+            if self.serial and self.serial not in serials:
+                raise SourceError(f"RealSense {self.serial} not found (connected: {', '.join(serials) or 'none'})")
+            if not serials:
+                raise SourceError("no RealSense connected")
+            if self.serial:
+                cfg.enable_device(self.serial)
+            w, h = self.size
+            cfg.enable_stream(rs.stream.color, w, h, rs.format.rgb8, self.fps)
+            cfg.enable_stream(rs.stream.depth, w, h, rs.format.z16, self.fps)
+        pipe = rs.pipeline()
+        try:
+            profile = pipe.start(cfg)
+        except RuntimeError as exc:
+            raise SourceError(f"RealSense {self.serial or self.playback or '(first device)'}: {exc}") from exc
         self._align = rs.align(rs.stream.color)
         intr = profile.get_stream(rs.stream.color).as_video_stream_profile().get_intrinsics()
-        K = np.array([[intr.fx, 0, intr.ppx], [0, intr.fy, intr.ppy], [0, 0, 1.0]])
-        self.model = CameraModel(K, intr.width, intr.height, name=name)
-        self._depth_scale_mm = profile.get_device().first_depth_sensor().get_depth_scale() * 1000.0
+        self.info_fields = realsense_camera_info_fields(intr)
+        K = np.array(self.info_fields["k"]).reshape(3, 3)
+        self.model = CameraModel(K, intr.width, intr.height, name=self.name)
+        dev = profile.get_device()
+        self.device = dev.get_info(rs.camera_info.serial_number)
+        self._depth_scale_mm = dev.first_depth_sensor().get_depth_scale() * 1000.0
+        self._pipe = pipe
 
     def poll(self) -> tuple[np.ndarray, np.ndarray] | None:
-        """The newest (rgb, depth mm) pair, or None when no new frame set has arrived."""
-        frames = self._pipe.poll_for_frames()
+        """The newest (rgb, depth mm aligned to colour) pair, or None when no new frame set has arrived or the device
+        is not (yet) there; an absent device is retried every `retry_period` s."""
+        if self._pipe is None:
+            now = self._clock()
+            if now < self._next_try:
+                return None
+            self._next_try = now + self.retry_period
+            self.attempts += 1
+            try:
+                self._open()
+            except SourceError as exc:
+                self.status = f"{exc}; retrying every {self.retry_period:g} s"
+                return None
+            self.status = f"RealSense {self.device} streaming"
+        try:
+            frames = self._pipe.poll_for_frames()
+        except RuntimeError as exc:     # unplugged while streaming: close and retry
+            self.stop()
+            self.status = f"RealSense {self.device or self.serial}: {exc}; retrying every {self.retry_period:g} s"
+            return None
         if not frames:
             return None
         frames = self._align.process(frames)
         color, depth = frames.get_color_frame(), frames.get_depth_frame()
         if not color or not depth:
             return None
-        return np.asanyarray(color.get_data()), depth_to_mm(np.asanyarray(depth.get_data()), self._depth_scale_mm)
+        self.frames += 1
+        rgb = np.asanyarray(color.get_data())
+        return rgb, depth_to_mm(np.asanyarray(depth.get_data()), self._depth_scale_mm)
 
     def stop(self) -> None:
-        self._pipe.stop()
+        if self._pipe is not None:
+            try:
+                self._pipe.stop()
+            except RuntimeError:
+                pass
+            self._pipe = None
