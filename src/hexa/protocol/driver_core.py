@@ -225,7 +225,8 @@ class DriverCore:
 
 # ---------------------------------------------------------------------------------------------- configuration
 SCALAR_KEYS = ("uno_port", "mega_port", "baud", "stream_rate_hz", "stale_timeout", "drop_after", "reconnect_period",
-               "hello_timeout", "boot_delay", "command_rate_hz", "max_speed",
+               "hello_timeout", "boot_delay", "stream_rerequest_period", "stream_reconnect_after", "command_rate_hz",
+               "max_speed",
                "board_clock_max_extrapolation", "watchdog_ms", "diagnostics_period", "calibration_duration",
                "rest_quiet_time", "frame_id", "latch_report", "command_sync", "command_sync_guard")
 REQUIRED_KEYS = SCALAR_KEYS + ("joint_names", "sensor", "current_offsets", "servos")
@@ -325,7 +326,9 @@ def driver_links_from_config(cfg: dict, core: DriverCore, on_samples, on_latch=N
 
     common = dict(baud=int(cfg["baud"]), stale_timeout=float(cfg["stale_timeout"]),
                   drop_after=float(cfg["drop_after"]), reconnect_period=float(cfg["reconnect_period"]),
-                  hello_timeout=float(cfg["hello_timeout"]), boot_delay=float(cfg["boot_delay"]))
+                  hello_timeout=float(cfg["hello_timeout"]), boot_delay=float(cfg["boot_delay"]),
+                  stream_rerequest_period=float(cfg["stream_rerequest_period"]),
+                  stream_reconnect_after=float(cfg["stream_reconnect_after"]))
     state = (lambda board: None) if on_state is None else (lambda board: lambda s: on_state(board, s))
     uno = ServoLink(str(cfg["uno_port"]), min_us=[s.min_us for s in core.servos],
                     max_us=[s.max_us for s in core.servos], watchdog_ms=int(cfg["watchdog_ms"]),
