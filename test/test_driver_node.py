@@ -54,18 +54,20 @@ def test_driver_commands_pulses_publishes_currents_and_effort_and_calibrates(tmp
         assert wait_for(lambda: expected in got, 5.0), (expected, got[-3:])
         assert wait_for(lambda: np.allclose(probe.states[-1][1].position, zeta), 3.0)
 
-        # NaN is rejected (nothing sent), out-of-range is clamped to the joint limits
+        # NaN, inf, 1e9 rad, a wrong size: rejected (nothing sent, the last good command stays), counted by reason
         n = len(got)
-        probe.command([float("nan")] + list(zeta[1:]))
+        for bad in ([float("nan")] + list(zeta[1:]), [float("inf")] + list(zeta[1:]), [1e9] + list(zeta[1:]),
+                    [desc.zeta_max + 1.0] + list(zeta[1:])):
+            probe.command(bad)
+        probe.command(list(zeta[:5]), names=[f"arm_{i}" for i in range(1, 6)])
         time.sleep(0.3)
-        assert len(got) == n
-        probe.command([desc.zeta_max + 1.0] + list(zeta[1:]))
-        clamped = (servos[0].pulse_from_angle(desc.zeta_max),) + expected[1:]
-        assert wait_for(lambda: got[-1] == clamped, 5.0), (clamped, got[-1])
+        assert len(got) == n and uno.targets == expected
+        assert np.allclose(probe.states[-1][1].position, zeta)
         t_diag = time.monotonic()
         uno_diag = wait_for(lambda: probe.diag_status("servo board", since=t_diag), 5.0)
         d = kv(uno_diag)
-        assert int(d["commands_rejected_nan"]) == 1 and int(d["commands_clamped"]) >= 1
+        assert (int(d["commands_rejected_nan"]), int(d["commands_rejected_range"])) == (2, 2)
+        assert int(d["commands_rejected_names"]) == 1 and int(d["commands_clamped"]) == 0
 
         # zero-current calibration at rest: I_0 = the mean current; afterwards currents read ~0
         time.sleep(0.4)

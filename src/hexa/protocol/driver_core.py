@@ -21,6 +21,8 @@ from hexa.protocol.frames import MAX_RATE_HZ, MIN_RATE_HZ, PULSE_MAX_US, PULSE_M
 from hexa.protocol.sensor_model import CurrentSensorModel
 
 N_JOINTS = 6
+#: a command this far (rad) outside the joint range is float noise at a limit: clamped; farther: rejected
+RANGE_TOLERANCE = 1e-6
 JOINT_NAMES = tuple(f"arm_{i}" for i in range(1, N_JOINTS + 1))
 
 
@@ -29,7 +31,8 @@ class DriverConfigError(ValueError):
 
 
 class CommandRejected(ValueError):
-    """A joint command that cannot be executed (NaN, wrong names or size); the message says why."""
+    """A joint command that cannot be executed (non-finite, outside the joint range, wrong names or size); the
+    message says why."""
 
 
 @dataclass(frozen=True)
@@ -90,8 +93,10 @@ def servo_calibrations_from_config(items: Sequence[dict] | None, desc=None) -> l
 @dataclass
 class CommandCounters:
     accepted: int = 0
-    rejected_nan: int = 0
-    rejected_names: int = 0
+    rejected_nan: int = 0        # NaN or ±inf
+    rejected_names: int = 0      # unknown or missing joint names
+    rejected_size: int = 0       # as many positions as names, six without names
+    rejected_range: int = 0      # outside the joint limits by more than RANGE_TOLERANCE
     clamped: int = 0
     slew_limited: int = 0
     coalesced: int = 0
@@ -145,18 +150,22 @@ class DriverCore:
     def order_command(self, names: Sequence[str], positions: Sequence[float]) -> np.ndarray:
         """Positions (6,) in joint order from a JointState's names/positions (empty names: given order).
 
+        A command is executed whole or not at all: one outside the joint limits (as 1e9 rad) is rejected, not
+        clamped, and the servos keep the last good command.
+
         Raises:
-            CommandRejected: wrong size, unknown/missing names, or a non-finite value.
+            CommandRejected: wrong size, unknown/missing names, a non-finite value or one outside the joint range
+                (each counted in `counters` by reason).
         """
         pos = np.asarray(positions, dtype=float)
         if len(names) == 0:
             if pos.shape != (N_JOINTS,):
-                self.counters.rejected_names += 1
+                self.counters.rejected_size += 1
                 raise CommandRejected(f"{pos.size} positions without names; expected {N_JOINTS}")
             ordered = pos
         else:
             if len(names) != len(pos):
-                self.counters.rejected_names += 1
+                self.counters.rejected_size += 1
                 raise CommandRejected(f"{len(names)} names but {len(pos)} positions")
             index = {n: i for i, n in enumerate(names)}
             missing = [n for n in self.joint_names if n not in index]
@@ -167,6 +176,12 @@ class DriverCore:
         if not np.all(np.isfinite(ordered)):
             self.counters.rejected_nan += 1
             raise CommandRejected(f"non-finite joint command {ordered.tolist()}")
+        outside = (ordered < self.zeta_min - RANGE_TOLERANCE) | (ordered > self.zeta_max + RANGE_TOLERANCE)
+        if np.any(outside):
+            self.counters.rejected_range += 1
+            i = int(np.argmax(outside))
+            raise CommandRejected(f"{self.joint_names[i]} = {ordered[i]:.6g} rad outside its range "
+                                  f"[{self.zeta_min[i]:.4f}, {self.zeta_max[i]:.4f}] rad")
         return ordered
 
     def limit_command(self, zeta: np.ndarray, now: float | None = None) -> np.ndarray:

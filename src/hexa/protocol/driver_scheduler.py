@@ -393,7 +393,8 @@ def driver_reports(sched: DriverScheduler, uno: Any, mega: Any, now: float, stal
         mega_r = mega_r._replace(level="ERROR", message=f"telemetry stale (no sample for {age:.2f} s)")
     uno_r = link_report("hexa_driver: servo board (Uno)", uno, now, {
         "commands_accepted": c.accepted, "commands_rejected_nan": c.rejected_nan,
-        "commands_rejected_names": c.rejected_names, "commands_clamped": c.clamped,
+        "commands_rejected_names": c.rejected_names, "commands_rejected_size": c.rejected_size,
+        "commands_rejected_range": c.rejected_range, "commands_clamped": c.clamped,
         "commands_slew_limited": c.slew_limited, "commands_coalesced": c.coalesced,
         "commands_unsent": sched.tx_failures, "targets_restored_after_reconnect": uno.restored,
         "board_pulses_us": list(us.pulses_us) if us is not None else "?",
