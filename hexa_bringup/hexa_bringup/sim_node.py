@@ -145,12 +145,16 @@ def main(argv: list[str] | None = None) -> int:
         print(f"hexa sim: {exc}", file=sys.stderr)
         rclpy.try_shutdown()
         return 2
+    except KeyboardInterrupt:                    # stopped while the model loads
+        rclpy.try_shutdown()
+        return 0
     try:
         node.runner.run(node, rclpy.ok)
     except KeyboardInterrupt:
         pass
     finally:
-        signal.signal(signal.SIGINT, signal.SIG_IGN)
+        signal.signal(signal.SIGINT, signal.SIG_IGN)   # a second signal must not interrupt the teardown
+        signal.signal(signal.SIGTERM, signal.SIG_IGN)
         node.close()
         node.destroy_node()
         rclpy.try_shutdown()

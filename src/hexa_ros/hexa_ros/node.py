@@ -6,7 +6,8 @@ node classes in one process on one executor the same way.
 The executor is rclpy's EventsExecutor (C++ event queue): a 1 kHz JointState subscription costs ≈ 110-160 µs of CPU
 per message with it against ≈ 640 µs with the SingleThreadedExecutor on the 2-core robot PC (docs/node_layer.md).
 Its `spin()` does not return on SIGINT, so the loop below spins in bounded steps and SIGINT/SIGTERM set a flag
-that ends the loop after the callback in progress (while nodes are built, they raise KeyboardInterrupt). rclpy's
+that ends the loop after the callback in progress (while nodes are built, they raise KeyboardInterrupt; from the
+executor's set-up on, they only set the flag). rclpy's
 signal handler stays off: it would invalidate the context while a callback is still publishing. The bounded step
 also ends the wait when /clock stops (sim time, the simulator gone), where an unbounded wait would never return.
 """
@@ -70,19 +71,29 @@ class _StopRequest:
         cls.requested = True
 
 
+def stop_on_signal() -> None:
+    """From now on SIGINT/SIGTERM only request the stop (`_StopRequest`): no KeyboardInterrupt can interrupt the
+    executor's set-up or a message being taken and converted."""
+    signal.signal(signal.SIGINT, _StopRequest.handler)
+    signal.signal(signal.SIGTERM, _StopRequest.handler)
+
+
 def spin_until_shutdown(executor: Any, step: float = SPIN_STEP) -> None:
-    """Spin `executor` in bounded steps until the context shuts down or SIGINT/SIGTERM arrives."""
+    """Spin `executor` in bounded steps until the context shuts down or SIGINT/SIGTERM arrives (also one that
+    arrived since `stop_on_signal`). An error the executor raises once the stop was requested (a message taken
+    while the process is being stopped) ends the spin like the stop itself; before, it propagates."""
     import rclpy
     from rclpy.executors import ExternalShutdownException
 
-    _StopRequest.requested = False
-    signal.signal(signal.SIGINT, _StopRequest.handler)
-    signal.signal(signal.SIGTERM, _StopRequest.handler)
+    stop_on_signal()
     try:
         while rclpy.ok() and not _StopRequest.requested:
             executor.spin_once(timeout_sec=step)
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
+    except Exception:
+        if not _StopRequest.requested:
+            raise
 
 
 def run(factories: Sequence[Callable[..., Any]], name: str, argv: list[str] | None = None,
@@ -104,6 +115,7 @@ def run(factories: Sequence[Callable[..., Any]], name: str, argv: list[str] | No
     from hexa_ros.env import apply_defaults
 
     apply_defaults()
+    _StopRequest.requested = False
     install_signal_handlers()
     rclpy.init(args=argv if argv is not None else sys.argv, signal_handler_options=SignalHandlerOptions.NO)
     nodes: list[Any] = []
@@ -117,6 +129,7 @@ def run(factories: Sequence[Callable[..., Any]], name: str, argv: list[str] | No
     except KeyboardInterrupt:
         _teardown(nodes)
         return 0
+    stop_on_signal()     # a signal from here on ends the spin before or after its first step, never a traceback
     try:
         executor = make_executor(executor_kind())
     except ValueError as exc:
@@ -134,6 +147,7 @@ def _teardown(nodes: list[Any], executor: Any = None) -> None:
     import rclpy
 
     signal.signal(signal.SIGINT, signal.SIG_IGN)     # a second Ctrl-C must not interrupt the teardown
+    signal.signal(signal.SIGTERM, signal.SIG_IGN)
     for node in reversed(nodes):
         close = getattr(node, "close", None)
         if callable(close):
