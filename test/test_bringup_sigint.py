@@ -1,6 +1,6 @@
-"""Ctrl-C of `hexa bringup sim`: every node exits with rc 0 and no traceback, whenever the signal comes once the
-nodes are up (at once, while the circle runs). A signal while a node's Python still imports its modules (the first
-seconds) is not covered: that node dies of the KeyboardInterrupt (docs/driver.md, "Faults and recovery")."""
+"""Ctrl-C of `hexa bringup sim`: every node exits with rc 0 and no traceback once the nodes are up (at once, while the
+circle runs). Each node runs through hexa_ros.start, so a Ctrl-C while it still imports or builds is clean too, but
+for the interpreter's own start (its first fraction of a second), which no Python code covers (docs/node_layer.md)."""
 from __future__ import annotations
 
 import re

@@ -27,11 +27,13 @@ EXECUTORS = ("events", "single")
 
 
 def _raise_keyboard_interrupt(_signum: int, _frame: Any) -> None:
+    _StopRequest.requested = True
     raise KeyboardInterrupt
 
 
 def install_signal_handlers() -> None:
-    """SIGINT and SIGTERM raise KeyboardInterrupt in the main thread (rclpy's own handler stays off)."""
+    """SIGINT and SIGTERM raise KeyboardInterrupt in the main thread (rclpy's own handler stays off) and record the
+    stop request (`stop_requested`): an import interrupted by it raises ImportError, not KeyboardInterrupt."""
     signal.signal(signal.SIGINT, _raise_keyboard_interrupt)
     signal.signal(signal.SIGTERM, _raise_keyboard_interrupt)
 
@@ -69,6 +71,11 @@ class _StopRequest:
     @classmethod
     def handler(cls, _signum: int, _frame: Any) -> None:
         cls.requested = True
+
+
+def stop_requested() -> bool:
+    """SIGINT or SIGTERM arrived since `install_signal_handlers` (first called by hexa_ros.start or `run`)."""
+    return _StopRequest.requested
 
 
 def stop_on_signal() -> None:
@@ -115,20 +122,20 @@ def run(factories: Sequence[Callable[..., Any]], name: str, argv: list[str] | No
     from hexa_ros.env import apply_defaults
 
     apply_defaults()
-    _StopRequest.requested = False
-    install_signal_handlers()
+    install_signal_handlers()     # a stop requested earlier (hexa_ros.start, while importing) still counts
     rclpy.init(args=argv if argv is not None else sys.argv, signal_handler_options=SignalHandlerOptions.NO)
     nodes: list[Any] = []
     try:
         for k, factory in enumerate(factories):
             nodes.append(factory(**(node_kwargs[k] if node_kwargs else {})))
-    except CONFIG_ERRORS as exc:
-        print(f"hexa {name}: {exc}", file=sys.stderr)
-        _teardown(nodes)
-        return 2
-    except KeyboardInterrupt:
-        _teardown(nodes)
-        return 0
+    except BaseException as exc:  # noqa: BLE001 - stopped while building (whatever the signal interrupted), or
+        _teardown(nodes)          # a configuration error
+        if _StopRequest.requested:
+            return 0
+        if isinstance(exc, CONFIG_ERRORS):
+            print(f"hexa {name}: {exc}", file=sys.stderr)
+            return 2
+        raise
     stop_on_signal()     # a signal from here on ends the spin before or after its first step, never a traceback
     try:
         executor = make_executor(executor_kind())
