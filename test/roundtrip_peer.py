@@ -1,5 +1,6 @@
 """Peer process for the cross-process tests: `pub` publishes samples of every hexa_msgs message (latched);
-`sub` receives them and prints one JSON line {type: fields-as-dict}; `collision` publishes one CollisionEvent."""
+`sub` receives them and prints one JSON line {type: fields-as-dict}; `collision` publishes one CollisionEvent;
+`stream` publishes CollisionEvents numbered 0, 1, ... at 100 Hz."""
 from __future__ import annotations
 
 import json
@@ -50,6 +51,19 @@ def main() -> int:
             while rclpy.ok():  # keep publishing so a late subscriber gets one
                 pub.publish(msg)
                 rclpy.spin_once(node, timeout_sec=0.1)
+        elif mode == "stream":
+            from rclpy.qos import QoSProfile, ReliabilityPolicy
+
+            pub = node.create_publisher(hm.CollisionEvent, "/hexa/collision",
+                                        QoSProfile(depth=100, reliability=ReliabilityPolicy.RELIABLE))
+            count = [0]
+
+            def tick() -> None:
+                pub.publish(hm.CollisionEvent(event=hm.CollisionEvent.START, id=count[0], axis_name="z"))
+                count[0] += 1
+
+            node.create_timer(0.01, tick)
+            rclpy.spin(node)
         elif mode == "sub":
             got: dict[str, dict] = {}
             for name in MESSAGES:

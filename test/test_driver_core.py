@@ -51,17 +51,34 @@ def test_servo_calibration_rejects_zero_slope_and_bad_limits():
         servo_calibrations_from_config([{"zero_us": 1500, "us_per_rad": 600}])
 
 
-def test_order_command_by_name_and_rejections(core):
+def test_order_command_by_name_and_rejections(core, desc):
     names = ["arm_3", "arm_1", "arm_2", "arm_6", "arm_5", "arm_4"]
-    z = core.order_command(names, [3, 1, 2, 6, 5, 4])
-    assert z.tolist() == [1, 2, 3, 4, 5, 6]
+    c = desc.zeta_center
+    z = core.order_command(names, [c + 0.3, c + 0.1, c + 0.2, c + 0.6, c + 0.5, c + 0.4])
+    assert np.allclose(z - c, [0.1, 0.2, 0.3, 0.4, 0.5, 0.6])
     with pytest.raises(CommandRejected, match="non-finite"):
-        core.order_command([], [1, 2, float("nan"), 4, 5, 6])
+        core.order_command([], [c, c, float("nan"), c, c, c])
+    with pytest.raises(CommandRejected, match="non-finite"):
+        core.order_command([], [c, c, c, float("-inf"), c, c])
     with pytest.raises(CommandRejected, match="lacks \\['arm_4'\\]"):
-        core.order_command(names[:5] + ["wrist"], [1] * 6)
+        core.order_command(names[:5] + ["wrist"], [c] * 6)
     with pytest.raises(CommandRejected, match="5 positions without names"):
-        core.order_command([], [1] * 5)
-    assert core.counters.rejected_nan == 1 and core.counters.rejected_names == 2
+        core.order_command([], [c] * 5)
+    with pytest.raises(CommandRejected, match="6 names but 7 positions"):
+        core.order_command(names, [c] * 7)
+    assert (core.counters.rejected_nan, core.counters.rejected_names, core.counters.rejected_size) == (2, 1, 2)
+    assert core.counters.accepted == 0
+
+
+@pytest.mark.parametrize("value", [1e9, -1e9, "max", "min"])
+def test_a_command_outside_the_joint_range_is_rejected_not_clamped(core, desc, value):
+    step = 1e-3
+    zeta = {"max": desc.zeta_max + step, "min": desc.zeta_min - step}.get(value, value)
+    with pytest.raises(CommandRejected, match=r"arm_2 = .* rad outside its range \[-4\.1888, -1\.0472\] rad"):
+        core.order_command([], [desc.zeta_center, zeta] + [desc.zeta_center] * 4)
+    assert core.counters.rejected_range == 1 and core.counters.clamped == 0
+    at_limit = core.order_command([], [desc.zeta_max + 1e-9] + [desc.zeta_center] * 5)   # float noise at a limit
+    assert np.allclose(core.limit_command(at_limit, now=0.0)[0], desc.zeta_max)
 
 
 def test_limit_command_clamps_to_joint_limits_and_slew(core, desc):

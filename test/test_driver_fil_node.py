@@ -5,16 +5,19 @@ right current on motor_currents and the right effort on joint_states. Fails (nev
 """
 from __future__ import annotations
 
+import os
 import time
 
 import numpy as np
 import pytest
 
+from hexa.protocol import frames as fr
 from hexa.protocol.driver_core import servo_calibrations_from_config
+from hexa.protocol.emulator import UnoEmulator
 from hexa.protocol.sensor_model import DEFAULT_SENSOR
 from hexa.protocol.simavr import SERVO_PINS, SimavrBoard, simavr_counts
 from hexa.robots.hexa_description import load_hexa
-from test_driver_helpers import RosProbe, driver_args, wait_for
+from test_driver_helpers import RosProbe, driver_args, kv, wait_for
 
 
 @pytest.fixture
@@ -60,3 +63,22 @@ def test_driver_node_through_real_firmware_in_simavr(tmp_path, procs, ros_env, p
         # a new voltage on one channel shows up on the topic
         mega.set_adc(3, 2.2)
         assert wait_for(lambda: probe.currents[-1][1].raw[3] == simavr_counts(2.2), 3.0)
+
+
+def test_the_real_mega_firmware_streams_again_after_one_stop_stream_frame_on_its_port(tmp_path, procs, ros_env, probe):
+    with UnoEmulator(link=tmp_path / "uno") as uno, SimavrBoard("mega", link=tmp_path / "mega") as mega:
+        procs.start(driver_args(uno.port, mega.port, "stream_rate_hz:=250", "diagnostics_period:=0.1"), ros_env)
+        assert wait_for(lambda: len(probe.currents) >= 50, 30.0), "no motor_currents through the firmware"
+        fd = os.open(mega.port, os.O_WRONLY | os.O_NOCTTY)   # the frame reaches the firmware, not the driver
+        try:
+            os.write(fd, fr.encode_frame(fr.STOP_STREAM, 0))
+        finally:
+            os.close(fd)
+        t_stop = time.monotonic()
+        assert wait_for(lambda: probe.currents[-1][0] > t_stop + 0.5, 5.0), "the stream did not come back"
+        gap = max(b[0] - a[0] for a, b in zip(probe.currents, probe.currents[1:]) if b[0] > t_stop)
+        print(f"firmware STOP_STREAM -> streaming again: {gap * 1e3:.0f} ms")
+        assert 0.2 < gap < 1.0           # it did stop, and came back within a second
+        t_now = time.monotonic()
+        st = wait_for(lambda: (s := probe.diag_status("current board", since=t_now)) is not None and s, 2.0)
+        assert st and int(kv(st)["stream_rerequests"]) >= 1 and int(kv(st)["connects"]) == 1

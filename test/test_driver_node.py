@@ -3,11 +3,13 @@ zero-current calibration, diagnostics, stale telemetry and unplug/replug recover
 from __future__ import annotations
 
 import math
+import os
 import time
 
 import numpy as np
 import pytest
 
+from hexa.protocol import frames as fr
 from hexa.protocol.driver_core import servo_calibrations_from_config
 from hexa.protocol.emulator import MegaEmulator, UnoEmulator
 from hexa.protocol.sensor_model import DEFAULT_SENSOR
@@ -52,18 +54,20 @@ def test_driver_commands_pulses_publishes_currents_and_effort_and_calibrates(tmp
         assert wait_for(lambda: expected in got, 5.0), (expected, got[-3:])
         assert wait_for(lambda: np.allclose(probe.states[-1][1].position, zeta), 3.0)
 
-        # NaN is rejected (nothing sent), out-of-range is clamped to the joint limits
+        # NaN, inf, 1e9 rad, a wrong size: rejected (nothing sent, the last good command stays), counted by reason
         n = len(got)
-        probe.command([float("nan")] + list(zeta[1:]))
+        for bad in ([float("nan")] + list(zeta[1:]), [float("inf")] + list(zeta[1:]), [1e9] + list(zeta[1:]),
+                    [desc.zeta_max + 1.0] + list(zeta[1:])):
+            probe.command(bad)
+        probe.command(list(zeta[:5]), names=[f"arm_{i}" for i in range(1, 6)])
         time.sleep(0.3)
-        assert len(got) == n
-        probe.command([desc.zeta_max + 1.0] + list(zeta[1:]))
-        clamped = (servos[0].pulse_from_angle(desc.zeta_max),) + expected[1:]
-        assert wait_for(lambda: got[-1] == clamped, 5.0), (clamped, got[-1])
+        assert len(got) == n and uno.targets == expected
+        assert np.allclose(probe.states[-1][1].position, zeta)
         t_diag = time.monotonic()
         uno_diag = wait_for(lambda: probe.diag_status("servo board", since=t_diag), 5.0)
         d = kv(uno_diag)
-        assert int(d["commands_rejected_nan"]) == 1 and int(d["commands_clamped"]) >= 1
+        assert (int(d["commands_rejected_nan"]), int(d["commands_rejected_range"])) == (2, 2)
+        assert int(d["commands_rejected_names"]) == 1 and int(d["commands_clamped"]) == 0
 
         # zero-current calibration at rest: I_0 = the mean current; afterwards currents read ~0
         time.sleep(0.4)
@@ -131,19 +135,70 @@ def _level(status) -> int:
     return lv[0] if isinstance(lv, (bytes, bytearray)) else int(lv)
 
 
-def test_driver_reports_stale_telemetry_as_error(tmp_path, procs, ros_env, probe):
-    with UnoEmulator(link=tmp_path / "uno") as uno, MegaEmulator(link=tmp_path / "mega") as mega:
-        procs.start(driver_args(uno.port, mega.port, "stream_rate_hz:=100", "diagnostics_period:=0.1",
+def _write_frame(port: str, msg_type: int) -> None:
+    """One frame written into a board's port from outside the driver (the board receives it)."""
+    fd = os.open(port, os.O_WRONLY | os.O_NOCTTY)
+    try:
+        os.write(fd, fr.encode_frame(msg_type, 0))
+    finally:
+        os.close(fd)
+
+
+def _no_samples(data: bytes) -> bytes:
+    """A board whose sampling died: every frame but SAMPLE still goes out."""
+    return b"".join(fr.encode_frame(f.type, f.seq, f.payload) for f in fr.FrameParser().feed(data)
+                    if f.type != fr.SAMPLE)
+
+
+def test_driver_recovers_a_silent_board_and_diagnostics_name_it_while_stale(tmp_path, procs, ros_env, probe):
+    mute = []
+    got = []
+    with UnoEmulator(on_targets=got.append, link=tmp_path / "uno") as uno, \
+            MegaEmulator(link=tmp_path / "mega", tx_filter=lambda b: _no_samples(b) if mute else b) as mega:
+        procs.start(driver_args(uno.port, mega.port, "stream_rate_hz:=200", "diagnostics_period:=0.05",
                                 "drop_after:=30.0"), ros_env)
-        assert wait_for(lambda: len(probe.currents) >= 10, 30.0), "no motor_currents from the driver"
-        mega.streaming = False  # the board stops sending without closing the port
+        assert wait_for(lambda: len(probe.currents) >= 20, 30.0), "no motor_currents from the driver"
+        # one STOP_STREAM frame on the Mega's port, as after a board reset: streaming again without a manual step
+        _write_frame(mega.port, fr.STOP_STREAM)
         t_stop = time.monotonic()
-        st = wait_for(lambda: (s := probe.diag_status("current board", since=t_stop + 0.3)) is not None
-                      and _level(s) == 2 and s, 3.0)
-        assert st and "stale" in st.message
-        n = len(probe.currents)
-        time.sleep(0.3)
-        assert len(probe.currents) == n  # nothing published while stale
+        assert wait_for(lambda: not mega.streaming, 1.0)
+        assert wait_for(lambda: mega.streaming and probe.currents[-1][0] > t_stop + 0.05, 3.0)
+        gap = max(b[0] - a[0] for a, b in zip(probe.currents, probe.currents[1:]) if b[0] > t_stop)
+        print(f"STOP_STREAM -> streaming again: {gap * 1e3:.0f} ms")
+        assert gap < 1.0
+        t_now = time.monotonic()
+        st = wait_for(lambda: (s := probe.diag_status("current board", since=t_now)) is not None
+                      and _level(s) == 0 and s, 2.0)
+        assert st
+        assert int(kv(st)["stream_rerequests"]) >= 1 and int(kv(st)["stream_recoveries"]) == 1
+        assert int(kv(st)["connects"]) == 1 and int(kv(st)["stream_reconnects"]) == 0
+        assert float(kv(st)["stream_last_recovery_s"]) < 1.0
+        # samples stop but the board answers everything else: ERROR naming the board while stale, then a reconnect
+        mute.append(True)
+        t_mute = time.monotonic()
+        st = wait_for(lambda: (s := probe.diag_status("current board", since=t_mute + 0.3)) is not None
+                      and _level(s) == 2 and s, 2.0)
+        assert st and "stale" in st.message and "Mega" in st.name
+        assert wait_for(lambda: int(kv(probe.diag_status("current board"))["stream_reconnects"]) >= 1, 2.0)
+        mute.clear()
+        t_back = time.monotonic()
+        assert wait_for(lambda: probe.currents[-1][0] > t_back, 3.0)
+        print(f"silent board reconnected -> streaming again: {probe.currents[-1][0] - t_mute:.2f} s after mute")
+        t_now = time.monotonic()
+        st = wait_for(lambda: (s := probe.diag_status("current board", since=t_now)) is not None
+                      and _level(s) == 0 and s, 3.0)
+        assert st and int(kv(st)["connects"]) >= 2
+        # the servo board resets with its port open: configured again, its last command restored
+        probe.command(np.full(6, load_hexa().zeta_center))
+        assert wait_for(lambda: len(got) >= 1, 3.0)
+        n = len(got)
+        uno.reset()
+        assert wait_for(lambda: len(got) > n and uno.outputs_enabled and uno.latch_report, 2.0)
+        assert got[-1] == got[n - 1]
+        t_now = time.monotonic()
+        st = wait_for(lambda: (s := probe.diag_status("servo board", since=t_now)) is not None
+                      and _level(s) == 0 and s, 2.0)
+        assert st and int(kv(st)["board_reconfigures_outputs_off"]) + int(kv(st)["latch_rerequests"]) >= 1
 
 
 def test_a_command_held_by_the_rate_limit_is_sent_on_wall_time_under_sim_time(tmp_path, procs, ros_env, probe):

@@ -13,6 +13,7 @@ import pytest
 from hexa.protocol import frames as fr
 from hexa.protocol.driver_core import DriverConfigError, driver_core_from_config, load_driver_config
 from hexa.protocol.driver_scheduler import CalibrationRefused, DriverScheduler, driver_reports
+from hexa.protocol.stream_watch import StreamWatch
 from hexa.robots.hexa_description import load_hexa
 
 MEGA = 5.0      # the Mega's board clock reads host time · rate + MEGA (s)
@@ -320,9 +321,11 @@ def test_diagnostics_name_a_stale_board_and_the_watchdog_hold(core):
                  bad_length=0, resyncs=0, discarded_bytes=0, dropped_frames=0, board_errors=0, decode_errors=0,
                  rtt_s=0.001, firmware_version=1, last_error="")
     uno = SimpleNamespace(port="/dev/uno", restored=0, stats=SimpleNamespace(state="CONNECTED", last_rx=9.9, **stats),
-                          status=fr.ServoStatus(fr.FLAG_WATCHDOG_HOLD, 0, 0, 0, 0, (1500,) * 6, 600))
+                          status=fr.ServoStatus(fr.FLAG_WATCHDOG_HOLD, 0, 0, 0, 0, (1500,) * 6, 600),
+                          watch=StreamWatch(0.25, 0.2, 0.75), reconfigures={"outputs_off": 0})
     mega = SimpleNamespace(port="/dev/mega", samples=100, sample_gaps=0, rate_hz=200, status=None,
-                           stats=SimpleNamespace(state="STALE", last_rx=9.5, **stats))
+                           stats=SimpleNamespace(state="STALE", last_rx=9.5, **stats),
+                           watch=StreamWatch(0.25, 0.2, 0.75))
     uno_r, mega_r = driver_reports(sched, uno, mega, now=10.0, stale_timeout=0.25)
     assert (mega_r.level, mega_r.message) == ("ERROR", "telemetry stale (no data for 0.50 s)")
     assert uno_r.level == "OK" and uno_r.values["board_watchdog_hold"] is True   # nothing commanded yet: no WARN
@@ -335,3 +338,7 @@ def test_diagnostics_name_a_stale_board_and_the_watchdog_hold(core):
     assert (mega_r.level, mega_r.message) == ("ERROR", "telemetry stale (no sample for 0.50 s)")
     assert mega_r.values["sample_rate_hz"] == "0.0" and uno_r.values["commands_accepted"] == 1
     assert uno_r.hardware_id == "/dev/uno" and mega_r.values["state"] == "CONNECTED"
+    uno.watch.start(10.5)          # the latch report asked for and quiet since: ERROR naming it, counted recoveries
+    uno_r, _ = driver_reports(sched, uno, mega, now=10.8, stale_timeout=0.25)
+    assert (uno_r.level, uno_r.message) == ("ERROR", "latch report stale (no LATCH for 0.30 s)")
+    assert uno_r.values["latch_rerequests"] == 0 and uno_r.values["board_reconfigures_outputs_off"] == 0

@@ -95,16 +95,57 @@ def test_unplug_replug_recovers_under_two_seconds(tmp_path):
             assert link.stats.last_reconnect_s < 2.5
 
 
-def test_stale_stream_marks_stale_then_reconnects(tmp_path):
-    with MegaEmulator(link=tmp_path / "mega") as mega:
+def test_a_board_that_stops_streaming_is_asked_again_and_streams_within_a_second(tmp_path):
+    samples = []
+    with MegaEmulator(link=tmp_path / "mega") as mega, \
+            CurrentLink(mega.port, rate_hz=200, stale_timeout=0.25, stream_reconnect_after=0.75,
+                        on_sample=lambda s, t, g: samples.append(t)) as link:
+        assert link.wait_connected(3.0) and _wait(lambda: len(samples) > 20)
+        mega.reset()                        # the board restarts with its port open: no stream, answers requests
+        t_stop = time.monotonic()
+        assert _wait(lambda: samples[-1] > t_stop + 0.05, 2.0)
+        back = next(t for t in samples if t > t_stop) - t_stop
+        print(f"stopped stream -> streaming again: {back * 1e3:.0f} ms")
+        assert back < 1.0 and link.watch.rerequests >= 1 and link.watch.recoveries == 1
+        assert link.stats.connects == 1 and link.watch.reconnects == 0   # re-requested, not reconnected
+        link.stop_stream()                  # stopped by the host: not re-requested
+        time.sleep(0.5)
+        assert not mega.streaming and link.watch.rerequests == 1
+
+
+def test_a_hung_board_is_reconnected_when_rerequests_do_not_help(tmp_path):
+    hung = threading.Event()
+    with MegaEmulator(link=tmp_path / "mega", tx_filter=lambda b: b"" if hung.is_set() else b) as mega:
         states = []
-        with CurrentLink(mega.port, rate_hz=100, stale_timeout=0.2, drop_after=0.3, poll_period=0,
-                         ping_period=0, on_state=states.append) as link:
+        with CurrentLink(mega.port, rate_hz=100, stale_timeout=0.2, drop_after=5.0, stream_reconnect_after=0.5,
+                         poll_period=0, ping_period=0, on_state=states.append) as link:
             assert link.wait_connected(3.0)
-            mega.streaming = False   # the board silently stops sending (hung firmware)
+            hung.set()                      # the board sends nothing at all
             assert _wait(lambda: "STALE" in states, 1.0)
-            assert _wait(lambda: link.stats.connects >= 2, 3.0)  # dropped, reopened, stream restarted
+            assert _wait(lambda: link.stats.disconnects == 1, 1.0)    # after 0.5 s quiet, not drop_after's 5 s
+            assert link.watch.reconnects == 1 and link.watch.rerequests >= 1
+            hung.clear()
+            assert _wait(lambda: link.stats.connects >= 2, 3.0)       # reopened, stream restarted
             assert mega.streaming
+
+
+def test_a_servo_board_reset_with_the_port_open_is_configured_again(tmp_path):
+    got, latches = [], []
+    with UnoEmulator(on_targets=got.append, link=tmp_path / "uno") as uno, \
+            ServoLink(uno.port, watchdog_ms=300, min_us=[700] * 6, on_latch=lambda x, t: latches.append(t),
+                      stale_timeout=0.25) as link:
+        assert link.wait_connected(3.0)
+        link.set_targets([1100, 1200, 1300, 1400, 1500, 1600])
+        assert _wait(lambda: len(got) == 1 and len(latches) > 5)
+        uno.reset()                         # outputs off, default limits and watchdog, no latch report
+        t_reset = time.monotonic()
+        assert _wait(lambda: latches[-1] > t_reset + 0.05 and len(got) >= 2, 2.0)
+        back = next(t for t in latches if t > t_reset) - t_reset
+        print(f"servo board reset -> latch report again: {back * 1e3:.0f} ms")
+        assert back < 1.0 and got[-1] == got[0] and uno.outputs_enabled
+        assert (uno.watchdog_ms, uno.min_us, uno.latch_report) == (300, [700] * 6, True)
+        assert link.reconfigures["outputs_off"] + link.reconfigures["latch_quiet"] >= 1
+        assert link.stats.connects == 1
 
 
 def test_servo_link_restores_last_targets_after_the_board_comes_back(tmp_path):

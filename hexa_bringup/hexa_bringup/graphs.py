@@ -80,7 +80,8 @@ def build_graph(mode: str, namespace: str = "/hexa", params: Path | None = DEFAU
             continue
         extra = (node_args or {}).get(name, [])
         sim_time = mode in ("sim", "replay")
-        cmd = [sys.executable, "-m", module] + ros_args(name, namespace, params, sim_time, extra)
+        # through hexa_ros.start: a Ctrl-C while the module still imports stops it cleanly too
+        cmd = [sys.executable, "-m", "hexa_ros.start", module] + ros_args(name, namespace, params, sim_time, extra)
         specs.append(NodeSpec(name, cmd, required=required))
     if missing:
         raise SupervisorError(f"cannot bring up '{mode}': required node module(s) not installed: "

@@ -150,23 +150,28 @@ def main(argv: list[str] | None = None) -> int:
 
     from hexa.sim.simulator import SimulatorError
     from hexa_ros.env import apply_defaults
-    from hexa_ros.node import install_signal_handlers
+    from hexa_ros.node import install_signal_handlers, stop_requested
 
     apply_defaults()
     install_signal_handlers()
     rclpy.init(args=argv if argv is not None else sys.argv, signal_handler_options=SignalHandlerOptions.NO)
     try:
         node = SimNode()
-    except (ValueError, SimulatorError) as exc:  # a bad parameter (scenario, trajectory, max_lag, ...): named, exit 2
-        print(f"hexa sim: {exc}", file=sys.stderr)
-        rclpy.try_shutdown()
-        return 2
+    except BaseException as exc:  # noqa: BLE001 - stopped while the model loads (whatever it interrupted), or
+        rclpy.try_shutdown()      # a bad parameter (scenario, trajectory, max_lag, ...): named, exit 2
+        if stop_requested():
+            return 0
+        if isinstance(exc, (ValueError, SimulatorError)):
+            print(f"hexa sim: {exc}", file=sys.stderr)
+            return 2
+        raise
     try:
         node.runner.run(node, rclpy.ok)
     except KeyboardInterrupt:
         pass
     finally:
-        signal.signal(signal.SIGINT, signal.SIG_IGN)
+        signal.signal(signal.SIGINT, signal.SIG_IGN)   # a second signal must not interrupt the teardown
+        signal.signal(signal.SIGTERM, signal.SIG_IGN)
         node.close()
         node.destroy_node()
         rclpy.try_shutdown()

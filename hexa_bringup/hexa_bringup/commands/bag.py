@@ -1,4 +1,5 @@
-"""`hexa record` and `hexa play`: MCAP rosbag2 recording of live topics (raw CDR) and playback."""
+"""`hexa record`, `hexa play` and `hexa bag recover`: MCAP rosbag2 recording of live topics (raw CDR), playback,
+and the rebuilding of a bag whose recorder was killed."""
 from __future__ import annotations
 
 import argparse
@@ -11,7 +12,8 @@ SKIP_BY_DEFAULT = {"/rosout", "/parameter_events"}
 
 
 def register(sub: argparse._SubParsersAction) -> None:
-    pr = sub.add_parser("record", help="record live topics to an MCAP rosbag2 (closed cleanly on Ctrl-C)")
+    pr = sub.add_parser("record", help="record live topics to an MCAP rosbag2 (closed cleanly on Ctrl-C; killed, "
+                                       "it loses at most the last 0.5 s: `hexa bag recover`)")
     pr.add_argument("topics", nargs="*", help="topics to record (default: every topic, discovered continuously)")
     pr.add_argument("-o", "--output", required=True, help="bag directory to create (must not exist)")
     pr.add_argument("--duration", type=float, default=0.0, help="stop after this many seconds (0 = until Ctrl-C)")
@@ -37,6 +39,16 @@ def register(sub: argparse._SubParsersAction) -> None:
                     help="write one line per published message: monotonic ns just before publishing, the message's "
                          "bag timestamp (ns) and its topic")
     pp.set_defaults(func=run_play)
+
+    pb = sub.add_parser("bag", help="bag maintenance")
+    bag_sub = pb.add_subparsers(dest="bag_command", required=True)
+    rv = bag_sub.add_parser("recover", help="rebuild a readable bag (MCAP + metadata.yaml) from what a killed "
+                                            "`hexa record` left, and say what was lost")
+    rv.add_argument("bag", help="the damaged bag directory (or its .mcap file)")
+    rv.add_argument("-o", "--output", help="write the recovered bag here (default: in place, the damaged one kept "
+                                           "as BAG.damaged)")
+    rv.add_argument("--json", action="store_true", help="print a JSON summary")
+    rv.set_defaults(func=run_recover)
 
 
 def _init(name: str, sim_time: bool = False):
@@ -111,6 +123,7 @@ def run_record(args: argparse.Namespace) -> int:
                         subs[topic] = node.create_subscription(cls, topic, on_raw, qos, raw=True)
                         print(f"hexa record: recording {topic} [{types[0]}]", file=sys.stderr, flush=True)
                 rclpy.spin_once(node, timeout_sec=0.05)
+                recorder.tick()
                 if args.duration and now - start >= args.duration:
                     break
         finally:
@@ -205,4 +218,30 @@ def run_play(args: argparse.Namespace) -> int:
         print(json.dumps({"bag": args.bag, "published": sent}))
     else:
         print(f"hexa play: published {sent} messages from {args.bag}")
+    return 0
+
+
+def run_recover(args: argparse.Namespace) -> int:
+    from hexa_bringup.bag import BagError, recover_bag
+
+    try:
+        r = recover_bag(args.bag, args.output)
+    except BagError as exc:
+        print(f"hexa bag recover: {exc}", file=sys.stderr)
+        return 2
+    total = sum(r.counts.values())
+    span = (r.end_ns - r.start_ns) / 1e9 if total else 0.0
+    if args.json:
+        print(json.dumps({"bag": str(r.output), "damaged": str(r.damaged) if r.damaged else None,
+                          "counts": r.counts, "start_ns": r.start_ns, "end_ns": r.end_ns, "chunks": r.chunks,
+                          "partial_chunk_messages": r.partial_messages, "discarded_bytes": r.discarded_bytes}))
+        return 0
+    print(f"hexa bag recover: {total} messages on {len(r.counts)} topics, {span:.3f} s "
+          f"(stamps {r.start_ns} .. {r.end_ns} ns) from {r.chunks} whole chunks and {r.partial_messages} messages "
+          f"of a cut chunk -> {r.output}")
+    for topic, n in sorted(r.counts.items()):
+        print(f"  {topic}: {n}")
+    kept = f"; the damaged bag is kept as {r.damaged}" if r.damaged else ""
+    print(f"lost: what was recorded after {r.end_ns} ns ({r.discarded_bytes} bytes of an incomplete record at "
+          f"the end of the file){kept}")
     return 0

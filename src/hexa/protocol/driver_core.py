@@ -21,6 +21,8 @@ from hexa.protocol.frames import MAX_RATE_HZ, MIN_RATE_HZ, PULSE_MAX_US, PULSE_M
 from hexa.protocol.sensor_model import CurrentSensorModel
 
 N_JOINTS = 6
+#: a command this far (rad) outside the joint range is float noise at a limit: clamped; farther: rejected
+RANGE_TOLERANCE = 1e-6
 JOINT_NAMES = tuple(f"arm_{i}" for i in range(1, N_JOINTS + 1))
 
 
@@ -29,7 +31,8 @@ class DriverConfigError(ValueError):
 
 
 class CommandRejected(ValueError):
-    """A joint command that cannot be executed (NaN, wrong names or size); the message says why."""
+    """A joint command that cannot be executed (non-finite, outside the joint range, wrong names or size); the
+    message says why."""
 
 
 @dataclass(frozen=True)
@@ -90,8 +93,10 @@ def servo_calibrations_from_config(items: Sequence[dict] | None, desc=None) -> l
 @dataclass
 class CommandCounters:
     accepted: int = 0
-    rejected_nan: int = 0
-    rejected_names: int = 0
+    rejected_nan: int = 0        # NaN or ±inf
+    rejected_names: int = 0      # unknown or missing joint names
+    rejected_size: int = 0       # as many positions as names, six without names
+    rejected_range: int = 0      # outside the joint limits by more than RANGE_TOLERANCE
     clamped: int = 0
     slew_limited: int = 0
     coalesced: int = 0
@@ -145,18 +150,22 @@ class DriverCore:
     def order_command(self, names: Sequence[str], positions: Sequence[float]) -> np.ndarray:
         """Positions (6,) in joint order from a JointState's names/positions (empty names: given order).
 
+        A command is executed whole or not at all: one outside the joint limits (as 1e9 rad) is rejected, not
+        clamped, and the servos keep the last good command.
+
         Raises:
-            CommandRejected: wrong size, unknown/missing names, or a non-finite value.
+            CommandRejected: wrong size, unknown/missing names, a non-finite value or one outside the joint range
+                (each counted in `counters` by reason).
         """
         pos = np.asarray(positions, dtype=float)
         if len(names) == 0:
             if pos.shape != (N_JOINTS,):
-                self.counters.rejected_names += 1
+                self.counters.rejected_size += 1
                 raise CommandRejected(f"{pos.size} positions without names; expected {N_JOINTS}")
             ordered = pos
         else:
             if len(names) != len(pos):
-                self.counters.rejected_names += 1
+                self.counters.rejected_size += 1
                 raise CommandRejected(f"{len(names)} names but {len(pos)} positions")
             index = {n: i for i, n in enumerate(names)}
             missing = [n for n in self.joint_names if n not in index]
@@ -167,6 +176,12 @@ class DriverCore:
         if not np.all(np.isfinite(ordered)):
             self.counters.rejected_nan += 1
             raise CommandRejected(f"non-finite joint command {ordered.tolist()}")
+        outside = (ordered < self.zeta_min - RANGE_TOLERANCE) | (ordered > self.zeta_max + RANGE_TOLERANCE)
+        if np.any(outside):
+            self.counters.rejected_range += 1
+            i = int(np.argmax(outside))
+            raise CommandRejected(f"{self.joint_names[i]} = {ordered[i]:.6g} rad outside its range "
+                                  f"[{self.zeta_min[i]:.4f}, {self.zeta_max[i]:.4f}] rad")
         return ordered
 
     def limit_command(self, zeta: np.ndarray, now: float | None = None) -> np.ndarray:
@@ -225,7 +240,8 @@ class DriverCore:
 
 # ---------------------------------------------------------------------------------------------- configuration
 SCALAR_KEYS = ("uno_port", "mega_port", "baud", "stream_rate_hz", "stale_timeout", "drop_after", "reconnect_period",
-               "hello_timeout", "boot_delay", "command_rate_hz", "max_speed",
+               "hello_timeout", "boot_delay", "stream_rerequest_period", "stream_reconnect_after", "command_rate_hz",
+               "max_speed",
                "board_clock_max_extrapolation", "watchdog_ms", "diagnostics_period", "calibration_duration",
                "rest_quiet_time", "frame_id", "latch_report", "command_sync", "command_sync_guard")
 REQUIRED_KEYS = SCALAR_KEYS + ("joint_names", "sensor", "current_offsets", "servos")
@@ -325,7 +341,9 @@ def driver_links_from_config(cfg: dict, core: DriverCore, on_samples, on_latch=N
 
     common = dict(baud=int(cfg["baud"]), stale_timeout=float(cfg["stale_timeout"]),
                   drop_after=float(cfg["drop_after"]), reconnect_period=float(cfg["reconnect_period"]),
-                  hello_timeout=float(cfg["hello_timeout"]), boot_delay=float(cfg["boot_delay"]))
+                  hello_timeout=float(cfg["hello_timeout"]), boot_delay=float(cfg["boot_delay"]),
+                  stream_rerequest_period=float(cfg["stream_rerequest_period"]),
+                  stream_reconnect_after=float(cfg["stream_reconnect_after"]))
     state = (lambda board: None) if on_state is None else (lambda board: lambda s: on_state(board, s))
     uno = ServoLink(str(cfg["uno_port"]), min_us=[s.min_us for s in core.servos],
                     max_us=[s.max_us for s in core.servos], watchdog_ms=int(cfg["watchdog_ms"]),

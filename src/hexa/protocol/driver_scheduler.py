@@ -375,8 +375,9 @@ def link_report(name: str, link: Any, now: float, extra: Mapping[str, Any]) -> L
 def driver_reports(sched: DriverScheduler, uno: Any, mega: Any, now: float, stale_timeout: float
                    ) -> tuple[LinkReport, LinkReport]:
     """The diagnostics of the servo board (a ServoLink) and the current board (a CurrentLink) at host time `now`:
-    each link's status and counters, the Mega's ERROR when no sample came for `stale_timeout` s, the Uno's WARN
-    while it holds the last command because commands stopped (its watchdog)."""
+    each link's status and counters, the Mega's ERROR when no sample came for `stale_timeout` s, the Uno's ERROR
+    while its LATCH reports are quiet, its WARN while it holds the last command because commands stopped (its
+    watchdog), and how often each link recovered a quiet stream (hexa.protocol.stream_watch)."""
     age = now - sched.last_sample_time if sched.last_sample_time else float("inf")
     rate = sched.measure_sample_rate(now, mega.samples)
     c = sched.core.counters
@@ -387,12 +388,13 @@ def driver_reports(sched: DriverScheduler, uno: Any, mega: Any, now: float, stal
         "sample_gaps": mega.sample_gaps, "data_age_s": f"{age:.3f}",
         "board_clock_rate": f"{sched.board_clock.rate:.4f}", "board_clock_restarts": sched.board_clock.restarts,
         "commands_redated": sched.timeline.redated,
-        "board_overruns": mega.status.overruns if mega.status else "?"})
+        "board_overruns": mega.status.overruns if mega.status else "?", **_recovery_values("stream", mega.watch)})
     if mega_r.level == "OK" and age > stale_timeout:
         mega_r = mega_r._replace(level="ERROR", message=f"telemetry stale (no sample for {age:.2f} s)")
     uno_r = link_report("hexa_driver: servo board (Uno)", uno, now, {
         "commands_accepted": c.accepted, "commands_rejected_nan": c.rejected_nan,
-        "commands_rejected_names": c.rejected_names, "commands_clamped": c.clamped,
+        "commands_rejected_names": c.rejected_names, "commands_rejected_size": c.rejected_size,
+        "commands_rejected_range": c.rejected_range, "commands_clamped": c.clamped,
         "commands_slew_limited": c.slew_limited, "commands_coalesced": c.coalesced,
         "commands_unsent": sched.tx_failures, "targets_restored_after_reconnect": uno.restored,
         "board_pulses_us": list(us.pulses_us) if us is not None else "?",
@@ -402,7 +404,16 @@ def driver_reports(sched: DriverScheduler, uno: Any, mega: Any, now: float, stal
         "latch_unmapped": sched.latches_unmapped, "uno_clock_rate": f"{sched.uno_clock.rate:.4f}",
         "command_sync": sched.command_sync, "commands_held_for_gap": sched.sync_held,
         "commands_sent_in_gap": sched.sync_sent_in_gap, "commands_sent_unsynced": sched.sync_unsynced,
-        "board_watchdog_hold": "?" if hold is None else hold})
-    if uno_r.level == "OK" and hold and sched.core.last_command_time is not None:
+        "board_watchdog_hold": "?" if hold is None else hold, **_recovery_values("latch", uno.watch),
+        **{f"board_reconfigures_{k}": v for k, v in uno.reconfigures.items()}})
+    if uno_r.level == "OK" and uno.watch.stale(now):
+        uno_r = uno_r._replace(level="ERROR", message=f"latch report stale (no LATCH for {uno.watch.quiet(now):.2f} s)")
+    elif uno_r.level == "OK" and hold and sched.core.last_command_time is not None:
         uno_r = uno_r._replace(level="WARN", message="holding last command (no joint_commands within the watchdog)")
     return uno_r, mega_r
+
+
+def _recovery_values(stream: str, watch: Any) -> dict[str, Any]:
+    """Diagnostic values of a link's StreamWatch, keys prefixed with the stream's name."""
+    return {f"{stream}_rerequests": watch.rerequests, f"{stream}_reconnects": watch.reconnects,
+            f"{stream}_recoveries": watch.recoveries, f"{stream}_last_recovery_s": f"{watch.last_recovery_s:.3f}"}

@@ -107,6 +107,12 @@ class _BoardEmulator:
         with self._lock:
             self._close_pty()
 
+    def reset(self) -> None:
+        """Simulate a board reset with the port open (hardware watchdog, brown-out): the board's state is as after
+        power-up (no stream, outputs off, default limits and watchdog, no latch report); the pty stays."""
+        with self._lock:
+            self._reset_board()
+
     def replug(self) -> None:
         """Simulate plugging the board back in: new pty, symlink updated, board state reset (like a reset)."""
         with self._lock:

@@ -21,6 +21,7 @@ from typing import Callable, Sequence
 import serial
 
 from hexa.protocol import frames as fr
+from hexa.protocol.stream_watch import RECONNECT, REREQUEST, StreamWatch
 
 DISCONNECTED = "DISCONNECTED"
 CONNECTING = "CONNECTING"
@@ -77,6 +78,10 @@ class BoardLink:
             starts the bootloader, which must not see our bytes); skipped for pseudo-terminals (/dev/pts/*).
         poll_period: send GET_STATUS this often when connected (0 = never).
         ping_period: send PING this often to measure the round trip (0 = never).
+        stream_rerequest_period: a board stream quiet for `stale_timeout` while the port is open (the Mega's
+            samples, the Uno's LATCH reports) is requested again this often (s; hexa.protocol.stream_watch).
+        stream_reconnect_after: the stream quiet this long (s, > stale_timeout; None: stale_timeout + drop_after)
+            -> close the port and reconnect.
     """
 
     kind = 0
@@ -84,7 +89,8 @@ class BoardLink:
     def __init__(self, port: str, baud: int = 500000, stale_timeout: float = 0.5, drop_after: float = 1.0,
                  reconnect_period: float = 0.1, hello_timeout: float = 3.0, poll_period: float = 0.2,
                  ping_period: float = 1.0, on_state: Callable[[str], None] | None = None,
-                 boot_delay: float = 0.0) -> None:
+                 boot_delay: float = 0.0, stream_rerequest_period: float = 0.2,
+                 stream_reconnect_after: float | None = None) -> None:
         self.port = port
         self.baud = baud
         self.stale_timeout = stale_timeout
@@ -96,6 +102,9 @@ class BoardLink:
         self.ping_period = ping_period
         self.on_state = on_state
         self.stats = LinkStats()
+        self.watch = StreamWatch(stale_timeout, stream_rerequest_period,
+                                 stale_timeout + drop_after if stream_reconnect_after is None
+                                 else stream_reconnect_after)
         self._ser: serial.Serial | None = None
         self._parser = fr.FrameParser()
         self._parser_base = fr.ParserStats()
@@ -107,6 +116,7 @@ class BoardLink:
         self._waiters: list[tuple[Callable[[fr.Frame], bool], list, threading.Event]] = []
         self._wait_lock = threading.Lock()
         self._next_poll = 0.0
+        self.status_asked = 0.0   # host time of the last periodic GET_STATUS
         self._next_ping = 0.0
         self._ping_sent: dict[int, float] = {}
         self._token = 0
@@ -233,6 +243,21 @@ class BoardLink:
     def periodic(self, now: float) -> None:
         """Called about every 20 ms while connected."""
 
+    def request_stream(self) -> None:
+        """Ask the board for its watched stream again (`watch` found it quiet; runs in the link thread)."""
+
+    def _watch_stream(self, now: float) -> bool:
+        """Recover a quiet stream (`watch`): re-request it, or close the port to reconnect (True)."""
+        action = self.watch.step(now)
+        if action == REREQUEST:
+            self.request_stream()
+        elif action == RECONNECT:
+            self.stats.last_error = (f"stream quiet for {self.watch.quiet(now):.2f} s after "
+                                     f"{self.watch.rerequests} re-requests: reconnecting")
+            self._close()
+            return True
+        return False
+
     # --------------------------------------------------------------------------------------------- thread
     def _set_state(self, state: str) -> None:
         if state != self.stats.state:
@@ -266,6 +291,7 @@ class BoardLink:
     def _close(self, count: bool = True) -> None:
         with self._wlock:
             ser, self._ser = self._ser, None
+        self.watch.stop()
         if ser is not None:
             try:
                 ser.close()
@@ -412,8 +438,11 @@ class BoardLink:
                     self.stats.last_error = f"no data for {quiet:.2f} s: reconnecting"
                     self._close()
                     continue
+            if self._watch_stream(now):
+                continue
             if self.poll_period and now >= self._next_poll:
                 self._next_poll = now + self.poll_period
+                self.status_asked = time.monotonic()
                 self.send(fr.GET_STATUS)
             if self.ping_period and now >= self._next_ping:
                 self._next_ping = now + self.ping_period
@@ -430,6 +459,12 @@ class ServoLink(BoardLink):
     `on_latch(latch, t_rx)` is called with each LATCH (frames.Latch: when each servo's pulse started, board clock,
     and the SET_TARGETS seq it carried; `set_targets` records the seq it used in `last_targets_seq`). Firmware
     without the report answers UNKNOWN_TYPE: the link connects anyway, with `latch_supported` False.
+
+    A board that reset with its port open (its hardware watchdog, a brown-out) forgets its configuration: the link
+    configures it again, counted by reason in `reconfigures`, when its LATCH reports go quiet (`watch`: then, still
+    quiet, it reconnects), when its STATUS shows the outputs off although targets were sent ("outputs_off"), and when
+    its STATUS shows the command watchdog holding although a command went out well within `watchdog_ms`
+    ("watchdog_hold").
     """
 
     kind = fr.BOARD_SERVO
@@ -449,22 +484,45 @@ class ServoLink(BoardLink):
         self.targets_sent = 0
         self.last_targets: tuple[int, ...] | None = None
         self.restored = 0
+        self.reconfigures = {"latch_quiet": 0, "outputs_off": 0, "watchdog_hold": 0}
+        self._targets_since: float | None = None   # the board has had targets since (host time), this connection
+        self._targets_tx = 0.0                     # last SET_TARGETS written (host time)
 
     def on_connected(self) -> None:
+        self._targets_since = None
         self.request(fr.SET_LIMITS, fr.pack_limits(self.min_us, self.max_us))
         self.request(fr.SET_WATCHDOG, fr.pack_watchdog(self.watchdog_ms))
         if self.on_latch is not None:
             try:
                 self.request(fr.SET_LATCH_REPORT, fr.pack_latch_report(True))
                 self.latch_supported = True
+                self.watch.start(time.monotonic())
             except LinkError as exc:   # firmware before the latch report: the link works without it
                 if "UNKNOWN_TYPE" not in str(exc):
                     raise
                 self.latch_supported = False
                 self.stats.last_error = str(exc)
         if self.last_targets is not None:  # after a board reset: restore what the host believes is commanded
-            self.send(fr.SET_TARGETS, fr.pack_targets(self.last_targets))
+            self._restore_targets()
+
+    def _restore_targets(self) -> None:
+        if self.send(fr.SET_TARGETS, fr.pack_targets(self.last_targets)) is not None:
             self.restored += 1
+            self._targets_since = self._targets_tx = time.monotonic()
+
+    def _reconfigure(self, reason: str, targets: bool) -> None:
+        """Configure the board again without waiting for its ACKs (the link thread keeps reading)."""
+        self.reconfigures[reason] += 1
+        self.stats.last_error = f"servo board reconfigured: {reason.replace('_', ' ')}"
+        self.send(fr.SET_LIMITS, fr.pack_limits(self.min_us, self.max_us))
+        self.send(fr.SET_WATCHDOG, fr.pack_watchdog(self.watchdog_ms))
+        if self.latch_supported:
+            self.send(fr.SET_LATCH_REPORT, fr.pack_latch_report(True))
+        if targets and self.last_targets is not None:
+            self._restore_targets()
+
+    def request_stream(self) -> None:
+        self._reconfigure("latch_quiet", targets=False)
 
     def set_targets(self, pulses_us: Sequence[int]) -> bool:
         """Command six pulse widths (us); False if the port is not open (the command is dropped).
@@ -476,16 +534,27 @@ class ServoLink(BoardLink):
         ok = seq is not None
         if ok:
             self.last_targets_seq = seq
+            self._targets_tx = time.monotonic()
+            if self._targets_since is None:
+                self._targets_since = self._targets_tx
         self.targets_sent += ok
         return ok
 
     def on_frame(self, frame: fr.Frame, t_rx: float) -> None:
         if frame.type == fr.STATUS:
-            self.status = fr.unpack_servo_status(frame.payload)
+            self.status = status = fr.unpack_servo_status(frame.payload)
             self.status_time = t_rx
+            # the board answers in order: targets written before the poll had reached it when it answered
+            asked = self.status_asked
+            if self._targets_since is not None and self._targets_since < asked:
+                if not status.flags & fr.FLAG_ACTIVE:
+                    self._reconfigure("outputs_off", targets=True)
+                elif status.flags & fr.FLAG_WATCHDOG_HOLD and asked - self._targets_tx < 0.5e-3 * self.watchdog_ms:
+                    self._reconfigure("watchdog_hold", targets=True)
         elif frame.type == fr.LATCH:
             latch = fr.unpack_latch(frame.payload)
             self.latches += 1
+            self.watch.data(t_rx)
             if self.on_latch is not None:
                 self.on_latch(latch, t_rx)
 
@@ -520,6 +589,10 @@ class CurrentLink(BoardLink):
     def on_connected(self) -> None:
         self._last_sample_seq = None
         self.request(fr.START_STREAM, fr.pack_start_stream(self.rate_hz))
+        self.watch.start(time.monotonic())
+
+    def request_stream(self) -> None:
+        self.send(fr.START_STREAM, fr.pack_start_stream(self.rate_hz))
 
     def end_of_read(self, t_read: float, t_rx: float) -> None:
         if self._batch:
@@ -531,6 +604,8 @@ class CurrentLink(BoardLink):
                 self.stats.last_error = f"callback failed: {type(exc).__name__}: {exc}"
 
     def stop_stream(self) -> None:
+        """Stop the board's stream (not re-requested until the next connect)."""
+        self.watch.stop()
         self.request(fr.STOP_STREAM, b"")
 
     def on_frame(self, frame: fr.Frame, t_rx: float) -> None:
@@ -542,6 +617,7 @@ class CurrentLink(BoardLink):
                 if gap >= 0x80000000:  # went backwards (board restarted): not a gap
                     gap = 0
             self._last_sample_seq = sample.sequence
+            self.watch.data(t_rx)
             self.samples += 1
             self.sample_gaps += gap
             self.stats.extra["sample_gaps"] = self.sample_gaps

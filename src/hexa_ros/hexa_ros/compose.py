@@ -65,15 +65,20 @@ def load(module: str, cls: str) -> Callable[..., Any]:
 
 
 def main(argv: list[str] | None = None) -> int:
-    from hexa_ros.node import run
+    from hexa_ros.node import install_signal_handlers, run, stop_requested
 
     args = list(sys.argv[1:] if argv is None else argv)
+    install_signal_handlers()     # Ctrl-C while the node modules import: rc 0, no traceback (hexa_ros.start)
     try:
         specs, ros_args = parse_specs(args)
         factories = [load(module, cls) for _name, module, cls in specs]
     except ComposeError as exc:
         print(f"hexa compose: {exc}", file=sys.stderr)
         return 2
+    except BaseException:  # noqa: BLE001 - stopped while importing (an ImportError may wrap the interrupt)
+        if stop_requested():
+            return 0
+        raise
     kwargs = [{"cli_args": ["--ros-args", "-r", f"__node:={name}"]} for name, _m, _c in specs]
     return run(factories, "+".join(name for name, _m, _c in specs), [sys.argv[0], *ros_args], kwargs)
 

@@ -6,7 +6,8 @@ node classes in one process on one executor the same way.
 The executor is rclpy's EventsExecutor (C++ event queue): a 1 kHz JointState subscription costs ≈ 110-160 µs of CPU
 per message with it against ≈ 640 µs with the SingleThreadedExecutor on the 2-core robot PC (docs/node_layer.md).
 Its `spin()` does not return on SIGINT, so the loop below spins in bounded steps and SIGINT/SIGTERM set a flag
-that ends the loop after the callback in progress (while nodes are built, they raise KeyboardInterrupt). rclpy's
+that ends the loop after the callback in progress (while nodes are built, they raise KeyboardInterrupt; from the
+executor's set-up on, they only set the flag). rclpy's
 signal handler stays off: it would invalidate the context while a callback is still publishing. The bounded step
 also ends the wait when /clock stops (sim time, the simulator gone), where an unbounded wait would never return.
 """
@@ -27,11 +28,13 @@ EXECUTORS = ("events", "single")
 
 
 def _raise_keyboard_interrupt(_signum: int, _frame: Any) -> None:
+    _StopRequest.requested = True
     raise KeyboardInterrupt
 
 
 def install_signal_handlers() -> None:
-    """SIGINT and SIGTERM raise KeyboardInterrupt in the main thread (rclpy's own handler stays off)."""
+    """SIGINT and SIGTERM raise KeyboardInterrupt in the main thread (rclpy's own handler stays off) and record the
+    stop request (`stop_requested`): an import interrupted by it raises ImportError, not KeyboardInterrupt."""
     signal.signal(signal.SIGINT, _raise_keyboard_interrupt)
     signal.signal(signal.SIGTERM, _raise_keyboard_interrupt)
 
@@ -71,19 +74,34 @@ class _StopRequest:
         cls.requested = True
 
 
+def stop_requested() -> bool:
+    """SIGINT or SIGTERM arrived since `install_signal_handlers` (first called by hexa_ros.start or `run`)."""
+    return _StopRequest.requested
+
+
+def stop_on_signal() -> None:
+    """From now on SIGINT/SIGTERM only request the stop (`_StopRequest`): no KeyboardInterrupt can interrupt the
+    executor's set-up or a message being taken and converted."""
+    signal.signal(signal.SIGINT, _StopRequest.handler)
+    signal.signal(signal.SIGTERM, _StopRequest.handler)
+
+
 def spin_until_shutdown(executor: Any, step: float = SPIN_STEP) -> None:
-    """Spin `executor` in bounded steps until the context shuts down or SIGINT/SIGTERM arrives."""
+    """Spin `executor` in bounded steps until the context shuts down or SIGINT/SIGTERM arrives (also one that
+    arrived since `stop_on_signal`). An error the executor raises once the stop was requested (a message taken
+    while the process is being stopped) ends the spin like the stop itself; before, it propagates."""
     import rclpy
     from rclpy.executors import ExternalShutdownException
 
-    _StopRequest.requested = False
-    signal.signal(signal.SIGINT, _StopRequest.handler)
-    signal.signal(signal.SIGTERM, _StopRequest.handler)
+    stop_on_signal()
     try:
         while rclpy.ok() and not _StopRequest.requested:
             executor.spin_once(timeout_sec=step)
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
+    except Exception:
+        if not _StopRequest.requested:
+            raise
 
 
 def run(factories: Sequence[Callable[..., Any]], name: str, argv: list[str] | None = None,
@@ -105,19 +123,21 @@ def run(factories: Sequence[Callable[..., Any]], name: str, argv: list[str] | No
     from hexa_ros.env import apply_defaults
 
     apply_defaults()
-    install_signal_handlers()
+    install_signal_handlers()     # a stop requested earlier (hexa_ros.start, while importing) still counts
     rclpy.init(args=argv if argv is not None else sys.argv, signal_handler_options=SignalHandlerOptions.NO)
     nodes: list[Any] = []
     try:
         for k, factory in enumerate(factories):
             nodes.append(factory(**(node_kwargs[k] if node_kwargs else {})))
-    except CONFIG_ERRORS as exc:
-        print(f"hexa {name}: {exc}", file=sys.stderr)
-        _teardown(nodes)
-        return 2
-    except KeyboardInterrupt:
-        _teardown(nodes)
-        return 0
+    except BaseException as exc:  # noqa: BLE001 - stopped while building (whatever the signal interrupted), or
+        _teardown(nodes)          # a configuration error
+        if _StopRequest.requested:
+            return 0
+        if isinstance(exc, CONFIG_ERRORS):
+            print(f"hexa {name}: {exc}", file=sys.stderr)
+            return 2
+        raise
+    stop_on_signal()     # a signal from here on ends the spin before or after its first step, never a traceback
     try:
         executor = make_executor(executor_kind())
     except ValueError as exc:
@@ -135,6 +155,7 @@ def _teardown(nodes: list[Any], executor: Any = None) -> None:
     import rclpy
 
     signal.signal(signal.SIGINT, signal.SIG_IGN)     # a second Ctrl-C must not interrupt the teardown
+    signal.signal(signal.SIGTERM, signal.SIG_IGN)
     for node in reversed(nodes):
         close = getattr(node, "close", None)
         if callable(close):
