@@ -12,6 +12,8 @@ TEXT = {
     "baud": "baud rate of both boards (firmware HX_BAUD); ptys ignore it",
     "stream_rate_hz": "Hz, Mega sample rate, 1..1000",
     "stale_timeout": "s without telemetry before the data is STALE (diagnostics ERROR)",
+    "stream_rerequest_period": "s between stream re-requests to a board that is quiet on an open port",
+    "stream_reconnect_after": "s of a quiet stream (> stale_timeout) before the port is closed and reconnected",
     "drop_after": "s stale before the port is closed and reopened",
     "reconnect_period": "s between attempts to reopen a vanished port",
     "hello_timeout": "s of HELLO retries after opening a port",
