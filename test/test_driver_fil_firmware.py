@@ -133,9 +133,9 @@ def test_uno_firmware_latch_report_times_each_pulse_and_names_its_command(tmp_pa
             assert len(latches) <= n_off + 1              # disabled: the stream stops (one may be in flight)
             assert link.stats.crc_errors == 0 and link.stats.decode_errors == 0
         del latches[n_off:]
-        # ~1.1 s of commands: 55 frames at simavr's full speed, 22-23 on a machine where it runs at 0.4x; the
-        # spacing check below proves none is missing in between
-        assert len(latches) >= 15
+        # ~1.1 s of commands: 55 frames at simavr's full speed, 22-23 where it runs at 0.4x, 11-12 on a loaded
+        # 2-core host (0.2x); enough for the spacing check below, which proves none is missing in between
+        assert len(latches) >= 8
         starts = [x.frame_start_us for x in latches]
         spacing = [b - a for a, b in zip(starts, starts[1:])]
         # one LATCH per 20 ms frame of simulated time, none missing: 50 per simulated second
