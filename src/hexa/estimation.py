@@ -515,13 +515,21 @@ class SampleSequencer:
         self.rejected: Counter[str] = Counter()
 
     @property
+    def takes_currents(self) -> bool:
+        """False in stamp mode (set, or settled on in auto mode): current samples are ignored."""
+        return self.mode != "stamp" and not self._stamp_mode
+
+    @property
     def adopted(self) -> int:
         """How many times a stream's stamps jumped for good and were adopted."""
         return sum(g.adopted for g in self._gates.values())
 
-    def _admit(self, stream: str, stamp: float) -> bool:
-        """Whether a message of `stream` stamped `stamp` follows its stream (counted by reason when not); on a
-        re-adopted jump, the queued messages more than max_step away from the new stamp are dropped as unpaired."""
+    def admit(self, stream: str, stamp: float) -> bool:
+        """Whether a message of `stream` ("currents" | "states") stamped `stamp` follows its stream (counted by
+        reason when not); on a re-adopted jump, the queued messages more than max_step away from the new stamp are
+        dropped as unpaired. push_currents and push_states call it unless told the caller did (`admitted`): the
+        monitor checks a current sample's stamp before its board time, so that a bad stamp never moves the board
+        clock."""
         verdict = self._gates[stream].check(stamp)
         if verdict == "adopted":
             for q in (self._cur, self._js):
@@ -535,12 +543,10 @@ class SampleSequencer:
         return True
 
     # ------------------------------------------------------------------ inputs
-    def push_currents(self, stamp: float, t: float, tau: NDArray) -> list[tuple]:
-        if self.mode == "stamp":
+    def push_currents(self, stamp: float, t: float, tau: NDArray, admitted: bool = False) -> list[tuple]:
+        if not self.takes_currents:
             return []
-        if self._stamp_mode:  # auto mode already settled on joint_states stamps
-            return []
-        if not self._admit("currents", stamp):
+        if not (admitted or self.admit("currents", stamp)):
             return []
         self.board = True
         self._cur.append((float(stamp), float(t), tau))
@@ -550,7 +556,7 @@ class SampleSequencer:
         return self._drain()
 
     def push_states(self, stamp: float, commanded: NDArray, velocity: Any, effort: Any) -> list[tuple]:
-        if not self._admit("states", stamp):
+        if not self.admit("states", stamp):
             return []
         self._js.append((float(stamp), commanded, velocity, effort))
         if len(self._js) > self.max_queue:

@@ -203,11 +203,14 @@ class CollisionMonitor:
         if cur is None:
             self.rejects["bad_currents"] += 1
             return []
+        seq = self.sequencer
+        if not seq.takes_currents or not seq.admit("currents", stamp):   # a bad stamp never moves the board clock
+            return []
         t = self.clock.time(stamp, board_us)
         if t is None:
             self.rejects["board_time"] += 1
             return []
-        return self._run(self.sequencer.push_currents(stamp, t, self.k_t * cur))
+        return self._run(seq.push_currents(stamp, t, self.k_t * cur, admitted=True))
 
     def push_states(self, stamp: float, position: NDArray | None, velocity: NDArray | None,
                     effort: NDArray | None) -> list[MonitorSample]:

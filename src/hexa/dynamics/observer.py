@@ -39,11 +39,11 @@ from typing import TYPE_CHECKING, Iterable
 
 import numpy as np
 
-from hexa.stream_gate import ACCEPTED, TimeGate
 from hexa.dynamics._kernel import KernelError, SampleKernel, chain_jacobian_rows, exp_rotate, solve6
 from hexa.dynamics.lagrange import (DynamicsError, HexaDynamicParameters, MotionState, _Geometry, _momentum_terms,
                                     _Velocity, inverse_dynamics, motion_from_joint_rates, pose_to_position_rotation,
                                     wrench_to_generalized_zyz)
+from hexa.stream_gate import ACCEPTED, TimeGate
 
 if TYPE_CHECKING:
     from numpy.typing import NDArray
