@@ -5,8 +5,9 @@ The injector is test/fault_injection_peer.py; docs/faults.md lists each fault an
 
 Asserted: after every single bad message the residual goes on within 2 sample periods (gaps measured on the residual's
 sample stamps, not wall time), the reject is counted by its reason in /diagnostics of every node that takes the
-topic, no collision START comes from any fault, a quiet board streams again within the target 1 s (asserted with
-margin for a loaded host), and the observer and the ports come back without a manual step."""
+topic, no collision START comes from a bad message, a quiet board or a killed observer, a quiet board streams again
+within the target 1 s (asserted with margin for a loaded host), and the observer and the ports come back without a
+manual step, the residual resuming on the restarted clock."""
 from __future__ import annotations
 
 import json
@@ -143,10 +144,14 @@ def test_each_bad_message_is_counted_by_its_reason_in_diagnostics(run):
     assert int(diag["/hexa/observer"]["values"]["reject_input_states_non_finite"]) >= 2
 
 
-def test_no_fault_causes_a_collision_start(run):
-    t0 = run["faults"][0]["wall"]
-    starts = [e for e in run["events"] if e["event"] == 0 and e["wall"] >= t0]
+def test_no_bad_message_quiet_board_or_observer_kill_causes_a_collision_start(run):
+    t0, t1 = run["faults"][0]["wall"], run["sim_kill_wall"]
+    starts = [e for e in run["events"] if e["event"] == 0 and t0 <= e["wall"] < t1]
     assert not starts, starts
+    # the simulator's restart moves the robot (it starts again at rest at the trajectory's start, the servos then
+    # slew to the restored targets): a START there is the monitor doing its job, the trajectory holds (docs/faults.md)
+    after = [(e["axis_name"], round(e["onset"], 3)) for e in run["events"] if e["event"] == 0 and e["wall"] >= t1]
+    print(f"STARTs after the simulator restart: {after}")
 
 
 def test_a_board_that_stops_streaming_streams_again_without_a_manual_step(run):

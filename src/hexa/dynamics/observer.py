@@ -470,8 +470,10 @@ class ResidualObserver:
             return None
         if verdict == "adopted" or (self._last_t > -math.inf and t - self._last_t > self.config.max_gap):
             # a gap, or a clock that jumped for good: do not integrate across it; r is kept, integration restarts here
-            if verdict == "adopted":
+            if verdict == "adopted":   # a new stream (a restarted board or simulator): detection starts over
                 self.clock_jumps += 1
+                self.r = np.zeros(6)
+                self.detector.reset()
             else:
                 self._reject("gap")
             self._prev = None
