@@ -118,6 +118,20 @@ def test_sequencer_drops_a_joint_states_stamped_far_away_and_keeps_pairing():
     assert seq.push_pose(1e6, np.zeros(6)) == [] and seq.rejected["pose_time_future"] == 1
 
 
+def test_sequencer_a_stamp_slightly_ahead_costs_at_most_adopt_after_samples():
+    seq = SampleSequencer("board", pose_delay=0.1, max_step=0.25, adopt_after=5)
+    out = []
+    for k in range(100):
+        s = 0.005 * k
+        if k == 20:
+            out += seq.push_states(s + 0.1, np.zeros(6), None, None)     # within max_step: accepted, then re-adopted
+        out += seq.push_currents(s, s, np.zeros(6))
+        out += seq.push_states(s, np.zeros(6), None, None)
+    times = [o[1] for o in out if o[0] == "sample"]
+    assert 100 - 6 <= len(times) < 100 and times[-1] == pytest.approx(0.495)
+    assert max(np.diff(times)) <= 0.005 * 7 + 1e-9 and seq.adopted == 1
+
+
 def test_sequencer_adopts_stamps_that_jumped_back_for_good():
     seq = SampleSequencer("board", pose_delay=0.1, adopt_after=3)
     out = []

@@ -489,8 +489,10 @@ class SampleSequencer:
     One message with a stamp far from its stream's costs only itself: the stamps of each stream pass a
     hexa.stream_gate.TimeGate (each at or after the last accepted one, at most `max_step` s later; a stream that
     really jumped — a restarted simulator, a bag played again — is adopted after `adopt_after` consistent messages,
-    and the queued messages the jump left behind are dropped as unpaired), and a pose stamped more than `max_step`
-    after the newest sample time waits for nothing: it is rejected. Rejects are counted by reason in `rejected`
+    and the queued messages the jump left behind, or ahead of it in the adopted stream, are dropped as unpaired), and
+    a pose stamped more than `max_step` after the newest sample time waits for nothing: it is rejected. A message
+    stamped less than `max_step` ahead is accepted and holds the good ones back until `adopt_after` of them re-adopt
+    the stream: it costs that many samples, not one. Rejects are counted by reason in `rejected`
     (currents_time_past, states_time_future, pose_time_future, ...)."""
 
     def __init__(self, mode: str = "auto", pose_delay: float = 0.5, auto_wait: int = 20,
@@ -531,9 +533,10 @@ class SampleSequencer:
         monitor checks a current sample's stamp before its board time, so that a bad stamp never moves the board
         clock."""
         verdict = self._gates[stream].check(stamp)
-        if verdict == "adopted":
+        if verdict == "adopted":   # drop what the jump left behind, and this stream's messages ahead of it (the one
+            own = self._cur if stream == "currents" else self._js     # that moved the reference, if that was bad)
             for q in (self._cur, self._js):
-                keep = [m for m in q if abs(m[0] - stamp) <= self.max_step]
+                keep = [m for m in q if stamp - self.max_step <= m[0] and (q is not own or m[0] <= stamp)]
                 self.unpaired += len(q) - len(keep)
                 q.clear()
                 q.extend(keep)
