@@ -97,6 +97,7 @@ def run(tmp_path_factory, module_ros_domain_id):
         out, err = peer.communicate(timeout=420)
         assert peer.returncode == 0, err[-3000:]
         record = json.loads(out.strip().splitlines()[-1])
+        (tmp / "record.json").write_text(out)          # for a look after a failure
         assert record["ok"], (record.get("error"), err[-3000:])
         if record["duplicate_nodes"]:
             pytest.fail(f"another ROS graph shares ROS_DOMAIN_ID {module_ros_domain_id} (nodes running twice: "
