@@ -132,6 +132,20 @@ def test_sequencer_a_stamp_slightly_ahead_costs_at_most_adopt_after_samples():
     assert max(np.diff(times)) <= 0.005 * 7 + 1e-9 and seq.adopted == 1
 
 
+def test_sequencer_in_auto_mode_takes_motor_currents_that_come_after_it_settled_on_stamps():
+    seq = SampleSequencer("auto", pose_delay=0.1, auto_wait=5)
+    out = []
+    for k in range(10):                                   # the motor_currents subscription matched late
+        out += seq.push_states(0.005 * k, np.zeros(6), None, np.zeros(6))
+    assert not seq.board and len(out) == 10
+    for k in range(10, 20):
+        out += seq.push_currents(0.005 * k, 0.005 * k - 0.0002, np.full(6, 1.0))
+        out += seq.push_states(0.005 * k, np.zeros(6), None, np.zeros(6))
+    assert seq.board and seq.to_board == 1 and seq.unpaired == 0
+    samples = [o for o in out if o[0] == "sample"]
+    assert len(samples) == 20 and samples[-1][1] == pytest.approx(0.0948) and samples[-1][3][0] == 1.0
+
+
 def test_sequencer_adopts_stamps_that_jumped_back_for_good():
     seq = SampleSequencer("board", pose_delay=0.1, adopt_after=3)
     out = []

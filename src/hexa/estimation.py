@@ -482,7 +482,9 @@ class SampleSequencer:
     0.1-0.47 s on this loaded machine); a pose that arrives later than that is released on arrival and counted in
     `late_poses` (only those can make a run non-deterministic). In `stamp` mode (no motor_currents: a bag or peer
     without them) each joint_states is a sample at its stamp with τ = effort. In `auto` mode the board mode is
-    chosen when a motor_currents arrives before `auto_wait` joint_states are queued.
+    chosen when a motor_currents arrives before `auto_wait` joint_states are queued; a motor_currents that arrives
+    after auto mode settled on stamps switches it to board mode for good (`to_board`): a node that starts while the
+    driver runs can match its joint_states subscription before its motor_currents one.
 
     Output items: ("sample", t, commanded ζ, τ, velocity or None) and ("pose", t_image, pose).
 
@@ -512,14 +514,15 @@ class SampleSequencer:
         self.last_t = -math.inf
         self.late_poses = 0
         self.unpaired = 0
+        self.to_board = 0
         self.max_step = float(max_step)
         self._gates = {k: TimeGate(self.max_step, adopt_after, repeats=True) for k in ("currents", "states")}
         self.rejected: Counter[str] = Counter()
 
     @property
     def takes_currents(self) -> bool:
-        """False in stamp mode (set, or settled on in auto mode): current samples are ignored."""
-        return self.mode != "stamp" and not self._stamp_mode
+        """False in stamp mode: current samples are ignored."""
+        return self.mode != "stamp"
 
     @property
     def adopted(self) -> int:
@@ -551,6 +554,9 @@ class SampleSequencer:
             return []
         if not (admitted or self.admit("currents", stamp)):
             return []
+        if self._stamp_mode:     # auto mode had settled on stamps before the first motor_currents: board mode now
+            self._stamp_mode = False
+            self.to_board += 1
         self.board = True
         self._cur.append((float(stamp), float(t), tau))
         if len(self._cur) > self.max_queue:  # no joint_states at all: nothing to pair with

@@ -9,7 +9,7 @@ Checks, in order, each counted by its reason in `PoseCheck.rejected`:
 - `off_workspace`: outside the robot's workspace (for the Hexa: inverse kinematics, seed 000 eqs 14-18, finds no
   reachable arm angles — a plate 10 m away, or one past a joint limit);
 - `time_past`, `time_future`, `jump`: against the last accepted pose (hexa.stream_gate.StreamGate): a stamp before
-  it, more than `max_step` s after it, or a move farther than the robot can go in the time between
+  it (an equal one passes), more than `max_step` s after it, or a move farther than the robot can go in the time between
   (|Δp| ≤ position_noise + max_speed·Δt, rotation angle ≤ angle_noise + max_angular_speed·Δt). A plate that really
   moved while it was not seen sends poses that agree with one another: after `adopt_after` of them the check adopts
   them.
@@ -91,7 +91,8 @@ class PoseCheck:
         self.reachable = reachable
         self.rejected: Counter[str] = Counter()
         self.accepted = 0
-        self._time_rule = time_step_rule(self.limits.max_step)
+        # equal stamps pass (a publisher that leaves the stamp 0): the move bound then allows only the noise
+        self._time_rule = time_step_rule(self.limits.max_step, repeats=True)
         self.gate: StreamGate[tuple[float, np.ndarray]] = StreamGate(self._follows, self.limits.adopt_after)
 
     @classmethod
