@@ -470,10 +470,11 @@ class ResidualObserver:
             return None
         if verdict == "adopted" or (self._last_t > -math.inf and t - self._last_t > self.config.max_gap):
             # a gap, or a clock that jumped for good: do not integrate across it; r is kept, integration restarts here
-            if verdict == "adopted":   # a new stream (a restarted board or simulator): detection starts over
-                self.clock_jumps += 1
+            if verdict == "adopted":   # a new stream (a restarted board or simulator): detection starts over, and
+                self.clock_jumps += 1  # camera poses are taken on the new time axis
                 self.r = np.zeros(6)
                 self.detector.reset()
+                self._cam, self._cam_t = None, -math.inf
             else:
                 self._reject("gap")
             self._prev = None
