@@ -37,6 +37,8 @@ class Peer:
         self.currents_wall: list[float] = []
         self.events: list[dict] = []
         self.diag: dict[str, dict] = {}
+        self.diag_max: dict[str, dict[str, float]] = {}     # largest value of each counter while collecting
+        self.collect_max = True
         self.last_mc = None
         self.last_pose = None
         sub = node.create_subscription
@@ -79,6 +81,13 @@ class Peer:
     def _on_diag(self, m) -> None:
         with self.lock:
             for st in m.status:
+                if self.collect_max:
+                    seen = self.diag_max.setdefault(st.name, {})
+                    for kv in st.values:
+                        try:
+                            seen[kv.key] = max(seen.get(kv.key, 0.0), float(kv.value))
+                        except ValueError:
+                            pass
                 self.diag[st.name] = {"level": int.from_bytes(st.level, "little") if isinstance(st.level, bytes)
                                       else int(st.level), "message": st.message,
                                       "values": {kv.key: kv.value for kv in st.values}}
@@ -227,10 +236,13 @@ def main() -> int:
             peer.pub[topic].publish(msg)
             out["faults"].append({"name": name, "topic": topic, "t_sample": t_sample, "wall": time.monotonic()})
             time.sleep(0.4)
-        time.sleep(1.5)          # poses are applied pose_delay (0.5 s) of sample time later; one more /diagnostics
+        time.sleep(1.5)          # poses are applied pose_delay (0.5 s) of sample time later
         out["faults_end_wall"] = time.monotonic()
+        time.sleep(1.5)          # two more /diagnostics rounds from every node (1 Hz, late on a loaded host)
         with peer.lock:
             out["diag_after_faults"] = json.loads(json.dumps(peer.diag))
+            out["diag_max"] = json.loads(json.dumps(peer.diag_max))
+            peer.collect_max = False             # the killed nodes start their counters again
         out["duplicate_nodes"] += _duplicates(node)   # before the kills: a killed node's entry lingers a while
         # 2. the current board stops streaming (one STOP_STREAM on its port, as after a reset)
         fd = os.open(os.path.join(link_dir, "mega"), os.O_WRONLY | os.O_NOCTTY)
