@@ -100,6 +100,27 @@ def test_sample_clock_costs_one_sample_for_a_board_time_far_ahead_and_adopts_a_r
     assert c2.backwards == 2 and c2.gate.adopted == 1
 
 
+def test_a_board_that_was_silent_comes_back_at_once_on_its_later_board_time():
+    c = SampleClock(tau=1.0, jump=0.5)
+    for k in range(5):
+        c.time(10.0 + 0.005 * k, 1_000_000 + 5000 * k)
+    # 2 s of silence (a STOP_STREAM, a stall): board time and stamps both move on 2 s — not a bad board time
+    assert c.time(12.025, 3_025_000) == pytest.approx(12.025, abs=0.01) and c.rejected == {}
+    assert c.time(12.03, 3_030_000 + 2_000_000_000) is None and c.rejected == {"time_future": 1}
+
+
+def test_sequencer_takes_both_topics_back_at_once_after_a_common_silence():
+    seq = SampleSequencer("board", pose_delay=0.1, max_step=0.25, adopt_after=5)
+    out = []
+    for k in list(range(20)) + list(range(220, 240)):          # 1 s without either topic
+        s = 0.005 * k
+        out += seq.push_currents(s, s, np.zeros(6))
+        out += seq.push_states(s, np.zeros(6), None, None)
+    times = [o[1] for o in out if o[0] == "sample"]
+    assert len(times) >= 39 and times[-1] == pytest.approx(1.195)   # at most the first sample after the silence
+    assert seq.rejected["currents_time_future"] <= 1
+
+
 def test_sequencer_drops_a_joint_states_stamped_far_away_and_keeps_pairing():
     seq = SampleSequencer("board", pose_delay=0.1)
     out = []

@@ -465,6 +465,10 @@ class InputCheck:
         return True
 
 
+#: the other topic of a sample's pair
+OTHER = {"currents": "states", "states": "currents"}
+
+
 class SampleSequencer:
     """Deterministic ordering of the three input streams of the live nodes: the result depends only on message
     stamps and contents, never on the order in which DDS delivers the topics, so a replayed bag gives the same
@@ -490,7 +494,8 @@ class SampleSequencer:
 
     One message with a stamp far from its stream's costs only itself: the stamps of each stream pass a
     hexa.stream_gate.TimeGate (each at or after the last accepted one, at most `max_step` s later; a stream that
-    really jumped — a restarted simulator, a bag played again — is adopted after `adopt_after` consistent messages,
+    really jumped — a restarted simulator, a bag played again — is adopted after `adopt_after` consistent messages, or
+    at once when the other topic's newest stamp is already within `max_step` of it (both resume after a silence),
     and the queued messages the jump left behind, or ahead of it in the adopted stream, are dropped as unpaired), and
     a pose stamped more than `max_step` after the newest sample time waits for nothing: it is rejected. A message
     stamped less than `max_step` ahead is accepted and holds the good ones back until `adopt_after` of them re-adopt
@@ -517,6 +522,7 @@ class SampleSequencer:
         self.to_board = 0
         self.max_step = float(max_step)
         self._gates = {k: TimeGate(self.max_step, adopt_after, repeats=True) for k in ("currents", "states")}
+        self._seen = {"currents": -math.inf, "states": -math.inf}   # each topic's newest stamp, accepted or not
         self.rejected: Counter[str] = Counter()
 
     @property
@@ -535,7 +541,12 @@ class SampleSequencer:
         dropped as unpaired. push_currents and push_states call it unless told the caller did (`admitted`): the
         monitor checks a current sample's stamp before its board time, so that a bad stamp never moves the board
         clock."""
-        verdict = self._gates[stream].check(stamp)
+        gate = self._gates[stream]
+        verdict = gate.check(stamp)
+        if verdict == "time_future" and abs(stamp - self._seen[OTHER[stream]]) <= self.max_step:
+            gate.adopt(stamp)     # the other topic is there already: both resume after a silence, not one bad stamp
+            verdict = "adopted"
+        self._seen[stream] = stamp
         if verdict == "adopted":   # drop what the jump left behind, and this stream's messages ahead of it (the one
             own = self._cur if stream == "currents" else self._js     # that moved the reference, if that was bad)
             for q in (self._cur, self._js):

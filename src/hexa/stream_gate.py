@@ -69,6 +69,12 @@ class StreamGate(Generic[T]):
         self.rejected[reason] += 1
         return reason
 
+    def adopt(self, value: T) -> None:
+        """Take `value` as the reference now (the caller has other evidence that the stream moved there)."""
+        self.last = value
+        self._run.clear()
+        self.adopted += 1
+
 
 def time_step_rule(max_step: float, repeats: bool = False) -> Callable[[float, float], str | None]:
     """The rule of a stream of times (s) that increase by at most `max_step` per message: "time_past" for a time before

@@ -20,7 +20,7 @@ from hexa.dynamics.observer import ObserverConfig, ObserverError, ResidualObserv
 from hexa.estimation import EstimatorConfig, InputCheck, SampleSequencer, ServoModel, ZetaEstimator
 from hexa.pose_check import PoseCheck
 from hexa.rotations import pose6_from_transform
-from hexa.stream_gate import ACCEPTED, TimeGate
+from hexa.stream_gate import ACCEPTED, StreamGate
 
 ZETA_SOURCES = ("estimator", "measured")
 #: estimator settings the monitor takes at run time
@@ -36,15 +36,16 @@ class SampleClock:
     Host receive stamps jitter by milliseconds (USB, scheduling; in sim mode they are quantized by /clock), which at
     200-1000 Hz would corrupt the observer's Δt; the board's clock does not.
 
-    Board times pass a hexa.stream_gate.TimeGate: a repeated or older board time, or one more than `jump` s after the
-    last accepted one, returns None and is counted by reason in `rejected` (older or repeated ones also in
-    `backwards`), leaving the clock as it was — one board time 2·10⁹ µs ahead costs that one sample. A board clock
-    that really jumped (a reset) is adopted after `adopt_after` consistent samples."""
+    Board times pass a hexa.stream_gate.StreamGate: a repeated or older board time, or one more than `jump` s after the
+    last accepted one beyond the host time between their stamps (a board that was silent for a while comes back that
+    much later), returns None and is counted by reason in `rejected` (older or repeated ones also in `backwards`),
+    leaving the clock as it was — one board time 2·10⁹ µs ahead costs that one sample. A board clock that really
+    jumped (a reset) is adopted after `adopt_after` consistent samples."""
 
     def __init__(self, tau: float = 10.0, jump: float = 0.5, fixed_offset: float | None = None,
                  adopt_after: int = 5) -> None:
         self.tau, self.jump, self.fixed_offset = tau, jump, fixed_offset
-        self.gate = TimeGate(jump, adopt_after)
+        self.gate: StreamGate[tuple[float, float]] = StreamGate(self._follows, adopt_after)
         self._raw: int | None = None
         self._board = 0.0
         self._offset = 0.0
@@ -55,6 +56,13 @@ class SampleClock:
         """Rejected board times by reason (time_past, time_future)."""
         return dict(self.gate.rejected)
 
+    def _follows(self, prev: tuple[float, float], new: tuple[float, float]) -> str | None:
+        """(board time, stamp) `new` may follow `prev`: later on the board, by at most `jump` + the stamps' step."""
+        step = new[0] - prev[0]
+        if step <= 0.0:
+            return "time_past"
+        return "time_future" if step > self.jump + max(new[1] - prev[1], 0.0) else None
+
     def time(self, stamp: float, board_us: int) -> float | None:
         """The sample time (s) of a sample received at host time `stamp` with board time `board_us` (µs)."""
         raw = int(board_us) & 0xFFFFFFFF
@@ -62,7 +70,7 @@ class SampleClock:
             board = raw * 1e-6 if self.fixed_offset is not None else 0.0
         else:   # the signed step from the last accepted board time, across the 2³² µs wrap
             board = self._board + ((((raw - self._raw) + (1 << 31)) & 0xFFFFFFFF) - (1 << 31)) * 1e-6
-        verdict = self.gate.check(board)
+        verdict = self.gate.check((board, float(stamp)))
         if verdict not in ACCEPTED:
             self.backwards += verdict == "time_past"
             return None
