@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import json
 import os
+import shutil
 import signal
 import subprocess
 import sys
@@ -43,7 +44,8 @@ def test_replay_topics_name_what_is_missing():
 
 @pytest.fixture(scope="module")
 def demo_bag(tmp_path_factory):
-    """The plate case of `hexa demo` for 4.2 s of sim time (its START included), recorded with the graph's outputs."""
+    """The plate case of `hexa demo --record-images` for 4.2 s of sim time (its START included): the graph's outputs
+    and its sensor inputs, both cameras included (the observer's ζ estimator starts from the camera's plate pose)."""
     pytest.importorskip("rclpy", reason="ROS 2 Jazzy wheels not installed: run `make test` (it sets them up)")
     from rosdomain import held_ros_domain
 
@@ -52,9 +54,10 @@ def demo_bag(tmp_path_factory):
 
     out = tmp_path_factory.mktemp("replay_demo")
     with held_ros_domain(range(98, 0, -1)) as domain:
-        run = run_case("plate", out, ros_env(domain), duration=4.2, status_every=1e9)
+        run = run_case("plate", out, ros_env(domain), duration=4.2, status_every=1e9, record_images=True)
     assert (run.bag / "metadata.yaml").exists(), f"no bag recorded (rc {run.returncode}, logs {run.log_dir})"
-    return run.bag
+    yield run.bag
+    shutil.rmtree(out, ignore_errors=True)          # images: hundreds of MB
 
 
 def _messages(bag, topics) -> dict[str, list]:
@@ -105,7 +108,8 @@ def test_replay_of_a_demo_bag_yields_each_output_once(demo_bag, procs, ros_env, 
     _stop(rec)
     assert graph.returncode == 0, (gout[-2000:], gerr[-2000:])
     played = next(line for line in gout.splitlines() if "replaying" in line)
-    assert played.endswith(": /hexa/motor_currents, /hexa/joint_states"), played   # no output, no image in it
+    inputs = [f"/hexa/{t}" for t in SENSOR_INPUTS]
+    assert played.split("/clock: ", 1)[1].split(", ") == inputs, played        # no recorded output in it
     live = _messages(demo_bag, recorded)
     again = _messages(out_bag, recorded)
     report = {t: (len(live[t]), len(again[t])) for t in recorded}
@@ -113,8 +117,9 @@ def test_replay_of_a_demo_bag_yields_each_output_once(demo_bag, procs, ros_env, 
     for topic in recorded:
         keys = [_key(topic, m) for m in again[topic]]
         assert len(keys) == len(set(keys)), f"{topic}: {len(keys) - len(set(keys))} outputs came twice"
-    # the replay's outputs come from the live nodes, as many as in the live run (not twice as many, not none)
+    # the replay's outputs come from the live nodes: some (its ζ estimator waits for the first camera pose), never more
+    # than the live run's (the recorded ones played beside them would double them)
     n_live, n_again = report["/hexa/residual"]
-    assert 0.5 * n_live <= n_again <= 1.05 * n_live, report
+    assert 0.25 * n_live <= n_again <= 1.05 * n_live, report
     starts = [m for m in again["/hexa/collision"] if m.event == 0]
-    assert len(starts) == len({m.id for m in starts}) >= 1, report
+    assert len(starts) == len({m.id for m in starts}), report

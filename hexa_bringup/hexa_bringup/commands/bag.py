@@ -247,6 +247,7 @@ def bag_summary(path: str) -> dict:
     """
     from pathlib import Path
 
+    import yaml
     from rosbags.rosbag2 import Reader
 
     from hexa_bringup.commands._ros import CliError
@@ -261,7 +262,10 @@ def bag_summary(path: str) -> dict:
         hint = " (a killed recording? `hexa bag recover`)" if bag.is_dir() and list(bag.glob("*.mcap")) else ""
         raise CliError(f"cannot read bag {path}: {' '.join(str(exc).split())}{hint}") from exc
     try:
-        files = [p for p in reader.paths]
+        files = sorted(p for p in (bag.iterdir() if bag.is_dir() else [bag]) if p.is_file())
+        meta = {}
+        if bag.is_dir() and (bag / "metadata.yaml").is_file():
+            meta = (yaml.safe_load((bag / "metadata.yaml").read_text()) or {}).get("rosbag2_bagfile_information", {})
         topics = {}
         for c in reader.connections:
             qos = [{"reliability": q.reliability.name.lower(), "durability": q.durability.name.lower(),
@@ -271,10 +275,10 @@ def bag_summary(path: str) -> dict:
                                             "qos": qos})
             t["count"] += c.msgcount
         start, end = (reader.start_time, reader.end_time) if reader.message_count else (0, 0)
-        return {"bag": str(bag), "files": [str(f) for f in files],
-                "size_bytes": sum(Path(f).stat().st_size for f in files if Path(f).exists()),
-                "storage": reader.metadata["storage_identifier"], "duration_s": (end - start) * 1e-9,
-                "start_ns": start, "end_ns": end, "messages": reader.message_count, "topics": topics}
+        return {"bag": str(bag), "files": [str(f) for f in files], "size_bytes": sum(f.stat().st_size for f in files),
+                "storage": meta.get("storage_identifier", files[0].suffix.lstrip(".") if files else "?"),
+                "duration_s": (end - start) * 1e-9, "start_ns": start, "end_ns": end,
+                "messages": reader.message_count, "topics": topics}
     finally:
         reader.close()
 

@@ -130,11 +130,15 @@ def check_cameras() -> list[Check]:
 
 def firmware_dir() -> Path | None:
     """hexa_driver/firmware of this checkout (where `make firmware` builds the .hex files)."""
+    import importlib.util
+
     try:
-        import hexa_driver
+        spec = importlib.util.find_spec("hexa_driver.driver_node")
     except ImportError:
         return None
-    d = Path(hexa_driver.__file__).resolve().parents[1] / "firmware"
+    if spec is None or not spec.origin:
+        return None
+    d = Path(spec.origin).resolve().parents[1] / "firmware"     # hexa_driver/hexa_driver/driver_node.py
     return d if d.is_dir() else None
 
 

@@ -65,7 +65,9 @@ def register(sub: argparse._SubParsersAction) -> None:
     pi.add_argument("topic")
     pi.add_argument("-v", "--verbose", action="store_true", help="every publisher and subscription with its QoS")
     pi.add_argument("--json", action="store_true")
-    pi.add_argument("--wait", type=float, default=1.5, help="seconds of discovery before answering (default 1.5)")
+    pi.add_argument("--wait", type=float, default=1.0, help="seconds of discovery before answering (default 1)")
+    pi.add_argument("--timeout", type=float, default=5.0,
+                    help="seconds to wait for the topic to be discovered (default 5)")
     pi.set_defaults(func=run_info)
 
 
@@ -258,6 +260,7 @@ def run_pub(args: argparse.Namespace) -> int:
             cli.wait_for(lambda: pub.get_subscription_count() >= wait_subs, args.timeout,
                          f"{pub.get_subscription_count()} of {wait_subs} subscriptions of {name} matched within "
                          f"{args.timeout:g} s")
+            cli.spin_for(0.5)       # matched here first: the subscriber's side matches this publisher a moment later
         sent = 0
         period = 1.0 / args.rate
         next_t = time.monotonic()
@@ -283,11 +286,22 @@ def run_info(args: argparse.Namespace) -> int:
     name = absolute(args.topic)
     with RosCli("hexa_info") as cli:
         cli.spin_for(args.wait)
-        types = dict(cli.node.get_topic_names_and_types()).get(name)
-        if not types:
-            raise CliError(f"no topic {name} in the graph (check ROS_DOMAIN_ID; `hexa topic list`)")
-        pubs = [_endpoint(i) for i in cli.node.get_publishers_info_by_topic(name)]
-        subs = [_endpoint(i) for i in cli.node.get_subscriptions_info_by_topic(name) if i.node_name != cli.name]
+        types = cli.wait_for(lambda: dict(cli.node.get_topic_names_and_types()).get(name),
+                             max(0.0, args.timeout - args.wait) or 1e-3,
+                             f"no topic {name} in the graph within {args.timeout:g} s (check ROS_DOMAIN_ID; "
+                             f"`hexa topic list`)")
+
+        def endpoints() -> tuple[list, list] | None:
+            """Both lists once every endpoint's node is known (a node's name arrives after its endpoints)."""
+            pubs = [_endpoint(i) for i in cli.node.get_publishers_info_by_topic(name)]
+            subs = [_endpoint(i) for i in cli.node.get_subscriptions_info_by_topic(name) if i.node_name != cli.name]
+            return None if any(e["node"] == UNKNOWN_NODE for e in pubs + subs) else (pubs, subs)
+
+        try:
+            pubs, subs = cli.wait_for(endpoints, 2.0, "")
+        except CliError:                               # still unnamed: show them as they are
+            pubs = [_endpoint(i) for i in cli.node.get_publishers_info_by_topic(name)]
+            subs = [_endpoint(i) for i in cli.node.get_subscriptions_info_by_topic(name) if i.node_name != cli.name]
     if args.json:
         info = {"topic": name, "types": list(types), "publishers": len(pubs), "subscriptions": len(subs)}
         if args.verbose:
@@ -309,6 +323,10 @@ def run_info(args: argparse.Namespace) -> int:
                   f"  Liveliness: {q['liveliness'].upper()}\n"
                   f"  Liveliness lease duration: {_dur(q['liveliness_lease_s'])}")
     return 0
+
+
+#: the node name of an endpoint whose node has not been discovered yet
+UNKNOWN_NODE = "_NODE_NAME_UNKNOWN_"
 
 
 def _dur(seconds: float | None) -> str:
