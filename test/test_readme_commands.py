@@ -8,8 +8,8 @@ ROS_DOMAIN_ID), so an example that records a bag can be followed by one that rea
 How a command is run depends on its form:
 - **run**: a complete command line runs to its end and must exit 0 (within RUN_TIMEOUT s);
 - **stream**: a command that runs until Ctrl-C (an echo without --once, hz without --duration, a recording without
-  --duration, a bringup, `hexa view`) must still be running after STREAM_SECONDS s and then stop cleanly on SIGINT;
-  a bringup runs in a domain of its own (it starts its own graph);
+  --duration, a bringup, `hexa view`) must still be running after STREAM_SECONDS s (a recording: after it says it
+  records) and then stop cleanly on SIGINT; a bringup runs in a domain of its own (it starts its own graph);
 - **synopsis**: a line with placeholders (`BAG`, `N`, `...`, `a|b`, `[opt]`) names its subcommand: `hexa <verbs> --help`
   must exit 0 for each alternative;
 - **parse**: the commands in CHEAP (minutes of work, or hardware) are parsed by the CLI's own parser — every option
@@ -24,6 +24,8 @@ import shlex
 import signal
 import subprocess
 import sys
+import threading
+import time
 from pathlib import Path
 
 import pytest
@@ -45,6 +47,9 @@ CHEAP: dict[tuple[str, ...], str] = {
     ("bringup", "robot"): "needs the robot's serial ports and RealSense cameras",
     ("bringup", "sim"): "a second simulated graph beside the module's own `hexa bringup sim`",
 }
+#: stream commands that first say on stderr that they are working (then STREAM_SECONDS more): a recorder subscribes
+#: only once it has discovered the topics
+READY = {("record",): "hexa record: recording "}
 #: a placeholder token: BAG, N, TOPSERIAL, R, …, ..., a|b, [x], {a|b}, 1..5
 PLACEHOLDER = re.compile(r"^(?:[A-Z][A-Z0-9_]*|.*(?:\.\.\.|…|\||\[|\]).*|\d+\.\.\d+)$")
 
@@ -98,8 +103,28 @@ def words(cmd: str) -> list[str]:
         return cmd.split()[1:]
 
 
-def has_placeholder(argv: list[str]) -> bool:
-    return any(PLACEHOLDER.match(w) for w in argv)
+def has_placeholder(cmd: str) -> bool:
+    """A placeholder among the unquoted words of `cmd` (a quoted YAML value such as '[3, 3]' is not one)."""
+    try:
+        raw = shlex.split(cmd, posix=False)[1:]
+    except ValueError:
+        raw = cmd.split()[1:]
+    return any(PLACEHOLDER.match(w) for w in raw if not w.startswith(("'", '"')))
+
+
+def parses(argv: list[str]) -> bool:
+    """True when the CLI's own parser accepts `argv` (every option and value valid)."""
+    import contextlib
+    import io
+
+    from hexa_bringup.cli import build_parser
+
+    try:
+        with contextlib.redirect_stderr(io.StringIO()), contextlib.redirect_stdout(io.StringIO()):
+            build_parser().parse_args(argv)
+    except SystemExit:
+        return False
+    return True
 
 
 def subcommand_paths(argv: list[str]) -> list[list[str]]:
@@ -128,10 +153,14 @@ def _subparser_choices(parser) -> dict:
     return {}
 
 
-def classify(kind: str, argv: list[str]) -> tuple[str, str]:
+def classify(kind: str, cmd: str) -> tuple[str, str]:
     """(how, why): "run" | "stream" | "synopsis" | "parse"."""
-    if kind == "synopsis" or has_placeholder(argv) or (argv and re.search(r"[/|]", argv[0])):
+    argv = words(cmd)
+    if kind == "synopsis" or has_placeholder(cmd) or (argv and re.search(r"[/|]", argv[0])):
         return "synopsis", "placeholders"
+    paths = subcommand_paths(argv)
+    if paths and len(paths[0]) == len(argv) and not parses(argv):
+        return "synopsis", "names a subcommand (`hexa topic`), not a command line"
     for prefix, why in CHEAP.items():
         if tuple(argv[:len(prefix)]) == prefix:
             return "parse", why
@@ -197,6 +226,20 @@ def _stop(proc: subprocess.Popen, grace: float = 20.0) -> tuple[str, str]:
     return out or "", err or ""
 
 
+def _interrupt(proc: subprocess.Popen, grace: float = 20.0) -> None:
+    """SIGINT (Ctrl-C) to the process group; SIGKILL after `grace` s."""
+    for sig, wait in ((signal.SIGINT, grace), (signal.SIGKILL, 10.0)):
+        try:
+            os.killpg(proc.pid, sig)
+        except ProcessLookupError:
+            return
+        try:
+            proc.wait(timeout=wait)
+            return
+        except subprocess.TimeoutExpired:
+            continue
+
+
 def _no_traceback(cmd: str, out: str, err: str) -> None:
     assert "Traceback (most recent call last)" not in out + err, f"`{cmd}` printed a traceback:\n{err[-3000:]}"
 
@@ -204,7 +247,7 @@ def _no_traceback(cmd: str, out: str, err: str) -> None:
 @pytest.mark.parametrize("kind,cmd", COMMANDS, ids=[c for _k, c in COMMANDS])
 def test_readme_command(kind, cmd, sim_graph, workdir, ros_domain_id):
     argv = words(cmd)
-    how, why = classify(kind, argv)
+    how, why = classify(kind, cmd)
     env = sim_graph
     if how == "synopsis":
         paths = subcommand_paths(argv)
@@ -222,6 +265,8 @@ def test_readme_command(kind, cmd, sim_graph, workdir, ros_domain_id):
         except SystemExit as exc:
             pytest.fail(f"`{cmd}` does not parse (exit {exc.code}); not run because: {why}")
         return
+    if argv[:1] == ["view"] and "--port" not in argv:
+        argv += ["--port", "0"]              # any free port: a concurrent `hexa view` may hold 8765
     if argv[:1] == ["bringup"]:              # its own graph, in its own domain
         from hexa_bringup.rosenv import ros_env
 
@@ -237,12 +282,26 @@ def test_readme_command(kind, cmd, sim_graph, workdir, ros_domain_id):
         _no_traceback(cmd, out, err)
         assert proc.returncode == 0, f"`{cmd}` exited {proc.returncode}:\n{err[-2000:]}"
         return
+    marker = next((m for prefix, m in READY.items() if tuple(argv[:len(prefix)]) == prefix), None)
+    err_lines: list[str] = []
+    out_lines: list[str] = []
+    readers = [threading.Thread(target=lambda f=f, acc=acc: acc.extend(iter(f.readline, "")), daemon=True)
+               for f, acc in ((proc.stderr, err_lines), (proc.stdout, out_lines))]
+    for r in readers:
+        r.start()
+    deadline = time.monotonic() + 90.0
+    while marker and proc.poll() is None and time.monotonic() < deadline \
+            and not any(marker in line for line in list(err_lines)):
+        time.sleep(0.2)
     try:
-        out, err = proc.communicate(timeout=STREAM_SECONDS)
+        proc.wait(timeout=STREAM_SECONDS)
         ended = True
     except subprocess.TimeoutExpired:
         ended = False
-        out, err = _stop(proc)
+        _interrupt(proc)
+    for r in readers:
+        r.join(timeout=10)
+    out, err = "".join(out_lines), "".join(err_lines)
     _no_traceback(cmd, out, err)
     if ended:      # a stream command that ends by itself (a replay at the bag's end) must have succeeded
         assert proc.returncode == 0, f"`{cmd}` exited {proc.returncode} within {STREAM_SECONDS:g} s:\n{err[-2000:]}"
@@ -253,6 +312,76 @@ def test_readme_command(kind, cmd, sim_graph, workdir, ros_domain_id):
 
 def test_the_readme_has_commands_of_every_kind():
     """The parser finds the README's command lines (a README reshaped so that none is found would pass silently)."""
-    kinds = {classify(k, words(c))[0] for k, c in COMMANDS}
+    kinds = {classify(k, c)[0] for k, c in COMMANDS}
     assert {"run", "stream", "synopsis", "parse"} <= kinds, kinds
     assert len(COMMANDS) >= 30
+
+
+# ---------------------------------------------------------------------------------------------------------------
+# the topic table
+
+#: ROS's own topics of every node, described in the text under the table
+ROS_OWN = {"/rosout", "/parameter_events"}
+
+GRAPH_DUMP = """
+import json, time
+from hexa_bringup.commands._ros import RosCli, qos_dict
+with RosCli("hexa_readme_table") as cli:
+    seen, still = None, time.monotonic()
+    while time.monotonic() - still < 3.0:
+        now = sorted(cli.node.get_topic_names_and_types())
+        if now != seen:
+            seen, still = now, time.monotonic()
+        cli.spin_for(0.2)
+    out = {}
+    for name, types in seen:
+        pubs = [(i.node_name, qos_dict(i.qos_profile)) for i in cli.node.get_publishers_info_by_topic(name)]
+        pubs = [(n, q["reliability"], q["durability"]) for n, q in pubs if not n.startswith("hexa_")]
+        if pubs:
+            out[name] = {"types": types, "publishers": pubs}
+print(json.dumps(out))
+"""
+
+
+def topic_table(text: str, ns: str = "/hexa") -> dict[str, tuple[str, str, str]]:
+    """topic → (type "pkg/Name", reliability, durability) from the README's table with a QoS column."""
+    lines = text.splitlines()
+    start = next(i for i, line in enumerate(lines) if line.startswith("| topic | type | from | QoS |"))
+    out = {}
+    for line in lines[start + 2:]:
+        if not line.startswith("|"):
+            break
+        cells = [c.strip() for c in line.strip("|").split("|")]
+        names = []
+        for raw in re.findall(r"`([^`]+)`", cells[0]):
+            m = re.match(r"^(.*)\{([^}]+)\}(.*)$", raw)
+            for name in ([m.group(1) + alt + m.group(3) for alt in m.group(2).split(",")] if m else [raw]):
+                names.append(name if name.startswith("/") else f"{ns}/{name}")
+        types = [t.strip() for t in cells[1].split(",")]
+        qos = cells[3]
+        reliability = "best_effort" if qos.startswith("best effort") else "reliable"
+        durability = "transient_local" if "transient local" in qos else "volatile"
+        for k, name in enumerate(names):
+            kind = types[k * len(types) // len(names)] if len(types) > 1 else types[0]
+            out[name] = (kind, reliability, durability)
+    return out
+
+
+def test_the_topic_table_lists_every_published_topic_with_its_type_and_qos(sim_graph, workdir):
+    import json
+
+    table = topic_table(README.read_text(encoding="utf-8"))
+    r = subprocess.run([sys.executable, "-c", GRAPH_DUMP], env=sim_graph, cwd=str(workdir), capture_output=True,
+                       text=True, timeout=120)
+    assert r.returncode == 0, r.stderr[-2000:]
+    graph = {t: v for t, v in json.loads(r.stdout).items() if t not in ROS_OWN}
+    missing = sorted(set(graph) - set(table))
+    assert not missing, f"published by `hexa bringup sim` but not in the README's topic table: {missing}"
+    stale = sorted(set(table) - set(graph))
+    assert not stale, f"in the README's topic table but not published by `hexa bringup sim`: {stale}"
+    for topic, v in sorted(graph.items()):
+        kind, reliability, durability = table[topic]
+        assert [t.replace("/msg/", "/") for t in v["types"]] == [kind], (topic, v["types"], kind)
+        for node, rel, dur in v["publishers"]:
+            assert (rel, dur) == (reliability, durability), (topic, node, rel, dur, "README:", reliability,
+                                                             durability)
