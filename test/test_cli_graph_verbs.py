@@ -218,3 +218,22 @@ def test_shell_completion_completes_verbs(tmp_path):
     subprocess.run([*HEXA], env=env, capture_output=True, text=True, timeout=60)
     assert sorted(w.strip() for w in out.read_text().split("\n")) == ["describe", "dump"]
     print(f"two completions in {time.monotonic() - t0:.1f} s")
+
+
+def test_demo_prints_its_domain_and_the_line_that_watches_it_from_a_second_shell(graph, tmp_path):
+    """The printed line, run as printed from a shell with the default discovery range, finds the observer's
+    /hexa/collision (the demo's graph is on this host only)."""
+    import re
+    import shlex
+
+    r = hexa(graph, "demo", "--params", str(tmp_path / "none.yaml"), "--out", str(tmp_path / "demo"))
+    assert r.returncode == 2 and "parameter file" in r.stderr      # stops before any graph starts
+    m = re.search(r"^\s+(ROS_DOMAIN_ID=(\d+) hexa topic echo /hexa/collision)$", r.stdout, re.M)
+    assert m and m.group(2) == graph["ROS_DOMAIN_ID"], r.stdout
+    shell = {k: v for k, v in os.environ.items() if not k.startswith(("ROS_", "RMW_", "FAST"))}
+    assign, *argv = shlex.split(m.group(1))
+    shell[assign.split("=")[0]] = assign.split("=")[1]
+    watch = subprocess.run([*HEXA, *argv[1:], "--timeout", "20"], env=shell, capture_output=True, text=True,
+                           timeout=90)
+    # no collision happens here: it found the publisher and waited for messages (exit 1), it did not miss the node
+    assert watch.returncode == 1 and "0 of any messages on /hexa/collision" in watch.stderr, watch.stderr

@@ -85,6 +85,21 @@ def main(argv: list[str] | None = None) -> int:
 
         print(f"hexa {where}: {reason(exc)}", file=sys.stderr)
         return 2
+    except Exception as exc:
+        if _interrupted(exc):                   # Ctrl-C inside an import (rclpy's C library) re-raised as another error
+            return 130
+        raise
+
+
+def _interrupted(exc: BaseException) -> bool:
+    """True when a KeyboardInterrupt is among the causes of `exc`."""
+    seen = set()
+    while exc is not None and id(exc) not in seen:
+        if isinstance(exc, KeyboardInterrupt):
+            return True
+        seen.add(id(exc))
+        exc = exc.__cause__ or exc.__context__
+    return False
 
 
 if __name__ == "__main__":
