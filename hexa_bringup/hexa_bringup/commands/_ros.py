@@ -101,6 +101,23 @@ class RosCli:
                 raise CliError(error)
             self.spin_for(0.1)
 
+    def discover(self, wait: float, others: Callable[[], Any], patience: float = 5.0) -> None:
+        """Spin `wait` s of discovery; while `others()` finds nothing of the graph yet, spin on up to `patience` s
+        more (discovery is slower on a loaded host), and 0.5 s after the first find (the rest arrives together)."""
+        self.spin_for(wait)
+        if others():
+            return
+        end = time.monotonic() + patience
+        while time.monotonic() < end:
+            self.spin_for(0.1)
+            if others():
+                self.spin_for(0.5)
+                return
+
+    def foreign_topics(self) -> list[str]:
+        """Topics other than the ones every node (this one too) has."""
+        return [t for t, _ in self.node.get_topic_names_and_types() if t not in ("/rosout", "/parameter_events")]
+
     def nodes(self) -> list[str]:
         """Fully qualified names of the graph's nodes, without this CLI's own node."""
         out = []

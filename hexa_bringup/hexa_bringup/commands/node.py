@@ -14,7 +14,9 @@ def register(sub: argparse._SubParsersAction) -> None:
     nsub.required = True
     pl = nsub.add_parser("list", help="fully qualified names of the nodes in the graph")
     pl.add_argument("--json", action="store_true")
-    pl.add_argument("--wait", type=float, default=1.5, help="seconds of discovery before listing (default 1.5)")
+    pl.add_argument("--wait", type=float, default=1.5,
+                    help="seconds of discovery before listing (default 1.5; up to 5 s more while the graph shows "
+                         "nothing yet)")
     pl.set_defaults(func=run_list)
     pi = nsub.add_parser("info", help="a node's publishers, subscribers, service servers and clients")
     pi.add_argument("node", help="fully qualified node name, e.g. /hexa/observer")
@@ -25,7 +27,7 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 def run_list(args: argparse.Namespace) -> int:
     with RosCli("hexa_node") as cli:
-        cli.spin_for(args.wait)
+        cli.discover(args.wait, cli.nodes)
         nodes = cli.nodes()
     print(json.dumps(nodes) if args.json else "\n".join(nodes))
     return 0

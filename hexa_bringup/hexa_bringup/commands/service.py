@@ -72,7 +72,7 @@ def _cli() -> RosCli:
 
 def run_list(args: argparse.Namespace) -> int:
     with _cli() as cli:
-        cli.spin_for(args.wait)
+        cli.discover(args.wait, cli.nodes)
         services = sorted(cli.node.get_service_names_and_types())
     if args.json:
         print(json.dumps({n: t for n, t in services}))

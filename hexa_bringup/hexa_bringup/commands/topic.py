@@ -20,7 +20,9 @@ def register(sub: argparse._SubParsersAction) -> None:
     pl = tsub.add_parser("list", help="topics in the graph with their types")
     pl.add_argument("-t", "--show-types", action="store_true", help="also print each topic's type")
     pl.add_argument("--json", action="store_true")
-    pl.add_argument("--wait", type=float, default=1.5, help="seconds of discovery before listing (default 1.5)")
+    pl.add_argument("--wait", type=float, default=1.5,
+                    help="seconds of discovery before listing (default 1.5; up to 5 s more while the graph shows "
+                         "nothing yet)")
     pl.set_defaults(func=run_list)
 
     pe = tsub.add_parser("echo", help="print messages of a topic (type resolved from the graph)")
@@ -103,7 +105,7 @@ def _qos_for(cli: RosCli, topic: str):
 
 def run_list(args: argparse.Namespace) -> int:
     with RosCli() as cli:
-        cli.spin_for(args.wait)
+        cli.discover(args.wait, cli.foreign_topics)
         topics = sorted(cli.node.get_topic_names_and_types())
     if args.json:
         print(json.dumps({name: types for name, types in topics}))
