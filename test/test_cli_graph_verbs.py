@@ -237,3 +237,14 @@ def test_demo_prints_its_domain_and_the_line_that_watches_it_from_a_second_shell
                            timeout=90)
     # no collision happens here: it found the publisher and waited for messages (exit 1), it did not miss the node
     assert watch.returncode == 1 and "0 of any messages on /hexa/collision" in watch.stderr, watch.stderr
+
+
+def test_completion_offers_the_graphs_topic_and_node_names(graph, tmp_path):
+    out = tmp_path / "completions"
+    env = dict(graph, _ARGCOMPLETE="1", _ARGCOMPLETE_IFS="\n", _ARGCOMPLETE_STDOUT_FILENAME=str(out))
+    for line, wanted in (("hexa topic info /hexa/coll", {"/hexa/collision", "/hexa/collision_state"}),
+                         ("hexa param dump /hexa/obs", {"/hexa/observer"})):
+        env.update(COMP_LINE=line, COMP_POINT=str(len(line)))
+        r = subprocess.run([*HEXA], env=env, capture_output=True, text=True, timeout=60)
+        assert r.returncode == 0, r.stderr
+        assert {w.strip() for w in out.read_text().split("\n")} == wanted, out.read_text()

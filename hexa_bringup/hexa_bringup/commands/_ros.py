@@ -186,3 +186,25 @@ def qos_dict(qos: Any) -> dict[str, Any]:
     return {"reliability": name(qos.reliability), "durability": name(qos.durability), "history": name(qos.history),
             "depth": int(qos.depth), "deadline_s": seconds(qos.deadline), "lifespan_s": seconds(qos.lifespan),
             "liveliness": name(qos.liveliness), "liveliness_lease_s": seconds(qos.liveliness_lease_duration)}
+
+
+def graph_completer(kind: str) -> Callable[..., list[str]]:
+    """An argcomplete completer of the graph's `kind` names ("topics" | "nodes" | "services"), discovered for about a
+    second at each TAB (there is no ros2 daemon to ask)."""
+    def complete(prefix: str, **_kw: Any) -> list[str]:
+        try:
+            with RosCli("hexa_complete") as cli:
+                if kind == "nodes":
+                    cli.discover(1.0, cli.nodes, patience=1.0)
+                    names = cli.nodes()
+                elif kind == "services":
+                    cli.discover(1.0, cli.nodes, patience=1.0)
+                    names = [n for n, _ in cli.node.get_service_names_and_types()]
+                else:
+                    cli.discover(1.0, cli.foreign_topics, patience=1.0)
+                    names = cli.foreign_topics()
+        except Exception:  # noqa: BLE001 - a completion must never print an error into the user's command line
+            return []
+        return sorted(n for n in set(names) if n.startswith(prefix))
+
+    return complete

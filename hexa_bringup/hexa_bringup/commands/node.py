@@ -5,7 +5,7 @@ from __future__ import annotations
 import argparse
 import json
 
-from hexa_bringup.commands._ros import RosCli
+from hexa_bringup.commands._ros import RosCli, graph_completer
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -19,7 +19,8 @@ def register(sub: argparse._SubParsersAction) -> None:
                          "nothing yet)")
     pl.set_defaults(func=run_list)
     pi = nsub.add_parser("info", help="a node's publishers, subscribers, service servers and clients")
-    pi.add_argument("node", help="fully qualified node name, e.g. /hexa/observer")
+    pi.add_argument("node", help="fully qualified node name, e.g. /hexa/observer"
+                    ).completer = graph_completer("nodes")
     pi.add_argument("--json", action="store_true")
     pi.add_argument("--timeout", type=float, default=10.0, help="seconds to wait for the node to be discovered")
     pi.set_defaults(func=run_info)

@@ -10,7 +10,10 @@ from pathlib import Path
 
 import yaml
 
-from hexa_bringup.commands._ros import CliError, RosCli, absolute, load_yaml_mapping, looks_like_type, reason
+from hexa_bringup.commands._ros import (CliError, RosCli, absolute, graph_completer, load_yaml_mapping,
+                                        looks_like_type, reason)
+
+NODES = graph_completer("nodes")
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -24,7 +27,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     pc = ssub.add_parser("call", help="call a service: call NAME [TYPE] [REQUEST]; the type comes from the graph "
                                       "when omitted, e.g. hexa service call /hexa/observer/reset "
                                       "'{recalibrate: true}'")
-    pc.add_argument("name")
+    pc.add_argument("name").completer = graph_completer("services")
     pc.add_argument("type", nargs="?", metavar="TYPE_OR_REQUEST",
                     help="pkg/srv/Name, or the request when the type is omitted (told apart by shape)")
     pc.add_argument("request", nargs="?", default=None, help="request fields as YAML (default {})")
@@ -36,30 +39,30 @@ def register(sub: argparse._SubParsersAction) -> None:
     qsub = q.add_subparsers(dest="param_command", metavar="ACTION")
     qsub.required = True
     ql = qsub.add_parser("list", help="parameter names of a node")
-    ql.add_argument("node", help="fully qualified node name, e.g. /hexa/observer")
+    ql.add_argument("node", help="fully qualified node name, e.g. /hexa/observer").completer = NODES
     ql.set_defaults(func=run_param_list)
     qg = qsub.add_parser("get", help="a parameter's value")
-    qg.add_argument("node")
+    qg.add_argument("node").completer = NODES
     qg.add_argument("name")
     qg.set_defaults(func=run_param_get)
     qs = qsub.add_parser("set", help="set a parameter (value as YAML: 2.5, true, [2, 2, 2, 0.2, 0.2, 0.2])")
-    qs.add_argument("node")
+    qs.add_argument("node").completer = NODES
     qs.add_argument("name")
     qs.add_argument("value")
     qs.set_defaults(func=run_param_set)
     qd = qsub.add_parser("describe", help="parameters' descriptors: type, description, range, read-only")
-    qd.add_argument("node")
+    qd.add_argument("node").completer = NODES
     qd.add_argument("names", nargs="*", help="parameter names (default: all)")
     qd.add_argument("--json", action="store_true")
     qd.set_defaults(func=run_param_describe)
     qm = qsub.add_parser("dump", help="every parameter of a node as a ROS parameters YAML (`--params` / "
                                       "`hexa param load` read it)")
-    qm.add_argument("node")
+    qm.add_argument("node").completer = NODES
     qm.add_argument("-o", "--output", help="write to this file instead of stdout")
     qm.set_defaults(func=run_param_dump)
     qo = qsub.add_parser("load", help="set a node's parameters from a ROS parameters YAML (as `hexa param dump` "
                                       "writes); values already in effect are skipped, refusals named")
-    qo.add_argument("node")
+    qo.add_argument("node").completer = NODES
     qo.add_argument("file")
     qo.set_defaults(func=run_param_load)
     for sp in (ql, qg, qs, qd, qm, qo):

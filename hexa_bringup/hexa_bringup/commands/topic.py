@@ -8,8 +8,8 @@ import sys
 import time
 from collections import deque
 
-from hexa_bringup.commands._ros import (CliError, RosCli, absolute, load_yaml_mapping, looks_like_type, qos_dict,
-                                        reason)
+from hexa_bringup.commands._ros import (CliError, RosCli, absolute, graph_completer, load_yaml_mapping,
+                                        looks_like_type, qos_dict, reason)
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -26,7 +26,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     pl.set_defaults(func=run_list)
 
     pe = tsub.add_parser("echo", help="print messages of a topic (type resolved from the graph)")
-    pe.add_argument("topic")
+    pe.add_argument("topic").completer = graph_completer("topics")
     pe.add_argument("type", nargs="?", help="message type pkg/msg/Name (default: from the graph)")
     pe.add_argument("--once", action="store_true", help="exit after the first message")
     pe.add_argument("-n", "--count", type=int, default=0, help="exit after N messages")
@@ -37,7 +37,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     pe.set_defaults(func=run_echo)
 
     ph = tsub.add_parser("hz", help="measure the publishing rate of a topic")
-    ph.add_argument("topic")
+    ph.add_argument("topic").completer = graph_completer("topics")
     ph.add_argument("type", nargs="?")
     ph.add_argument("--window", type=int, default=100, help="samples in the moving window")
     ph.add_argument("--duration", type=float, default=0.0, help="stop after this many seconds (0 = until Ctrl-C)")
@@ -46,7 +46,7 @@ def register(sub: argparse._SubParsersAction) -> None:
 
     pp = tsub.add_parser("pub", help="publish a message (type from the graph when omitted), e.g. "
                                      "hexa topic pub /chatter std_msgs/msg/String '{data: hi}' --once")
-    pp.add_argument("topic")
+    pp.add_argument("topic").completer = graph_completer("topics")
     pp.add_argument("type", nargs="?", help="message type pkg/msg/Name (default: from the graph's publishers or "
                                             "subscribers of the topic)")
     pp.add_argument("values", nargs="?", default="{}", help="message fields as YAML (default {})")
@@ -64,7 +64,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     pp.set_defaults(func=run_pub)
 
     pi = tsub.add_parser("info", help="type and endpoints of a topic; -v: each endpoint's node and QoS")
-    pi.add_argument("topic")
+    pi.add_argument("topic").completer = graph_completer("topics")
     pi.add_argument("-v", "--verbose", action="store_true", help="every publisher and subscription with its QoS")
     pi.add_argument("--json", action="store_true")
     pi.add_argument("--wait", type=float, default=1.0, help="seconds of discovery before answering (default 1)")
