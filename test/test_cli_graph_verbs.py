@@ -248,3 +248,20 @@ def test_completion_offers_the_graphs_topic_and_node_names(graph, tmp_path):
         r = subprocess.run([*HEXA], env=env, capture_output=True, text=True, timeout=60)
         assert r.returncode == 0, r.stderr
         assert {w.strip() for w in out.read_text().split("\n")} == wanted, out.read_text()
+
+
+def test_doctor_reads_the_firmware_version_a_running_driver_reports(tmp_path, procs, ros_env):
+    """The driver against the board emulators on ptys (the firmware's protocol): doctor names both boards."""
+    from hexa.protocol.emulator import MegaEmulator, UnoEmulator
+    from test_driver_helpers import driver_args
+
+    with UnoEmulator(link=tmp_path / "uno") as uno, MegaEmulator(link=tmp_path / "mega") as mega:
+        procs.start(driver_args(uno.port, mega.port, "stream_rate_hz:=200", "diagnostics_period:=0.2"), ros_env)
+        boards: list = []
+        deadline = time.monotonic() + 60
+        while not len(boards) == 2 and time.monotonic() < deadline:
+            r = hexa(ros_env, "doctor", "--json", "--wait", "3")
+            boards = [c for c in json.loads(r.stdout)["checks"] if c["name"] == "board"]
+    assert len(boards) == 2, boards
+    assert all(c["state"] == "ok" and "firmware 0x100 (" in c["detail"] for c in boards), boards   # the emulators'
+    assert any("(Mega)" in c["detail"] for c in boards) and any("(Uno)" in c["detail"] for c in boards), boards
