@@ -181,6 +181,9 @@ def run_play(args: argparse.Namespace) -> int:
     excluded = {t if t.startswith("/") else "/" + t for t in args.exclude}
     wanted = {t if t.startswith("/") else "/" + t for t in args.topics or []}
     selected = [t for t in topics if (not wanted or t in wanted) and t not in excluded]
+    absent = sorted(wanted - set(topics))
+    if absent:
+        print(f"hexa play: the bag has no topic {', '.join(absent)}; playing the others", file=sys.stderr)
     pubs = {}
     for topic in selected:
         msgtype, _count, reliable = topics[topic]
