@@ -265,3 +265,19 @@ def test_doctor_reads_the_firmware_version_a_running_driver_reports(tmp_path, pr
     assert len(boards) == 2, boards
     assert all(c["state"] == "ok" and "firmware 0x100 (" in c["detail"] for c in boards), boards   # the emulators'
     assert any("(Mega)" in c["detail"] for c in boards) and any("(Uno)" in c["detail"] for c in boards), boards
+
+
+def test_param_load_reads_the_sections_and_wildcards_of_a_ros_parameters_file():
+    from hexa_bringup.commands._ros import CliError
+    from hexa_bringup.commands.service import file_parameters
+    from hexa_bringup.graphs import DEFAULT_PARAMS
+
+    shipped = file_parameters(yaml.safe_load(DEFAULT_PARAMS.read_text()), "/hexa/observer", "hexa_params.yaml")
+    assert "thresholds" in shipped and "approach_speed" not in shipped          # /**/observer, not /**/trajectory
+    data = {"/**": {"ros__parameters": {"use_sim_time": True, "a": 1}},
+            "/hexa": {"observer": {"ros__parameters": {"a": 2, "gains": {"k": 3}}}},
+            "/*/rnea": {"ros__parameters": {"a": 4}}}
+    assert file_parameters(data, "/hexa/observer", "f") == {"use_sim_time": True, "a": 2, "gains.k": 3}
+    assert file_parameters(data, "/hexa/rnea", "f") == {"use_sim_time": True, "a": 4}
+    with pytest.raises(CliError, match="no ros__parameters for /hexa/pose"):
+        file_parameters({"/hexa/observer": {"ros__parameters": {"a": 1}}}, "/hexa/pose", "f")

@@ -311,26 +311,44 @@ def _flat(tree: dict, prefix: str = "") -> dict:
     return out
 
 
+def _node_sections(data: dict, prefix: str = "") -> list[tuple[str, dict]]:
+    """(node key, ros__parameters) of a ROS parameters YAML in file order; namespaces may nest as mappings."""
+    out = []
+    for key, value in data.items():
+        if not isinstance(value, dict):
+            continue
+        name = f"{prefix}/{str(key).strip('/')}" if prefix else str(key)
+        if isinstance(value.get("ros__parameters"), dict):
+            out.append((name, value["ros__parameters"]))
+        out += _node_sections({k: v for k, v in value.items() if k != "ros__parameters"}, name)
+    return out
+
+
+def _matches(key: str, node: str) -> bool:
+    """True when the node-name key of a parameters file (`/hexa/observer`, `observer`, `/**`, `/**/observer`,
+    `/*/observer`) applies to the fully qualified `node`."""
+    import re
+
+    pattern = re.escape(key if key.startswith("/") else "/" + key)
+    pattern = pattern.replace(r"/\*\*", "(?:/[^/]+)*").replace(r"\*", "[^/]+")
+    return re.fullmatch(pattern, node) is not None
+
+
 def file_parameters(data, node: str, path: str) -> dict:
-    """The parameters a ROS parameters YAML gives `node`: its own section (by full name, by name, or under its
-    namespace) over the `/**` wildcard's, flattened to dotted names.
+    """The parameters a ROS parameters YAML gives `node` (every section whose name or wildcard matches it, later
+    ones over earlier ones), flattened to dotted names.
 
     Raises:
         CliError: the file is not a parameters YAML or has nothing for `node`.
     """
     if not isinstance(data, dict):
         raise CliError(f"{path} is not a ROS parameters YAML (a mapping of node names to ros__parameters)")
-    ns, _, base = node.rpartition("/")
-    keys = ["/**", "**", node, node.lstrip("/"), base]
     found: dict = {}
-    for key in keys:
-        section = data.get(key)
-        if section is None and key not in ("/**", "**") and ns:
-            section = (data.get(ns) or data.get(ns.lstrip("/")) or {}).get(base)
-        if isinstance(section, dict) and isinstance(section.get("ros__parameters"), dict):
-            found.update(_flat(section["ros__parameters"]))
+    for key, params in _node_sections(data):
+        if _matches(key, node):
+            found.update(_flat(params))
     if not found:
-        raise CliError(f"{path} has no ros__parameters for {node} (nor for /**)")
+        raise CliError(f"{path} has no ros__parameters for {node}")
     return found
 
 
