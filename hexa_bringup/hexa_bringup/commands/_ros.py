@@ -102,21 +102,20 @@ class RosCli:
             self.spin_for(0.1)
 
     def discover(self, wait: float, others: Callable[[], Any], patience: float = 5.0) -> None:
-        """Spin `wait` s of discovery; while `others()` finds nothing of the graph yet, spin on up to `patience` s
-        more (discovery is slower on a loaded host), and 0.5 s after the first find (the rest arrives together)."""
+        """Spin `wait` s of discovery, then on (up to `patience` s more) while `others()` finds nothing of the graph
+        yet or what it finds still changes within 0.5 s (discovery is slower on a loaded host)."""
         self.spin_for(wait)
-        if others():
-            return
         end = time.monotonic() + patience
-        while time.monotonic() < end:
+        last, still = others(), time.monotonic()
+        while time.monotonic() < end and not (last and time.monotonic() - still >= 0.5):
             self.spin_for(0.1)
-            if others():
-                self.spin_for(0.5)
-                return
+            now = others()
+            if now != last:
+                last, still = now, time.monotonic()
 
     def foreign_topics(self) -> list[str]:
         """Topics other than the ones every node (this one too) has."""
-        return [t for t, _ in self.node.get_topic_names_and_types() if t not in ("/rosout", "/parameter_events")]
+        return sorted(t for t, _ in self.node.get_topic_names_and_types() if t not in ("/rosout", "/parameter_events"))
 
     def nodes(self) -> list[str]:
         """Fully qualified names of the graph's nodes, without this CLI's own node."""
@@ -195,13 +194,13 @@ def graph_completer(kind: str) -> Callable[..., list[str]]:
         try:
             with RosCli("hexa_complete") as cli:
                 if kind == "nodes":
-                    cli.discover(1.0, cli.nodes, patience=1.0)
+                    cli.discover(1.0, cli.nodes, patience=3.0)
                     names = cli.nodes()
                 elif kind == "services":
-                    cli.discover(1.0, cli.nodes, patience=1.0)
+                    cli.discover(1.0, cli.nodes, patience=3.0)
                     names = [n for n, _ in cli.node.get_service_names_and_types()]
                 else:
-                    cli.discover(1.0, cli.foreign_topics, patience=1.0)
+                    cli.discover(1.0, cli.foreign_topics, patience=3.0)
                     names = cli.foreign_topics()
         except Exception:  # noqa: BLE001 - a completion must never print an error into the user's command line
             return []
