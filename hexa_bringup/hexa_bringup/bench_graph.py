@@ -40,11 +40,11 @@ import numpy as np
 from hexa.benchmarks import BenchRow
 from hexa_bringup.bench_graph_analysis import (cdr_stamp_ns, compare_contacts, compare_events, fifo_pairs,
                                                latency_stats, match_nearest, unwrap_board_us, within_percent)
+# the inputs played from a bag, relative to the graph's namespace: the replay graph's sensor inputs (one definition)
+from hexa_bringup.graphs import CAMERA_TOPICS, CAMERAS  # noqa: F401 - bench_graph_robot takes them from here
+from hexa_bringup.graphs import SENSOR_INPUTS as INPUTS
 
-#: the inputs played from a bag, relative to the graph's namespace
-CAMERA_TOPICS = ("color/image_raw", "aligned_depth_to_color/image_raw", "color/camera_info")
-CAMERAS = ("cam_top", "cam_side")
-INPUTS = tuple(f"{c}/{t}" for c in CAMERAS for t in CAMERA_TOPICS) + ("motor_currents", "joint_states")
+
 #: outputs of the processing graph the probe listens to: topic → message type
 OUTPUTS = {"plate_pose": "geometry_msgs/msg/PoseStamped", "residual": "hexa_msgs/msg/Residual",
            "collision": "hexa_msgs/msg/CollisionEvent", "contact": "hexa_msgs/msg/Contact",

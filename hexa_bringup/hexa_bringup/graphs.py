@@ -3,6 +3,7 @@ from __future__ import annotations
 
 import importlib.util
 import sys
+from collections.abc import Iterable
 from pathlib import Path
 
 import yaml
@@ -30,6 +31,13 @@ NODES: list[tuple[str, str, bool, tuple[str, ...]]] = [
     ("srm", "hexa_dynamics.srm_node", True, ("upsrpu",)),
 ]
 MODES = ("sim", "robot", "replay", "upsrpu")
+#: the sensor inputs of the processing graph, relative to its namespace: what the hardware (or the simulator) publishes
+#: and the nodes of "replay" mode read: both cameras' colour, aligned depth and camera_info (realsense-ros layout)
+#: and the driver's two streams. `hexa bringup replay` plays these from a bag, never the recorded outputs; `hexa bench
+#: graph` plays the same set.
+CAMERAS = ("cam_top", "cam_side")
+CAMERA_TOPICS = ("color/image_raw", "aligned_depth_to_color/image_raw", "color/camera_info")
+SENSOR_INPUTS = tuple(f"{c}/{t}" for c in CAMERAS for t in CAMERA_TOPICS) + ("motor_currents", "joint_states")
 #: the node class of each module (for composition: hexa_ros.compose builds it)
 NODE_CLASSES = {"hexa_vision.pose_node": "PoseNode", "hexa_vision.isolation_node": "IsolationNode",
                 "hexa_dynamics.observer_node": "ObserverNode", "hexa_dynamics.rnea_node": "RneaNode",
@@ -107,6 +115,37 @@ def _composed(specs: list[NodeSpec], mode: str, namespace: str, params: Path | N
         out.append(NodeSpec(group, cmd, required=any(present[n].required for n in names)))
         grouped.update(names)
     return [s for s in specs if s.name not in grouped] + out
+
+
+def _absolute(topic: str, namespace: str) -> str:
+    return topic if topic.startswith("/") else f"{namespace.rstrip('/')}/{topic}"
+
+
+def replay_topics(bag: Iterable[str], namespace: str = "/hexa", topics: Iterable[str] | None = None,
+                  exclude: Iterable[str] = ()) -> list[str]:
+    """The topics of a bag that `hexa bringup replay` plays: by default the SENSOR_INPUTS in `namespace` that the bag
+    holds (never the recorded outputs, which the live nodes publish again); `topics` replaces that choice, `exclude`
+    removes topics from it. Relative names are resolved in `namespace`.
+
+    Raises:
+        SupervisorError: a topic of `topics` is not in the bag, or nothing is left to play (naming what the bag holds).
+    """
+    held = set(bag)
+    if topics:
+        chosen = [_absolute(t, namespace) for t in topics]
+        absent = [t for t in chosen if t not in held]
+        if absent:
+            raise SupervisorError(f"the bag has no topic {', '.join(absent)}; it holds {', '.join(sorted(held))}")
+    else:
+        chosen = [t for t in (_absolute(t, namespace) for t in SENSOR_INPUTS) if t in held]
+    dropped = {_absolute(t, namespace) for t in exclude}
+    chosen = [t for t in dict.fromkeys(chosen) if t not in dropped]
+    if not chosen:
+        raise SupervisorError(f"nothing to replay: the bag holds none of the sensor inputs "
+                              f"{', '.join(_absolute(t, namespace) for t in SENSOR_INPUTS)} (or all were excluded); "
+                              f"it holds {', '.join(sorted(held)) or 'no topic'}. Name topics with --topics, or "
+                              f"--ns if the bag was recorded in another namespace")
+    return chosen
 
 
 def load_graph_file(path: str | Path) -> list[NodeSpec]:

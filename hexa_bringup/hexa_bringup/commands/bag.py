@@ -1,5 +1,5 @@
-"""`hexa record`, `hexa play` and `hexa bag recover`: MCAP rosbag2 recording of live topics (raw CDR), playback,
-and the rebuilding of a bag whose recorder was killed."""
+"""`hexa record`, `hexa play`, `hexa bag info` and `hexa bag recover`: MCAP rosbag2 recording of live topics (raw
+CDR), playback, what a bag holds, and the rebuilding of a bag whose recorder was killed."""
 from __future__ import annotations
 
 import argparse
@@ -15,6 +15,10 @@ def register(sub: argparse._SubParsersAction) -> None:
     pr = sub.add_parser("record", help="record live topics to an MCAP rosbag2 (closed cleanly on Ctrl-C; killed, "
                                        "it loses at most the last 0.5 s: `hexa bag recover`)")
     pr.add_argument("topics", nargs="*", help="topics to record (default: every topic, discovered continuously)")
+    pr.add_argument("--sensor-inputs", action="store_true",
+                    help="also record the graph's sensor inputs (both cameras' colour, aligned depth and camera_info, "
+                         "motor_currents, joint_states in --ns): a bag `hexa bringup replay` plays")
+    pr.add_argument("--ns", default="/hexa", help="namespace of --sensor-inputs (default /hexa)")
     pr.add_argument("-o", "--output", required=True, help="bag directory to create (must not exist)")
     pr.add_argument("--duration", type=float, default=0.0, help="stop after this many seconds (0 = until Ctrl-C)")
     pr.add_argument("--use-sim-time", action="store_true", help="stamp messages with /clock time")
@@ -29,6 +33,7 @@ def register(sub: argparse._SubParsersAction) -> None:
                     help="with --clock: /clock messages per second of bag time (default 100; 0 = one per message: "
                          "every sim-time node handles each of them, which costs the graph a core at 1 kHz)")
     pp.add_argument("--topics", nargs="*", help="only these topics")
+    pp.add_argument("--exclude", nargs="+", default=[], metavar="TOPIC", help="not these topics")
     pp.add_argument("--wait", type=float, default=1.0, help="seconds to let subscribers connect before playing")
     pp.add_argument("--json", action="store_true", help="print a JSON summary at the end")
     pp.add_argument("--wait-subscribers", action="store_true",
@@ -42,6 +47,11 @@ def register(sub: argparse._SubParsersAction) -> None:
 
     pb = sub.add_parser("bag", help="bag maintenance")
     bag_sub = pb.add_subparsers(dest="bag_command", required=True)
+    bi = bag_sub.add_parser("info", help="what a bag holds: duration, start and end, and per topic its type, "
+                                         "message count and QoS (like `ros2 bag info`)")
+    bi.add_argument("bag", help="the bag directory")
+    bi.add_argument("--json", action="store_true")
+    bi.set_defaults(func=run_info)
     rv = bag_sub.add_parser("recover", help="rebuild a readable bag (MCAP + metadata.yaml) from what a killed "
                                             "`hexa record` left, and say what was lost")
     rv.add_argument("bag", help="the damaged bag directory (or its .mcap file)")
@@ -82,6 +92,10 @@ def run_record(args: argparse.Namespace) -> int:
     signal.signal(signal.SIGTERM, on_signal)
     rclpy, node = _init("hexa_record", args.use_sim_time)
     wanted = {t if t.startswith("/") else "/" + t for t in args.topics}
+    if args.sensor_inputs:
+        from hexa_bringup.graphs import SENSOR_INPUTS
+
+        wanted |= {f"{args.ns.rstrip('/')}/{t}" for t in SENSOR_INPUTS}
     try:
         recorder = BagRecorder(args.output)
     except BagError as exc:
@@ -164,7 +178,12 @@ def run_play(args: argparse.Namespace) -> int:
     signal.signal(signal.SIGINT, on_signal)
     signal.signal(signal.SIGTERM, on_signal)
     rclpy, node = _init("hexa_play")
-    selected = [t for t in topics if not args.topics or t in args.topics]
+    excluded = {t if t.startswith("/") else "/" + t for t in args.exclude}
+    wanted = {t if t.startswith("/") else "/" + t for t in args.topics or []}
+    selected = [t for t in topics if (not wanted or t in wanted) and t not in excluded]
+    absent = sorted(wanted - set(topics))
+    if absent:
+        print(f"hexa play: the bag has no topic {', '.join(absent)}; playing the others", file=sys.stderr)
     pubs = {}
     for topic in selected:
         msgtype, _count, reliable = topics[topic]
@@ -189,6 +208,7 @@ def run_play(args: argparse.Namespace) -> int:
             print(f"hexa play: no subscriber after {args.wait:g} s on {', '.join(lonely)}; playing anyway",
                   file=sys.stderr)
     sent = 0
+    counts = dict.fromkeys(selected, 0)
     clock_step = int(1e9 / args.clock_rate) if args.clock_rate > 0 else 0
     next_clock = -1
     try:
@@ -204,6 +224,7 @@ def run_play(args: argparse.Namespace) -> int:
                 log.write(f"{time.monotonic_ns()} {stamp} {topic}\n")
             pubs[topic].publish(data)
             sent += 1
+            counts[topic] += 1
     except BagError as exc:
         print(f"hexa play: {exc}", file=sys.stderr)
         return 2
@@ -215,9 +236,80 @@ def run_play(args: argparse.Namespace) -> int:
         if rclpy.ok():
             rclpy.shutdown()
     if args.json:
-        print(json.dumps({"bag": args.bag, "published": sent}))
+        print(json.dumps({"bag": args.bag, "published": sent, "counts": counts}))
     else:
         print(f"hexa play: published {sent} messages from {args.bag}")
+    return 0
+
+
+def bag_summary(path: str) -> dict:
+    """Files, size, storage, time span and per-topic type, count and offered QoS of the bag at `path`.
+
+    Raises:
+        hexa_bringup.commands._ros.CliError: missing or unreadable (a killed recording: `hexa bag recover`).
+    """
+    from pathlib import Path
+
+    import yaml
+    from rosbags.rosbag2 import Reader
+
+    from hexa_bringup.commands._ros import CliError
+
+    bag = Path(path)
+    if not bag.exists():
+        raise CliError(f"bag {path} does not exist")
+    try:
+        reader = Reader(bag)
+        reader.open()
+    except Exception as exc:  # noqa: BLE001 - rosbags raises several types; all mean "not a readable bag"
+        hint = " (a killed recording? `hexa bag recover`)" if bag.is_dir() and list(bag.glob("*.mcap")) else ""
+        raise CliError(f"cannot read bag {path}: {' '.join(str(exc).split())}{hint}") from exc
+    try:
+        files = sorted(p for p in (bag.iterdir() if bag.is_dir() else [bag]) if p.is_file())
+        meta = {}
+        if bag.is_dir() and (bag / "metadata.yaml").is_file():
+            meta = (yaml.safe_load((bag / "metadata.yaml").read_text()) or {}).get("rosbag2_bagfile_information", {})
+        topics = {}
+        for c in reader.connections:
+            qos = [{"reliability": q.reliability.name.lower(), "durability": q.durability.name.lower(),
+                    "history": q.history.name.lower(), "depth": int(q.depth)}
+                   for q in getattr(c.ext, "offered_qos_profiles", []) or []]
+            t = topics.setdefault(c.topic, {"type": c.msgtype, "count": 0, "serialization": c.ext.serialization_format,
+                                            "qos": qos})
+            t["count"] += c.msgcount
+        start, end = (reader.start_time, reader.end_time) if reader.message_count else (0, 0)
+        return {"bag": str(bag), "files": [str(f) for f in files], "size_bytes": sum(f.stat().st_size for f in files),
+                "storage": meta.get("storage_identifier", files[0].suffix.lstrip(".") if files else "?"),
+                "duration_s": (end - start) * 1e-9, "start_ns": start, "end_ns": end,
+                "messages": reader.message_count, "topics": topics}
+    finally:
+        reader.close()
+
+
+def run_info(args: argparse.Namespace) -> int:
+    import datetime
+
+    info = bag_summary(args.bag)
+    if args.json:
+        print(json.dumps(info))
+        return 0
+
+    def when(ns: int) -> str:
+        return f"{datetime.datetime.fromtimestamp(ns * 1e-9, datetime.timezone.utc):%Y-%m-%d %H:%M:%S.%f} UTC " \
+               f"({ns * 1e-9:.9f})"
+
+    print(f"Files:             {', '.join(info['files'])}")
+    print(f"Bag size:          {info['size_bytes'] / 1e6:.3f} MB")
+    print(f"Storage id:        {info['storage']}")
+    print(f"Duration:          {info['duration_s']:.3f} s")
+    print(f"Start:             {when(info['start_ns'])}")
+    print(f"End:               {when(info['end_ns'])}")
+    print(f"Messages:          {info['messages']}")
+    print(f"Topic information: {len(info['topics'])} topics")
+    width = max((len(t) for t in info["topics"]), default=0)
+    for topic, t in sorted(info["topics"].items()):
+        qos = ", ".join(f"{q['reliability']}/{q['durability']}" for q in t["qos"]) or "-"
+        print(f"  {topic:<{width}}  {t['type']}  count {t['count']}  {t['serialization']}  QoS {qos}")
     return 0
 
 

@@ -13,7 +13,8 @@ ROBOT_APPROACH_SPEED = 0.3
 def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("bringup", help="start and supervise the node graph (sim | robot | replay BAG | upsrpu)")
     p.add_argument("mode", choices=["sim", "robot", "replay", "upsrpu"],
-                   help="sim: simulated Hexa + whole graph; robot: real hardware; replay: graph on a bag; "
+                   help="sim: simulated Hexa + whole graph; robot: real hardware; replay: the processing nodes on a "
+                        "bag's sensor inputs (never its recorded outputs); "
                         "upsrpu: simulated 3UPS+RPU with singularity monitor and SRM (namespace /upsrpu)")
     p.add_argument("bag", nargs="?", help="bag to replay (mode replay)")
     p.add_argument("--ns", default=None, help="namespace of the graph (default /hexa; /upsrpu for upsrpu)")
@@ -30,6 +31,11 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="run pose + isolation in one process and observer + rnea + singularity in another "
                         "(hexa_ros.compose; fewer processes, one interpreter per group)")
     p.add_argument("--rate", type=float, default=1.0, help="replay: playback rate")
+    p.add_argument("--topics", nargs="+", metavar="TOPIC",
+                   help="replay: play these topics of the bag (relative names are in --ns) instead of the sensor "
+                        "inputs (both cameras, motor_currents, joint_states)")
+    p.add_argument("--exclude", nargs="+", default=[], metavar="TOPIC",
+                   help="replay: do not play these topics (e.g. cam_side/color/image_raw)")
     p.add_argument("--log-dir", default=None, help="write each node's output to DIR/<node>.log")
     p.add_argument("--duration", type=float, default=0.0, help="stop after this many seconds (0 = until Ctrl-C)")
     p.add_argument("--status-every", type=float, default=5.0, help="seconds between status tables")
@@ -66,8 +72,25 @@ def mode_node_args(args: argparse.Namespace) -> dict[str, list[str]]:
     return node_args
 
 
+def _bag_topics(bag: str) -> list[str]:
+    """The topics of `bag`.
+
+    Raises:
+        hexa_bringup.supervisor.SupervisorError: the bag is missing or unreadable.
+    """
+    from hexa_bringup.bag import bag_topics
+    from hexa_bringup.supervisor import SupervisorError
+
+    if not Path(bag).exists():
+        raise SupervisorError(f"bag {bag} does not exist")
+    try:
+        return list(bag_topics(bag))
+    except Exception as exc:  # noqa: BLE001 - rosbags raises several types; all mean "not a readable bag"
+        raise SupervisorError(f"cannot read bag {bag}: {exc}") from exc
+
+
 def run(args: argparse.Namespace) -> int:
-    from hexa_bringup.graphs import DEFAULT_PARAMS, build_graph, load_graph_file
+    from hexa_bringup.graphs import DEFAULT_PARAMS, build_graph, load_graph_file, replay_topics
     from hexa_bringup.rosenv import ros_env
     from hexa_bringup.supervisor import NodeSpec, Supervisor, SupervisorError
 
@@ -82,11 +105,13 @@ def run(args: argparse.Namespace) -> int:
             if args.mode == "replay":
                 if not args.bag:
                     raise SupervisorError("replay mode needs a BAG argument")
-                if not Path(args.bag).exists():
-                    raise SupervisorError(f"bag {args.bag} does not exist")
+                topics = replay_topics(_bag_topics(args.bag), ns, args.topics, args.exclude)
+                print(f"hexa bringup: replaying {len(topics)} topics of {args.bag} and /clock: {', '.join(topics)}",
+                      flush=True)
                 specs.insert(0, NodeSpec("play", [sys.executable, "-m", "hexa_bringup.cli", "play", args.bag,
-                                                  "--clock", "--rate", str(args.rate), "--wait", "3"],
-                                                  required=True, respawn=False, ends_graph=True))
+                                                  "--clock", "--rate", str(args.rate), "--wait", "3",
+                                                  "--topics", *topics],
+                                         required=True, respawn=False, ends_graph=True))
         sup = Supervisor(specs, ros_env(None, localhost_only=False), log_dir=args.log_dir,
                          status_every=args.status_every)
     except SupervisorError as exc:

@@ -27,6 +27,12 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.set_defaults(func=run)
 
 
+def watch_hint(domain: int, ns: str = "/hexa") -> str:
+    """The lines that tell the user the demo's ROS_DOMAIN_ID and how to watch the graph from a second shell."""
+    return (f"hexa demo: the graph runs in ROS_DOMAIN_ID={domain} (discovery on this host only). "
+            f"Watch it from a second shell:\n  ROS_DOMAIN_ID={domain} hexa topic echo {ns.rstrip('/')}/collision")
+
+
 def run(args: argparse.Namespace) -> int:
     from hexa.report.collision_demo import (compute_metrics, markdown_table, plate_equivalent_truth, plot_case,
                                             write_report)
@@ -39,6 +45,7 @@ def run(args: argparse.Namespace) -> int:
     domain = int(os.environ.get("ROS_DOMAIN_ID", str(100 + os.getpid() % 100)))
     env = ros_env(domain)  # localhost discovery: the demo never talks to other machines
     os.environ.update(env)  # the progress display in this process joins the same graph
+    print(watch_hint(domain, args.ns), flush=True)
     cases = list(CASES) if args.case == "all" else [args.case]
     rtf = REAL_TIME_FACTOR if args.rtf is None else args.rtf
     params = DEFAULT_PARAMS if args.params is None else Path(args.params)

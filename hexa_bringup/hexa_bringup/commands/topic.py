@@ -1,4 +1,4 @@
-"""`hexa topic list|echo|hz`: what operators would use `ros2 topic` for (no ros2 CLI wheel exists)."""
+"""`hexa topic list|echo|hz|pub|info`: what operators would use `ros2 topic` for (no ros2 CLI wheel exists)."""
 from __future__ import annotations
 
 import argparse
@@ -7,6 +7,9 @@ import math
 import sys
 import time
 from collections import deque
+
+from hexa_bringup.commands._ros import (CliError, RosCli, absolute, graph_completer, load_yaml_mapping,
+                                        looks_like_type, qos_dict, reason)
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -17,11 +20,13 @@ def register(sub: argparse._SubParsersAction) -> None:
     pl = tsub.add_parser("list", help="topics in the graph with their types")
     pl.add_argument("-t", "--show-types", action="store_true", help="also print each topic's type")
     pl.add_argument("--json", action="store_true")
-    pl.add_argument("--wait", type=float, default=1.5, help="seconds of discovery before listing (default 1.5)")
+    pl.add_argument("--wait", type=float, default=1.5,
+                    help="seconds of discovery before listing (default 1.5; up to 5 s more while the graph shows "
+                         "nothing yet)")
     pl.set_defaults(func=run_list)
 
     pe = tsub.add_parser("echo", help="print messages of a topic (type resolved from the graph)")
-    pe.add_argument("topic")
+    pe.add_argument("topic").completer = graph_completer("topics")
     pe.add_argument("type", nargs="?", help="message type pkg/msg/Name (default: from the graph)")
     pe.add_argument("--once", action="store_true", help="exit after the first message")
     pe.add_argument("-n", "--count", type=int, default=0, help="exit after N messages")
@@ -32,55 +37,43 @@ def register(sub: argparse._SubParsersAction) -> None:
     pe.set_defaults(func=run_echo)
 
     ph = tsub.add_parser("hz", help="measure the publishing rate of a topic")
-    ph.add_argument("topic")
+    ph.add_argument("topic").completer = graph_completer("topics")
     ph.add_argument("type", nargs="?")
     ph.add_argument("--window", type=int, default=100, help="samples in the moving window")
     ph.add_argument("--duration", type=float, default=0.0, help="stop after this many seconds (0 = until Ctrl-C)")
     ph.add_argument("--json", action="store_true", help="print one JSON summary at the end")
     ph.set_defaults(func=run_hz)
 
+    pp = tsub.add_parser("pub", help="publish a message (type from the graph when omitted), e.g. "
+                                     "hexa topic pub /chatter std_msgs/msg/String '{data: hi}' --once")
+    pp.add_argument("topic").completer = graph_completer("topics")
+    pp.add_argument("type", nargs="?", help="message type pkg/msg/Name (default: from the graph's publishers or "
+                                            "subscribers of the topic)")
+    pp.add_argument("values", nargs="?", default="{}", help="message fields as YAML (default {})")
+    pp.add_argument("-r", "--rate", type=float, default=1.0, help="messages per second (default 1)")
+    pp.add_argument("-1", "--once", action="store_true", help="publish one message and exit")
+    pp.add_argument("-t", "--times", type=int, default=0, help="publish this many messages and exit (0 = until "
+                                                               "Ctrl-C)")
+    pp.add_argument("-w", "--wait-matching-subscriptions", type=int, default=None, metavar="N",
+                    help="wait until N subscriptions match before publishing (default 1 with --once/--times, else 0)")
+    pp.add_argument("--timeout", type=float, default=10.0, help="give up waiting for the type or the subscriptions "
+                                                                "after this many seconds")
+    pp.add_argument("--qos-reliability", choices=["reliable", "best_effort"], default="reliable")
+    pp.add_argument("--qos-durability", choices=["volatile", "transient_local"], default="volatile")
+    pp.add_argument("--qos-depth", type=int, default=10)
+    pp.set_defaults(func=run_pub)
 
-class _Cli:
-    """An rclpy context + node for one CLI call; closes cleanly."""
-
-    def __init__(self) -> None:
-        from hexa_bringup.rosenv import apply_defaults
-
-        apply_defaults()
-        import rclpy
-        from rclpy.executors import SingleThreadedExecutor
-
-        self.rclpy = rclpy
-        self.context = rclpy.context.Context()
-        rclpy.init(context=self.context)
-        import os
-
-        self.node = rclpy.create_node(f"hexa_cli_{os.getpid()}", context=self.context,
-                                      start_parameter_services=False)
-        self.executor = SingleThreadedExecutor(context=self.context)
-        self.executor.add_node(self.node)
-
-    def spin_for(self, seconds: float) -> None:
-        end = time.monotonic() + seconds
-        while time.monotonic() < end:
-            self.executor.spin_once(timeout_sec=min(0.05, max(0.0, end - time.monotonic())))
-
-    def close(self) -> None:
-        try:
-            self.executor.shutdown()
-            self.node.destroy_node()
-        finally:
-            if self.context.ok():
-                self.rclpy.shutdown(context=self.context)
-
-    def __enter__(self) -> "_Cli":
-        return self
-
-    def __exit__(self, *exc: object) -> None:
-        self.close()
+    pi = tsub.add_parser("info", help="type and endpoints of a topic; -v: each endpoint's node and QoS")
+    pi.add_argument("topic").completer = graph_completer("topics")
+    pi.add_argument("-v", "--verbose", action="store_true", help="every publisher and subscription with its QoS")
+    pi.add_argument("--json", action="store_true")
+    pi.add_argument("--wait", type=float, default=1.0, help="seconds of discovery before answering (default 1)")
+    pi.add_argument("--timeout", type=float, default=5.0,
+                    help="seconds to wait for the topic to be discovered (default 5)")
+    pi.set_defaults(func=run_info)
 
 
-def _resolve(cli: _Cli, topic: str, type_name: str | None, timeout: float) -> tuple[str, str]:
+def _resolve(cli: RosCli, topic: str, type_name: str | None, timeout: float) -> tuple[str, str]:
     """Fully qualified topic name and its type, waiting for discovery up to `timeout` (0 = forever)."""
     name = topic if topic.startswith("/") else "/" + topic
     if type_name:
@@ -93,12 +86,12 @@ def _resolve(cli: _Cli, topic: str, type_name: str | None, timeout: float) -> tu
                 print(f"hexa topic: {name} has several types {types[name]}; using {types[name][0]}", file=sys.stderr)
             return name, types[name][0]
         if timeout and time.monotonic() - start > timeout:
-            raise SystemExit(f"hexa topic: no publisher of {name} found within {timeout:g} s "
-                             f"(check ROS_DOMAIN_ID and that the node runs; `hexa topic list`)")
+            raise CliError(f"no publisher of {name} found within {timeout:g} s "
+                           f"(check ROS_DOMAIN_ID and that the node runs; `hexa topic list`)")
         cli.spin_for(0.1)
 
 
-def _qos_for(cli: _Cli, topic: str):
+def _qos_for(cli: RosCli, topic: str):
     """A subscription QoS compatible with every current publisher (best effort if any publisher is)."""
     from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 
@@ -111,8 +104,8 @@ def _qos_for(cli: _Cli, topic: str):
 
 
 def run_list(args: argparse.Namespace) -> int:
-    with _Cli() as cli:
-        cli.spin_for(args.wait)
+    with RosCli() as cli:
+        cli.discover(args.wait, cli.foreign_topics)
         topics = sorted(cli.node.get_topic_names_and_types())
     if args.json:
         print(json.dumps({name: types for name, types in topics}))
@@ -127,7 +120,7 @@ def run_echo(args: argparse.Namespace) -> int:
 
     wanted = 1 if args.once else max(0, args.count)
     received = 0
-    with _Cli() as cli:
+    with RosCli() as cli:
         deadline = time.monotonic() + args.timeout if args.timeout else math.inf
         name, type_name = _resolve(cli, args.topic, args.type, args.timeout)
         cls = get_message_class(type_name)
@@ -172,7 +165,7 @@ def run_hz(args: argparse.Namespace) -> int:
 
     stamps: deque[float] = deque(maxlen=max(2, args.window))
     total = 0
-    with _Cli() as cli:
+    with RosCli() as cli:
         name, type_name = _resolve(cli, args.topic, args.type, args.duration)
         cls = get_message_class(type_name)
         cli.spin_for(0.2)
@@ -217,3 +210,132 @@ def _rate_summary(name: str, stamps: deque, total: int) -> dict:
     std = math.sqrt(sum((g - mean) ** 2 for g in gaps) / len(gaps))
     return {"topic": name, "rate_hz": 1.0 / mean if mean > 0 else None, "min_s": min(gaps), "max_s": max(gaps),
             "std_s": std, "window": len(stamps), "count": total}
+
+
+def _graph_type(cli: RosCli, name: str, timeout: float) -> str:
+    """The type of `name` from the graph (publishers or subscriptions), waiting up to `timeout` s.
+
+    Raises:
+        CliError: nobody in the graph uses the topic.
+    """
+    def probe() -> str | None:
+        types = dict(cli.node.get_topic_names_and_types()).get(name)
+        return types[0] if types else None
+
+    return cli.wait_for(probe, timeout, f"{name} is not in the graph within {timeout:g} s: give its type "
+                                        f"(hexa topic pub {name} pkg/msg/Name '{{...}}')")
+
+
+def run_pub(args: argparse.Namespace) -> int:
+    from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
+
+    from hexa_bringup.msgutil import get_message_class, set_message_fields
+
+    name = absolute(args.topic)
+    type_name, values = args.type, args.values
+    if type_name is not None and not looks_like_type(type_name):
+        if args.values != "{}":
+            raise CliError(f"{type_name!r} is not a message type (pkg/msg/Name)")
+        type_name, values = None, type_name          # `pub TOPIC '{yaml}'`: the type comes from the graph
+    fields = load_yaml_mapping(values, "the message")
+    if not args.rate > 0:
+        raise CliError(f"--rate must be > 0, got {args.rate:g}")
+    count = 1 if args.once else max(0, args.times)
+    wait_subs = args.wait_matching_subscriptions
+    if wait_subs is None:
+        wait_subs = 1 if count else 0
+    with RosCli("hexa_pub") as cli:
+        if type_name is None:
+            type_name = _graph_type(cli, name, args.timeout)
+        cls = get_message_class(type_name)
+        try:
+            msg = set_message_fields(cls(), fields)
+        except (KeyError, TypeError, AssertionError, ValueError, AttributeError) as exc:
+            raise CliError(f"bad message for {type_name}: {reason(exc)}") from exc
+        qos = QoSProfile(depth=max(1, args.qos_depth),
+                         reliability=ReliabilityPolicy.RELIABLE if args.qos_reliability == "reliable"
+                         else ReliabilityPolicy.BEST_EFFORT,
+                         durability=DurabilityPolicy.TRANSIENT_LOCAL if args.qos_durability == "transient_local"
+                         else DurabilityPolicy.VOLATILE)
+        pub = cli.node.create_publisher(cls, name, qos)
+        if wait_subs:
+            cli.wait_for(lambda: pub.get_subscription_count() >= wait_subs, args.timeout,
+                         f"{pub.get_subscription_count()} of {wait_subs} subscriptions of {name} matched within "
+                         f"{args.timeout:g} s")
+            cli.spin_for(0.5)       # matched here first: the subscriber's side matches this publisher a moment later
+        sent = 0
+        period = 1.0 / args.rate
+        next_t = time.monotonic()
+        while cli.context.ok():
+            pub.publish(msg)
+            sent += 1
+            print(f"publishing #{sent}: {json.dumps(message_dict(msg))}", flush=True)
+            if count and sent >= count:
+                break
+            next_t += period
+            cli.spin_for(max(0.0, next_t - time.monotonic()))
+        cli.spin_for(0.3)                              # the last reliable message goes out before the node does
+    return 0
+
+
+def message_dict(msg) -> dict:
+    from hexa_bringup.msgutil import message_to_dict
+
+    return message_to_dict(msg, 32)
+
+
+def run_info(args: argparse.Namespace) -> int:
+    name = absolute(args.topic)
+    with RosCli("hexa_info") as cli:
+        cli.spin_for(args.wait)
+        types = cli.wait_for(lambda: dict(cli.node.get_topic_names_and_types()).get(name),
+                             max(0.0, args.timeout - args.wait) or 1e-3,
+                             f"no topic {name} in the graph within {args.timeout:g} s (check ROS_DOMAIN_ID; "
+                             f"`hexa topic list`)")
+
+        def endpoints() -> tuple[list, list] | None:
+            """Both lists once every endpoint's node is known (a node's name arrives after its endpoints)."""
+            pubs = [_endpoint(i) for i in cli.node.get_publishers_info_by_topic(name)]
+            subs = [_endpoint(i) for i in cli.node.get_subscriptions_info_by_topic(name) if i.node_name != cli.name]
+            return None if any(e["node"] == UNKNOWN_NODE for e in pubs + subs) else (pubs, subs)
+
+        try:
+            pubs, subs = cli.wait_for(endpoints, 2.0, "")
+        except CliError:                               # still unnamed: show them as they are
+            pubs = [_endpoint(i) for i in cli.node.get_publishers_info_by_topic(name)]
+            subs = [_endpoint(i) for i in cli.node.get_subscriptions_info_by_topic(name) if i.node_name != cli.name]
+    if args.json:
+        info = {"topic": name, "types": list(types), "publishers": len(pubs), "subscriptions": len(subs)}
+        if args.verbose:
+            info.update(publisher_endpoints=pubs, subscription_endpoints=subs)
+        print(json.dumps(info))
+        return 0
+    print(f"Type: {', '.join(types)}")
+    for title, eps in (("Publisher count", pubs), ("Subscription count", subs)):
+        print(f"\n{title}: {len(eps)}" if args.verbose else f"{title}: {len(eps)}")
+        if not args.verbose:
+            continue
+        for e in eps:
+            q = e["qos"]
+            print(f"\nNode name: {e['node']}\nNode namespace: {e['namespace']}\nTopic type: {e['type']}\n"
+                  f"Endpoint type: {e['endpoint']}\nGID: {e['gid']}\nQoS profile:\n"
+                  f"  Reliability: {q['reliability'].upper()}\n  History (Depth): {q['history'].upper()} "
+                  f"({q['depth']})\n  Durability: {q['durability'].upper()}\n"
+                  f"  Lifespan: {_dur(q['lifespan_s'])}\n  Deadline: {_dur(q['deadline_s'])}\n"
+                  f"  Liveliness: {q['liveliness'].upper()}\n"
+                  f"  Liveliness lease duration: {_dur(q['liveliness_lease_s'])}")
+    return 0
+
+
+#: the node name of an endpoint whose node has not been discovered yet
+UNKNOWN_NODE = "_NODE_NAME_UNKNOWN_"
+
+
+def _dur(seconds: float | None) -> str:
+    return "Infinite" if seconds is None else f"{seconds:g} s"
+
+
+def _endpoint(info) -> dict:
+    return {"node": info.node_name, "namespace": info.node_namespace, "type": info.topic_type,
+            "endpoint": info.endpoint_type.name, "gid": ".".join(f"{b:02x}" for b in info.endpoint_gid),
+            "qos": qos_dict(info.qos_profile)}
