@@ -50,7 +50,8 @@ class VirtualBoards:
         self.sensor = CurrentSensorModel.from_dict(cfg.get("sensor", {}))
         seed = sim.seed if seed is None else int(seed)
         rng = np.random.default_rng([seed, 2])
-        self.offsets = rng.normal(0.0, sim.config.current_offset_sigma, 6)
+        # the truth (realistic robot) carries its own offsets: then the Mega adds none of its own
+        self.offsets = (rng.normal(0.0, sim.config.current_offset_sigma, 6) if sim.truth is None else np.zeros(6))
         self.k_t = float(sim.desc.K_t)
         uno_link = mega_link = None
         if link_dir is not None:
@@ -87,8 +88,9 @@ class VirtualBoards:
         return out
 
     def currents_at(self, t_sim: float) -> np.ndarray:
-        """The six true motor currents (A) the Mega measures at sim time `t_sim`: τ/K_t + I_0."""
-        return self.sim.tau_at(t_sim) / self.k_t + self.offsets
+        """The six true motor currents (A) the Mega measures at sim time `t_sim`: τ/K_t + I_0 (with the realistic
+        robot's truth: its K_t, sensor gain and offsets, `Simulator.motor_currents`)."""
+        return self.sim.motor_currents(self.sim.tau_at(t_sim)) + self.offsets
 
     def sim_time_of(self, t_board: float) -> float:
         """Sim time (s) of a Mega board time (s since the boards were created)."""
