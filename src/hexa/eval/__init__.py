@@ -20,7 +20,7 @@ from typing import Any, Callable
 from hexa.eval.campaign import TRAJECTORIES, run_contact_job, run_free_job
 
 #: free motion is cut into jobs of at most this many seconds (one trajectory each, looped), for the parallel pool
-FREE_CHUNK_S = 120.0
+FREE_CHUNK_S = 60.0
 
 
 @dataclass(frozen=True)
@@ -52,11 +52,13 @@ class CampaignConfig:
 
 
 def jobs_of(cfg: CampaignConfig) -> list[tuple[str, dict[str, Any]]]:
-    """The campaign's jobs: ("contact", job) per case and robot, ("free", job) per free-motion chunk and robot."""
+    """The campaign's jobs: ("free", job) per free-motion chunk and robot, then ("contact", job) per case and robot
+    (the long jobs first, so that the pool's workers finish together)."""
     jobs: list[tuple[str, dict[str, Any]]] = []
+    contacts: list[tuple[str, dict[str, Any]]] = []
     for realism in cfg.realisms:
         for i in range(cfg.cases):
-            jobs.append(("contact", {"campaign_seed": cfg.seed, "index": i, "sim_seed": cfg.seed * 100003 + i,
+            contacts.append(("contact", {"campaign_seed": cfg.seed, "index": i, "sim_seed": cfg.seed * 100003 + i,
                                      "realism": realism, "identify": cfg.identify, "observer": cfg.observer}))
         left, k = cfg.free_seconds, 0
         while left > 1e-9:
@@ -66,7 +68,7 @@ def jobs_of(cfg: CampaignConfig) -> list[tuple[str, dict[str, Any]]]:
                                   "observer": cfg.observer}))
             left -= chunk
             k += 1
-    return jobs
+    return jobs + contacts
 
 
 def _run_job(kind: str, job: dict[str, Any]) -> dict[str, Any]:
