@@ -92,3 +92,17 @@ def test_bad_campaign_settings_are_refused_with_their_name():
         CampaignConfig(cases=0, free_seconds=0.0)
     with pytest.raises(ValueError, match="workers"):
         CampaignConfig(workers=0)
+
+
+def test_cli_writes_the_report_and_refuses_bad_sizes(tmp_path, capsys):
+    from hexa_bringup.cli import main
+
+    assert main(["eval", "--cases", "-1", "--ideal"]) == 2
+    assert "cases (-1)" in capsys.readouterr().err
+    assert main(["eval", "--cases", "1", "--minutes", "0", "--ideal", "--workers", "1", "--no-identify",
+                 "--out", str(tmp_path), "--json"]) == 0
+    out = capsys.readouterr()
+    summary = json.loads(out.out)
+    assert list(summary) == ["ideal"] and summary["ideal"]["cases"] == 1
+    assert "1/1 jobs" in out.err                                   # the progress bar
+    assert (tmp_path / "report.md").exists() and (tmp_path / "det_curve.png").exists()
