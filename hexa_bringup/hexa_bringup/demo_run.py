@@ -93,13 +93,13 @@ def run_case(case: str, out_dir: Path, env: dict[str, str], ns: str = "/hexa", s
              real_time_factor: float = REAL_TIME_FACTOR, record_images: bool = False, duration: float | None = None,
              params: Path = DEFAULT_PARAMS, status_every: float = 5.0, loop: bool = False,
              contact_model: str = "scripted", servo_frame_period: float | None = None,
-             stream_rate_hz: int | None = None) -> CaseRun:
+             stream_rate_hz: int | None = None, realism: str = "ideal") -> CaseRun:
     """Bring up the sim graph for `case`, record a bag until the scenario is over, stop everything.
 
     loop: the trajectory node restarts the trajectory at its end (free-motion runs longer than its 10 s);
     contact_model: the simulator's ("scripted" | "physical", hexa.sim.Simulator); servo_frame_period: the simulated
     servo board's pulse frame (s; None = the description's); stream_rate_hz: the Mega's sample rate (None = the
-    driver's configured one)."""
+    driver's configured one); realism: the simulated robot ("ideal" | "realistic", hexa.sim.realism)."""
     scenario, trajectory, default_duration = CASES[case]
     sim_s = LEAD_IN + (default_duration if duration is None else duration)
     case_dir = out_dir / case
@@ -113,7 +113,7 @@ def run_case(case: str, out_dir: Path, env: dict[str, str], ns: str = "/hexa", s
         "sim": ["-p", f"scenario:={scenario}", "-p", f"seed:={seed}", "-p", f"real_time_factor:={real_time_factor}",
                 "-p", f"duration:={sim_s}", "-p", "use_sim_time:=false", "-p", f"link_dir:=/tmp/hexa_sim_{os.getpid()}",
                 "-p", f"start_delay:={START_DELAY}", "-p", f"lead_in:={LEAD_IN}", "-p", f"trajectory:={trajectory}",
-                "-p", f"contact_model:={contact_model}",
+                "-p", f"contact_model:={contact_model}", "-p", f"realism:={realism}",
                 "-p", f"servo_frame_period:={-1.0 if servo_frame_period is None else float(servo_frame_period)}"],
         "driver": ["-p", f"uno_port:=/tmp/hexa_sim_{os.getpid()}/uno",
                    "-p", f"mega_port:=/tmp/hexa_sim_{os.getpid()}/mega"]

@@ -28,6 +28,7 @@ from hexa.kinematics.hexa6rus import rotation_zyx
 from hexa.sim import Simulator
 from hexa.sim.boards import VirtualBoards
 from hexa.sim.pacing import MAX_LAG, Pacer, SimRunner
+from hexa.sim.realism import RealismConfig
 from hexa.sim.simulator import LINK_CODES
 from hexa.vision.images import fill_message
 
@@ -51,8 +52,11 @@ PARAMETERS = {
     "start_delay": Param(0.0, "wall s with sim time frozen at 0 while the graph starts", range=(0.0, 3600.0)),
     "contact_model": Param("scripted", "scripted (the scenario's force at the point) | physical (a pushing capsule "
                                        "through MuJoCo contacts)", choices=("scripted", "physical")),
-    "servo_frame_period": Param(-1.0, "s between servo set-point frames (0..0.1); < 0 = the description's",
-                                range=(-1.0, 0.1))}
+    "servo_frame_period": Param(-1.0, "s between servo set-point frames (0..0.1); < 0 = the description's "
+                                      "(or the realism's)", range=(-1.0, 0.1)),
+    "realism": Param("ideal", "ideal (the robot is the nodes' model) | realistic (a truth drawn from `seed`, servo "
+                              "friction, gear play, dead band, 20 ms pulse frame, ACS712 noise; docs/simulator.md)",
+                     choices=("ideal", "realistic"))}
 
 
 class SimNode(Node):
@@ -69,7 +73,8 @@ class SimNode(Node):
         self.sim = Simulator(seed=self.seed, scenario=None if self.scenario in ("", "none") else self.scenario,
                              cameras=cameras, randomize=bool(v["randomize"]), lead_in=float(v["lead_in"]),
                              contact_model=str(v["contact_model"]), trajectory=str(v["trajectory"]) or None,
-                             servo_frame_period=None if frame < 0 else frame)
+                             servo_frame_period=None if frame < 0 else frame,
+                             realism=RealismConfig.named(str(v["realism"])))
         self.runner = SimRunner(self.sim, pacer, clock_rate, truth_rate, cam_rate if cameras else None, duration,
                                 start_delay)
         self.boards = VirtualBoards(self.sim, link_dir=str(v["link_dir"])).start() if v["boards"] else None
@@ -87,7 +92,8 @@ class SimNode(Node):
             ("wrench_truth", WrenchStamped), ("contact_truth", Contact), ("plate_pose_truth", PoseStamped),
             ("joint_states_truth", JointState))}
         ports = f"uno {self.boards.uno.port}, mega {self.boards.mega.port}" if self.boards else "no boards"
-        self.get_logger().info(f"sim ready: scenario={self.scenario!r} seed={self.seed} rtf={rtf} ({ports})")
+        self.get_logger().info(f"sim ready: scenario={self.scenario!r} seed={self.seed} rtf={rtf} "
+                               f"robot={self.sim.realism.name} ({ports})")
 
     # ------------------------------------------------------------------ SimOutputs
     def clock(self) -> None:

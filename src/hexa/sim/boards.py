@@ -31,6 +31,14 @@ if TYPE_CHECKING:
 DEFAULT_LINK_DIR = Path("/tmp/hexa_sim")
 
 
+def board_offsets(sim: "Simulator", seed: int) -> np.ndarray:
+    """The virtual Mega's per-channel zero offsets I_0 (A) for `seed`: N(0, `sim.current_offset_sigma`), or none when
+    the simulator has a truth (the realistic robot carries its own, `RobotTruth.current_offset`)."""
+    if sim.truth is not None:
+        return np.zeros(6)
+    return np.random.default_rng([int(seed), 2]).normal(0.0, sim.config.current_offset_sigma, 6)
+
+
 class VirtualBoards:
     """Uno + Mega emulators wired to a Simulator (context manager; `uno.port` / `mega.port` are the tty paths).
 
@@ -49,8 +57,7 @@ class VirtualBoards:
         self.servos = servo_calibrations_from_config(cfg["servos"])
         self.sensor = CurrentSensorModel.from_dict(cfg.get("sensor", {}))
         seed = sim.seed if seed is None else int(seed)
-        rng = np.random.default_rng([seed, 2])
-        self.offsets = rng.normal(0.0, sim.config.current_offset_sigma, 6)
+        self.offsets = board_offsets(sim, seed)
         self.k_t = float(sim.desc.K_t)
         uno_link = mega_link = None
         if link_dir is not None:
@@ -87,8 +94,9 @@ class VirtualBoards:
         return out
 
     def currents_at(self, t_sim: float) -> np.ndarray:
-        """The six true motor currents (A) the Mega measures at sim time `t_sim`: τ/K_t + I_0."""
-        return self.sim.tau_at(t_sim) / self.k_t + self.offsets
+        """The six true motor currents (A) the Mega measures at sim time `t_sim`: τ/K_t + I_0 (with the realistic
+        robot's truth: its K_t, sensor gain and offsets, `Simulator.motor_currents`)."""
+        return self.sim.motor_currents(self.sim.tau_at(t_sim)) + self.offsets
 
     def sim_time_of(self, t_board: float) -> float:
         """Sim time (s) of a Mega board time (s since the boards were created)."""

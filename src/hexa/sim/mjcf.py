@@ -72,7 +72,7 @@ def _inertial(mass: float, com: np.ndarray, inertia: np.ndarray) -> str:
 
 
 def build_mjcf(desc: Any, pose: np.ndarray | None = None, config: SimConfig | None = None,
-               physical_contact: bool = False) -> str:
+               physical_contact: bool = False, truth: Any = None, motor_servos: bool = False) -> str:
     """MJCF text of the Hexa of `desc`, assembled at plate `pose` [x y z α β γ] (m, rad; Z-Y-X, eq 38).
 
     Args:
@@ -81,6 +81,11 @@ def build_mjcf(desc: Any, pose: np.ndarray | None = None, config: SimConfig | No
         config: simulator sections (default: read from `desc`).
         physical_contact: add the force-driven pusher (a capsule on a slide joint under a kinematic carrier) that
             touches the arms, rods and plate through MuJoCo contacts; without it nothing collides.
+        truth: a hexa.sim.realism.RobotTruth: each link's mass, COM and inertia, and each arm joint's Coulomb
+            friction (`frictionloss`), viscous friction (`damping`) and rotor inertia (`armature`) from it instead
+            of the description (the geometry stays the description's).
+        motor_servos: servos as torque motors (ctrl = the horn torque, clamped at the stall torque), for a servo law
+            computed outside MuJoCo (hexa.sim.realism.ServoMechanics); else MuJoCo position actuators (kp, kv).
 
     Raises:
         MJCFError: an unusable dimension; UnreachablePoseError from the inverse kinematics.
@@ -99,6 +104,8 @@ def build_mjcf(desc: Any, pose: np.ndarray | None = None, config: SimConfig | No
         if abs(np.linalg.norm(B[i] - A[i]) - l_a) > 1e-6 or abs(np.linalg.norm(C[i] - B[i]) - l_d) > 1e-5:
             raise MJCFError(f"chain {i + 1}: inverse kinematics does not close the loop at pose {pose.tolist()}")
     mp = desc_mass_properties(desc)
+    if truth is not None:
+        mp["plate"] = {"mass": truth.plate.mass, "com": truth.plate.com, "inertia": truth.plate.inertia}
     servo = cfg.servo
     tau_max = float(desc.torque_max)
     lo, hi = float(desc.zeta_min), float(desc.zeta_max)
@@ -154,9 +161,16 @@ def build_mjcf(desc: Any, pose: np.ndarray | None = None, config: SimConfig | No
         x_arm = (B[i] - A[i]) / l_a
         R_arm = _frame_from_xz(x_arm, ax[i])
         w(f'<body name="arm_{n}" pos="{_f(A[i])}" quat="{_f(_quat(R_arm))}">')
+        joint_extra = f'armature="{servo.armature:.9g}"'
+        arm_mp, rod_mp = mp["arm"], mp["rod"]
+        if truth is not None:
+            joint_extra = (f'armature="{servo.armature + truth.rotor_inertia[i]:.9g}" '
+                           f'damping="{servo.damping + truth.viscous[i]:.9g}" frictionloss="{truth.coulomb[i]:.9g}"')
+            arm_mp = {"mass": truth.arms[i].mass, "com": truth.arms[i].com, "inertia": truth.arms[i].inertia}
+            rod_mp = {"mass": truth.rods[i].mass, "com": truth.rods[i].com, "inertia": truth.rods[i].inertia}
         w(f'<joint name="arm_{n}" type="hinge" axis="0 0 1" ref="{zeta[i]:.12g}" range="{lo:.9g} {hi:.9g}" '
-          f'limited="false" armature="{servo.armature:.9g}"/>')
-        w(_inertial(mp["arm"]["mass"], mp["arm"]["com"], mp["arm"]["inertia"]))
+          f'limited="false" {joint_extra}/>')
+        w(_inertial(arm_mp["mass"], arm_mp["com"], arm_mp["inertia"]))
         w(f'<geom name="arm_{n}" type="capsule" fromto="0 0 0 {l_a:.9g} 0 0" size="{ap["arm_radius"]:.6g}" '
           f'material="arm"{aff}/>')
         x_rod = (C[i] - B[i]) / l_d
@@ -166,7 +180,7 @@ def build_mjcf(desc: Any, pose: np.ndarray | None = None, config: SimConfig | No
         w(f'<body name="rod_{n}" pos="{l_a:.12g} 0 0" quat="{_f(_quat(R_rel))}">')
         w(f'<joint name="u1_{n}" type="hinge" axis="{_f(a1)}" damping="0"/>')
         w(f'<joint name="u2_{n}" type="hinge" axis="0 1 0" damping="0"/>')
-        w(_inertial(mp["rod"]["mass"], mp["rod"]["com"], mp["rod"]["inertia"]))
+        w(_inertial(rod_mp["mass"], rod_mp["com"], rod_mp["inertia"]))
         w(f'<geom name="rod_{n}" type="capsule" fromto="0 0 0 {l_d:.9g} 0 0" size="{ap["rod_radius"]:.6g}" '
           f'material="rod"{aff}/>')
         w(f'<site name="rod_tip_{n}" pos="{l_d:.12g} 0 0" size="0.004"/>')
@@ -209,6 +223,9 @@ def build_mjcf(desc: Any, pose: np.ndarray | None = None, config: SimConfig | No
     w('</equality>')
     w('<actuator>')
     for i in range(6):
+        if motor_servos:
+            w(f'<motor name="servo_{i + 1}" joint="arm_{i + 1}" gear="1" ctrlrange="{-tau_max:.9g} {tau_max:.9g}"/>')
+            continue
         w(f'<position name="servo_{i + 1}" joint="arm_{i + 1}" kp="{servo.kp:.9g}" kv="{servo.kv:.9g}" '
           f'forcerange="{-tau_max:.9g} {tau_max:.9g}" ctrlrange="{lo:.9g} {hi:.9g}"/>')
     if physical_contact:

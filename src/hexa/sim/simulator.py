@@ -26,6 +26,7 @@ import numpy as np
 from hexa.sim.camera import NoiseBank, RGBDRenderer, RenderError, camera_model_of, depth_image_mm, noisy_rgb
 from hexa.sim.config import CAMERA_NAMES, SimConfig, sim_config_of
 from hexa.sim.mjcf import HOME_POSE, PARK_POS, build_mjcf
+from hexa.sim.realism import RealismConfig, RobotTruth, ServoMechanics, draw_truth, nominal_truth
 from hexa.vision.camera import CameraModel
 from hexa.sim.scenarios import ScenarioSpec, ScriptedCollision, draw_collision, load_scenario
 
@@ -161,15 +162,26 @@ class Simulator:
             visual) or "physical" (a capsule on a force-driven slide pushes the link through MuJoCo contacts; the
             ground truth is then MuJoCo's contact force and contact point, the force profile only approximately
             the scenario's).
-        servo_frame_period: overrides the description's `sim.servo.frame_period` (s; 0 = set-points at once).
+        servo_frame_period: overrides the description's `sim.servo.frame_period` (s; 0 = set-points at once) and the
+            realism's.
+        realism: hexa.sim.realism.RealismConfig (default: ideal — the robot is the description). With `truth` the
+            robot is built from `draw_truth(desc, seed)` (`self.truth`); with `servo_mechanics` the servos run the
+            dead band and gear play of hexa.sim.realism.ServoMechanics; its frame period and ADC noise replace the
+            description's.
     """
 
     def __init__(self, desc: Any = None, seed: int = 0, scenario: Any = None, cameras: bool = True,
                  pose: np.ndarray | None = None, drive: str | None = None, randomize: bool = False,
                  settle: float = 0.5, trajectory: str | None = None, lead_in: float = 0.0,
-                 contact_model: str = "scripted", servo_frame_period: float | None = None) -> None:
+                 contact_model: str = "scripted", servo_frame_period: float | None = None,
+                 realism: RealismConfig | None = None) -> None:
         self.desc = _desc_default(desc)
         self.config: SimConfig = sim_config_of(self.desc)
+        self.realism = realism or RealismConfig.ideal()
+        if servo_frame_period is None:
+            servo_frame_period = self.realism.frame_period
+        if self.realism.current_noise_counts is not None:
+            self.config = dataclasses.replace(self.config, current_noise_counts=self.realism.current_noise_counts)
         if servo_frame_period is not None:
             if not (0.0 <= float(servo_frame_period) <= 0.1):
                 raise SimulatorError(f"servo_frame_period must be 0..0.1 s, got {servo_frame_period!r}")
@@ -177,6 +189,13 @@ class Simulator:
                 self.config, servo=dataclasses.replace(self.config.servo, frame_period=float(servo_frame_period)))
         self.seed = int(seed)
         self._rng = np.random.default_rng(self.seed)
+        # the robot the world is built from (never read by a node); None: the description itself
+        self.truth: RobotTruth | None = (draw_truth(self.desc, self.seed, self.realism.tolerances)
+                                         if self.realism.truth else None)
+        self._mech: ServoMechanics | None = None
+        if self.realism.servo_mechanics:
+            self._mech = ServoMechanics(self.truth or nominal_truth(self.desc), self.config.servo.kp,
+                                        self.config.servo.kv, float(self.desc.torque_max))
         self.collision: ScriptedCollision | None = None
         if scenario is not None:
             if isinstance(scenario, ScriptedCollision):
@@ -222,7 +241,8 @@ class Simulator:
             raise SimulatorError(f"contact_model must be 'scripted' or 'physical', got {contact_model!r}")
         self.contact_model = contact_model
         physical = contact_model == "physical"
-        self.xml = build_mjcf(self.desc, start_pose, self.config, physical_contact=physical)
+        self.xml = build_mjcf(self.desc, start_pose, self.config, physical_contact=physical, truth=self.truth,
+                              motor_servos=self._mech is not None)
         self.model = mujoco.MjModel.from_xml_string(self.xml)
         self.data = mujoco.MjData(self.model)
         m = self.model
@@ -266,7 +286,8 @@ class Simulator:
         self._setpoint_tags = np.full(6, -1)  # tag of the targets each servo last latched
         self._target_hist: deque[tuple[float, np.ndarray, int]] = deque(maxlen=64)   # (sim time set, targets, tag)
         self._latch_frames: deque[LatchFrame] = deque(maxlen=500)   # frames completed, for the virtual Uno's report
-        self.data.ctrl[:6] = zeta0
+        self._cmd = zeta0.copy()              # the servos' set-points after the slew limit
+        self.data.ctrl[:6] = zeta0 if self._mech is None else 0.0
         self._manual: _Contact | None = None
         self._scripted: _Contact | None = None
         self._scripted_dir: np.ndarray | None = None
@@ -341,6 +362,20 @@ class Simulator:
             self._latch_frames.clear()
         return out
 
+    def servo_setpoints(self) -> np.ndarray:
+        """The set-point each servo acts on now (rad): with a pulse frame, the target its last pulse carried (what
+        the driver reconstructs from the latch report), else the newest target."""
+        with self._lock:
+            framed = self._frame_period > 0 and self.drive == "external" and self._latch_at is not None
+            return (self._setpoints if framed else self._targets).copy()
+
+    def motor_currents(self, tau: np.ndarray) -> np.ndarray:
+        """The currents (A) the Mega's sensors read for servo torques `tau` (N·m): the truth's K_t, sensor gain and
+        zero offset when there is a truth, else τ / K_t of the description (the virtual Mega adds its own offset)."""
+        if self.truth is not None:
+            return self.truth.currents(tau)
+        return np.asarray(tau, dtype=float) / float(self.desc.K_t)
+
     def step(self, n: int = 1) -> None:
         """Advance the physics by `n` timesteps."""
         with self._lock:
@@ -360,7 +395,7 @@ class Simulator:
             self._latch_at = None
             return self._targets
         if self._latch_at is None:         # the board's frames run since before t, at the seed's phase; until its
-            self._setpoints = np.array(self.data.ctrl[:6])   # pulse a servo keeps the set-point it has
+            self._setpoints = self._cmd.copy()   # pulse a servo keeps the set-point it has
             self._latch_at = t - self._frame_phase + self._pulse_slot * np.arange(1, 7)
         due = self._latch_at <= t
         if due.any():
@@ -399,7 +434,13 @@ class Simulator:
             k = min(self._step_count, len(self._traj_targets) - 1)
             self._targets = self._traj_targets[k]
         step = self._omega_max * self._dt
-        d.ctrl[:6] = d.ctrl[:6] + np.minimum(np.maximum(self._servo_setpoints(t) - d.ctrl[:6], -step), step)
+        self._cmd = self._cmd + np.minimum(np.maximum(self._servo_setpoints(t) - self._cmd, -step), step)
+        tau_motor = None
+        if self._mech is None:
+            d.ctrl[:6] = self._cmd
+        else:   # the servo law outside MuJoCo: dead band, stall clamp, gear play (ζ̈ of the previous step)
+            tau_motor = self._mech.motor_torque(self._cmd, d.qpos[self._arm_qpos], d.qvel[self._arm_dof])
+            d.ctrl[:6] = self._mech.step(tau_motor, d.qacc[self._arm_dof], self._dt)
         if use_schedule and self.collision is not None:
             self._update_scripted(t)
             if self._pusher is not None:
@@ -420,10 +461,10 @@ class Simulator:
             mujoco.mj_step2(m, d)
         else:
             mujoco.mj_forward(m, d)
-        tau = d.actuator_force[:6].copy()
+        tau = d.actuator_force[:6].copy() if tau_motor is None else tau_motor   # what the current sensors see
         if self._pusher is not None and contact is None:
             contact = self._physical_contact()
-        self._sample = (t, qpos, qvel, d.qacc.copy(), tau, d.ctrl[:6].copy(), contact)
+        self._sample = (t, qpos, qvel, d.qacc.copy(), tau, self._cmd.copy(), contact)
         k = self._step_count % len(self._tau_hist_t)
         self._tau_hist_t[k] = t
         self._tau_hist[k] = tau
@@ -737,7 +778,10 @@ class Simulator:
                 self._aim_rod(i, C[i])
             d.qvel[:] = 0.0
             d.qacc_warmstart[:] = 0.0
-            d.ctrl[:6] = zeta
+            self._cmd = zeta.copy()
+            d.ctrl[:6] = zeta if self._mech is None else 0.0
+            if self._mech is not None:
+                self._mech.reset()
             self._targets = zeta.copy()
             self._setpoints = zeta.copy()
             if self.drive == "trajectory":

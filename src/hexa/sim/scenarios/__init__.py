@@ -69,6 +69,7 @@ class ScriptedCollision:
     azimuth: float            # deviation of the force direction from the inward normal
     approach_time: float
     approach_distance: float
+    hold_time: float = 0.0    # s at the peak force between the rise and the release
 
     @property
     def peak_time(self) -> float:
@@ -76,15 +77,18 @@ class ScriptedCollision:
 
     @property
     def end_time(self) -> float:
-        return self.onset + self.rise_time + self.release_time
+        return self.onset + self.rise_time + self.hold_time + self.release_time
 
     def force_magnitude(self, t: float) -> float:
-        """|F|(t) (N): sin² rise from onset to the peak, cos² release, 0 outside."""
+        """|F|(t) (N): sin² rise from onset to the peak, held `hold_time`, cos² release, 0 outside."""
         if t < self.onset or t >= self.end_time:
             return 0.0
         if t < self.peak_time:
             return self.peak_force * float(np.sin(0.5 * np.pi * (t - self.onset) / self.rise_time) ** 2)
-        return self.peak_force * float(np.cos(0.5 * np.pi * (t - self.peak_time) / self.release_time) ** 2)
+        if t < self.peak_time + self.hold_time:
+            return self.peak_force
+        return self.peak_force * float(np.cos(0.5 * np.pi * (t - self.peak_time - self.hold_time)
+                                              / self.release_time) ** 2)
 
     def object_distance(self, t: float) -> float | None:
         """Distance (m) of the object's tip from the contact point at `t`; None when parked out of view."""

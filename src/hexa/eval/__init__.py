@@ -1,0 +1,129 @@
+"""`hexa eval`: a randomized campaign of contacts and free motion on the simulated robot, run through the nodes' own
+core classes without ROS, in parallel over the local cores. See docs/eval.md.
+
+    from hexa.eval import CampaignConfig, run_campaign
+    from hexa.eval.report import write_report
+    result = run_campaign(CampaignConfig(cases=6, free_seconds=20.0, workers=2))
+    write_report(result, "out/eval")
+"""
+from __future__ import annotations
+
+import math
+import multiprocessing
+import os
+import sys
+import time
+from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
+from dataclasses import asdict, dataclass, field
+from typing import Any, Callable
+
+from hexa.eval.campaign import TRAJECTORIES, run_contact_job, run_free_job
+
+#: free motion is cut into jobs of at most this many seconds (one trajectory each, looped), for the parallel pool
+FREE_CHUNK_S = 60.0
+
+
+@dataclass(frozen=True)
+class CampaignConfig:
+    """What to run: `cases` random contacts and `free_seconds` of free motion (over the three trajectories) on each
+    robot of `realisms` ("ideal", "realistic"); `seed` draws the contacts and seeds the simulators; `workers`
+    processes (default: the CPU count); `identify`: run the force identification (rnea's tracker) in the contact
+    cases; `observer`: ObserverConfig fields that replace the node's defaults."""
+
+    cases: int = 6
+    free_seconds: float = 20.0
+    realisms: tuple[str, ...] = ("ideal",)
+    seed: int = 0
+    workers: int | None = None
+    identify: bool = True
+    observer: dict[str, Any] = field(default_factory=dict)
+
+    def __post_init__(self) -> None:
+        from hexa.sim.realism import RealismConfig
+
+        if self.cases < 0 or not math.isfinite(self.free_seconds) or self.free_seconds < 0:
+            raise ValueError(f"cases ({self.cases}) and free_seconds ({self.free_seconds}) must be >= 0")
+        if self.cases == 0 and self.free_seconds == 0:
+            raise ValueError("nothing to run: give cases > 0 or free_seconds > 0")
+        if self.workers is not None and self.workers < 1:
+            raise ValueError(f"workers must be >= 1, got {self.workers}")
+        for r in self.realisms:
+            RealismConfig.named(r)   # raises ValueError naming the presets
+
+
+def jobs_of(cfg: CampaignConfig) -> list[tuple[str, dict[str, Any]]]:
+    """The campaign's jobs: ("free", job) per free-motion chunk and robot, then ("contact", job) per case and robot
+    (the long jobs first, so that the pool's workers finish together)."""
+    jobs: list[tuple[str, dict[str, Any]]] = []
+    contacts: list[tuple[str, dict[str, Any]]] = []
+    for realism in cfg.realisms:
+        for i in range(cfg.cases):
+            contacts.append(("contact", {"campaign_seed": cfg.seed, "index": i, "sim_seed": cfg.seed * 100003 + i,
+                                     "realism": realism, "identify": cfg.identify, "observer": cfg.observer}))
+        left, k = cfg.free_seconds, 0
+        while left > 1e-9:
+            chunk = min(FREE_CHUNK_S, left)
+            jobs.append(("free", {"trajectory": TRAJECTORIES[k % len(TRAJECTORIES)], "seconds": chunk,
+                                  "sim_seed": cfg.seed * 100003 + 50000 + k, "realism": realism,
+                                  "observer": cfg.observer}))
+            left -= chunk
+            k += 1
+    return jobs + contacts
+
+
+def _run_job(kind: str, job: dict[str, Any]) -> dict[str, Any]:
+    return run_contact_job(job) if kind == "contact" else run_free_job(job)
+
+
+class ProgressBar:
+    """A one-line progress bar on a stream (stderr): jobs done, simulated seconds, speed against real time, ETA."""
+
+    def __init__(self, total_jobs: int, total_sim_s: float, stream: Any = None, width: int = 30) -> None:
+        self.total, self.total_sim, self.width = total_jobs, total_sim_s, width
+        self.stream = stream if stream is not None else sys.stderr
+        self.done, self.sim_s, self.t0 = 0, 0.0, time.monotonic()
+
+    def update(self, sim_seconds: float) -> str:
+        self.done += 1
+        self.sim_s += sim_seconds
+        wall = max(time.monotonic() - self.t0, 1e-9)
+        frac = self.done / max(self.total, 1)
+        eta = wall / frac - wall if frac > 0 else float("nan")
+        bar = "#" * int(round(frac * self.width))
+        line = (f"\rhexa eval [{bar:<{self.width}}] {self.done}/{self.total} jobs, {self.sim_s:.0f} s simulated, "
+                f"{self.sim_s / wall:.1f}x real time, ETA {eta:.0f} s")
+        self.stream.write(line + ("\n" if self.done == self.total else ""))
+        self.stream.flush()
+        return line
+
+
+def run_campaign(cfg: CampaignConfig, progress: Callable[[float], Any] | None = None) -> dict[str, Any]:
+    """Run every job of `cfg` on a process pool (`cfg.workers`; 1 = in this process) and collect the results:
+    {"config", "contacts": [...], "free": [...], "wall_s", "sim_s", "workers"}. `progress(sim_seconds)` is called
+    after each job."""
+    jobs = jobs_of(cfg)
+    workers = cfg.workers or os.cpu_count() or 1
+    results: list[tuple[str, dict[str, Any]]] = []
+    t0 = time.monotonic()
+    if workers == 1:
+        for kind, job in jobs:
+            r = _run_job(kind, job)
+            results.append((kind, r))
+            if progress:
+                progress(r.get("sim_seconds", 0.0))
+    else:
+        # spawn: each worker imports MuJoCo afresh (no state inherited from a parent that may hold a GL context)
+        with ProcessPoolExecutor(max_workers=workers, mp_context=multiprocessing.get_context("spawn")) as pool:
+            futures = {pool.submit(_run_job, kind, job): kind for kind, job in jobs}
+            pending = set(futures)
+            while pending:
+                done, pending = wait(pending, return_when=FIRST_COMPLETED)
+                for f in done:
+                    r = f.result()
+                    results.append((futures[f], r))
+                    if progress:
+                        progress(r.get("sim_seconds", 0.0))
+    contacts = sorted((r for k, r in results if k == "contact"), key=lambda r: (r["realism"], r["index"]))
+    free = sorted((r for k, r in results if k == "free"), key=lambda r: (r["realism"], r["trajectory"]))
+    return {"config": asdict(cfg), "contacts": contacts, "free": free, "workers": workers,
+            "wall_s": time.monotonic() - t0, "sim_s": sum(r.get("sim_seconds", 0.0) for _, r in results)}

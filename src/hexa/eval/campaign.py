@@ -1,0 +1,318 @@
+"""One simulated run of `hexa eval`: the nodes' core classes on the MuJoCo robot, without ROS, faster than real time.
+
+A run drives the simulator like the live graph does and feeds the same classes the nodes run:
+- the trajectory node's `TrajectoryRunner` commands ζ at 100 Hz; each command reaches the servo board after the host
+  jitter of the realism (`JitterConfig`), then the servos take it through the pulse frame (if any);
+- the current board samples at the driver's `stream_rate_hz` (200 Hz, as in the live graph): the truth's motor
+  currents through the ACS712 + 10-bit ADC with the realism's noise (`hexa.sim.realism.adc_counts`), converted back
+  by the driver's sensor model; host stamps carry the jitter;
+  the joint_states position is each servo's set-point (what the driver gives it with the latch report);
+- the observer node's `CollisionMonitor` (ζ estimator → residual observer → detector) takes both streams and the
+  plate pose at 30 Hz (the true pose with σ = 0.5 mm / 0.1° of noise, standing in for the pose node — the vision is
+  not run here);
+- the rnea node's `ContactForceTracker` identifies the force from the observer's ζ̂, ζ̂̇ and τ; its contact is the
+  true link, chain and point at the START (an oracle isolation: the isolation on rendered frames is not run).
+
+The recorded arrays become a `hexa.report.collision_demo.CaseData`, and `compute_metrics` — the demo's own — gives
+delay, RMSE and false STARTs. The residual is also replayed through `CollisionDetector` at scaled thresholds (the DET
+curve) and through the paper's detector (plate axes only, r_low = 2 N / 0.2 N·m, no servo criterion).
+"""
+from __future__ import annotations
+
+import dataclasses
+import math
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from hexa.sim.scenarios import ScriptedCollision
+
+LINKS = ("plate", "arm", "rod")
+TRAJECTORIES = ("circle", "helix", "ellipse")
+#: s of rest at the start pose before the trajectory (the estimator and the observer settle), as `hexa demo`
+LEAD_IN = 1.0
+#: s simulated after a contact's end
+TAIL = 0.8
+CAMERA_PERIOD = 1.0 / 30.0
+POSE_NOISE = (0.0005, math.radians(0.1))    # m, rad: the stand-in for the pose node's error
+#: threshold scales of the DET curve (× the detector's thresholds, plate axes and servo torques together)
+THRESHOLD_SCALES = (0.5, 0.6, 0.7, 0.8, 0.9, 1.0, 1.15, 1.3, 1.5, 1.75, 2.0, 2.5)
+#: the paper's detector: r_low on the plate axes only (seed 000 §3.1), no servo-torque criterion
+PAPER_THRESHOLDS = (2.0, 2.0, 2.0, 0.2, 0.2, 0.2)
+R_LOW = 2.0
+#: truth samples between two plate-equivalent wrenches of the observer-lag figure (5 ms at the 1 kHz physics)
+PLATE_EQUIVALENT_STRIDE = 5
+
+
+@dataclass(frozen=True)
+class DetectorSpec:
+    """A detector to replay on recorded residuals: plate-axis thresholds (N, N·m) and servo thresholds (N·m, 0 =
+    off), with the live detector's release ratio and minimum duration."""
+
+    name: str
+    thresholds: tuple[float, ...]
+    servo_thresholds: tuple[float, ...]
+
+    def config(self, base: Any, scale: float = 1.0) -> Any:
+        return dataclasses.replace(base, thresholds=tuple(scale * v for v in self.thresholds),
+                                   servo_thresholds=tuple(scale * v for v in self.servo_thresholds))
+
+
+def detectors(observer_config: Any) -> tuple[DetectorSpec, DetectorSpec]:
+    """The node's detector (its configured thresholds) and the paper's baseline."""
+    return (DetectorSpec("node", tuple(observer_config.thresholds), tuple(observer_config.servo_thresholds)),
+            DetectorSpec("paper", PAPER_THRESHOLDS, (0.0,) * 6))
+
+
+def draw_contact(seed: int, index: int) -> ScriptedCollision:
+    """Contact `index` of a campaign `seed`: link (plate/arm/rod), chain, point on the link, direction, peak force
+    1–10 N, rise 0.1–0.5 s, hold 0–0.5 s, release 0.1–0.4 s, onset 1.5–8 s into a trajectory of the paper's three."""
+    rng = np.random.default_rng([int(seed), 7, int(index)])
+    link = LINKS[int(rng.integers(3))]
+    chain = 0 if link == "plate" else int(rng.integers(1, 7))
+    position = (float(rng.uniform(-np.pi, np.pi)) if link == "plate"
+                else float(rng.uniform(0.3, 0.9) if link == "arm" else rng.uniform(0.2, 0.9)))
+    return ScriptedCollision(
+        name=f"case{index}", trajectory=TRAJECTORIES[int(rng.integers(3))], link=link, chain=chain,
+        onset=float(rng.uniform(1.5, 8.0)), rise_time=float(rng.uniform(0.1, 0.5)),
+        release_time=float(rng.uniform(0.1, 0.4)), peak_force=float(rng.uniform(1.0, 10.0)), position=position,
+        elevation=float(np.radians(rng.uniform(-80.0, 30.0))), azimuth=float(np.radians(rng.uniform(-40.0, 40.0))),
+        approach_time=0.6, approach_distance=0.25, hold_time=float(rng.uniform(0.0, 0.5)))
+
+
+@dataclass
+class RunRecord:
+    """Arrays of one run (SI): at the monitor's sample times `t`, residual (N,6) on the plate axes and servo (N,6) as
+    servo torques; the live events; the simulator's truth at every physics step (`truth_t`, 1 kHz); the identified
+    forces."""
+
+    t: np.ndarray
+    residual: np.ndarray
+    servo: np.ndarray
+    events: list[tuple[float, str, int, str]]
+    truth_t: np.ndarray
+    truth_force: np.ndarray
+    truth_point: np.ndarray
+    truth_link: np.ndarray
+    truth_chain: np.ndarray
+    truth_pose: np.ndarray
+    truth_zeta: np.ndarray
+    wrench_t: np.ndarray
+    wrench_force: np.ndarray
+    sim_seconds: float
+    counters: dict[str, Any] = field(default_factory=dict)
+
+
+def simulate(collision: ScriptedCollision | None, trajectory: str, duration: float, realism: Any, seed: int,
+             observer_config: Any = None, identify: bool = True, desc: Any = None) -> RunRecord:
+    """Run the robot `duration` s of trajectory time (after LEAD_IN) with an optional scripted contact (its onset in
+    trajectory time); see the module docstring for what runs. Free motion (no contact) loops the trajectory and
+    ignores STARTs (it keeps moving, to count false alarms); with a contact a START holds the trajectory, as the
+    trajectory node's default policy does."""
+    from hexa.dynamics.contact_force import ContactForceConfig, ContactForceTracker, LocatedContact
+    from hexa.dynamics.monitor import CollisionMonitor, MonitorConfig
+    from hexa.dynamics.observer import ObserverConfig
+    from hexa.protocol.driver_core import load_driver_config
+    from hexa.protocol.sensor_model import CurrentSensorModel
+    from hexa.robots.hexa_description import load_hexa
+    from hexa.sim import Simulator
+    from hexa.sim.boards import board_offsets
+    from hexa.sim.realism import adc_counts
+    from hexa.trajectory_runner import TrajectoryRunner, TrajectorySettings
+
+    desc = desc or load_hexa()
+    ocfg = observer_config or ObserverConfig()
+    sim = Simulator(desc, seed=seed, scenario=collision, cameras=False, drive="external", lead_in=LEAD_IN,
+                    trajectory=None if collision is not None else trajectory, realism=realism)
+    rng = np.random.default_rng([int(seed), 11])
+    jitter = realism.jitter
+    driver_cfg = load_driver_config()
+    sensor = CurrentSensorModel.from_dict(driver_cfg.get("sensor", {}))
+    driver_offsets = np.asarray(driver_cfg.get("current_offsets") or np.zeros(6), dtype=float)
+    offsets = board_offsets(sim, seed)
+    punctual = jitter.sample_sigma <= 0 and jitter.spike_rate <= 0
+    mon = CollisionMonitor(desc, MonitorConfig(sim_clock=punctual), ocfg)
+    tracker = ContactForceTracker(desc, ContactForceConfig()) if identify else None
+    runner = TrajectoryRunner.from_settings(desc, TrajectorySettings(
+        trajectory=trajectory, start_time=LEAD_IN, loop=collision is None,
+        collision_policy="ignore" if collision is None else "hold"))
+    command_period = 1.0 / TrajectorySettings().rate_hz
+    pending: list[tuple[float, np.ndarray, int]] = []
+    next_cmd, next_cam, seq = 0.0, 0.0, 0
+    rec: dict[str, list] = {k: [] for k in ("t", "res", "servo", "wt", "wf")}
+    events: list[tuple[float, str, int, str]] = []
+
+    t_end = LEAD_IN + duration
+    steps_per_sample = max(1, int(round(1.0 / (float(driver_cfg["stream_rate_hz"]) * sim.timestep))))
+    k = 0
+    try:
+        while sim.time < t_end - 1e-9:
+            now = sim.time
+            if now >= next_cmd - 1e-12:
+                tick = runner.tick(now)
+                if tick.zeta is not None:
+                    seq = (seq + 1) & 0xFF
+                    pending.append((now + jitter.command_delay(rng), tick.zeta, seq))
+                next_cmd += command_period
+            if pending:
+                due = [c for c in pending if c[0] <= now + 1e-12]
+                if due:
+                    pending = [c for c in pending if c[0] > now + 1e-12]
+                    _, zeta_cmd, tag = due[-1]
+                    sim.set_servo_targets(zeta_cmd, tag=tag)
+            sim.step(1)
+            k += 1
+            if k % steps_per_sample:
+                continue
+            s = sim.state()
+            t = s.time
+            counts = adc_counts(sensor, sim.motor_currents(s.tau) + offsets, sim.config.current_noise_counts, rng)
+            amps = sensor.current_from_counts(counts) - driver_offsets
+            stamp = t + jitter.sample_delay(rng)
+            out = mon.push_currents(stamp, int(round(t * 1e6)), amps)
+            out += mon.push_states(stamp, sim.servo_setpoints(), None, None)
+            if t >= next_cam - 1e-12:
+                pose = s.pose + np.concatenate([rng.normal(0, POSE_NOISE[0], 3), rng.normal(0, POSE_NOISE[1], 3)])
+                out += mon.push_pose(t, pose)
+                if tracker is not None:
+                    tracker.on_pose(t, pose)
+                next_cam += CAMERA_PERIOD
+            for m in out:
+                r = m.residual
+                rec["t"].append(m.time)
+                rec["res"].append(r.wrench)
+                rec["servo"].append(r.servo_torque)
+                forces = []
+                if tracker is not None and m.zeta_dot is not None:
+                    forces += tracker.step_state(m.time, m.zeta, m.zeta_dot, m.tau)
+                for e in r.events:
+                    events.append((e.time, e.kind, e.id, e.axis_name))
+                    if e.kind == "START":
+                        runner.collision(now, r.wrench[:3])
+                    if tracker is not None:
+                        forces += tracker.on_collision(e.kind, e.id, e.time)
+                        g = sim.ground_truth()
+                        if e.kind == "START" and g.in_contact:   # the oracle isolation's contact
+                            forces += tracker.on_contact(LocatedContact(
+                                e.time, e.id, g.link, g.chain or 1, g.point.copy(),
+                                g.force / np.linalg.norm(g.force)))
+                for f in forces:
+                    rec["wt"].append(f.time)
+                    rec["wf"].append(f.force)
+        log = sim.truth_log()
+    finally:
+        sim.close()
+
+    def arr(key: str, width: int | None = None, dtype: Any = float) -> np.ndarray:
+        a = np.asarray(rec[key], dtype=dtype)
+        return a.reshape(len(rec[key]), width) if width else a
+
+    order = np.argsort(arr("wt"), kind="stable")
+    return RunRecord(t=arr("t"), residual=arr("res", 6), servo=arr("servo", 6), events=sorted(events),
+                     truth_t=log["time"], truth_force=log["force"], truth_point=log["point"],
+                     truth_link=log["link"].astype(int), truth_chain=log["chain"].astype(int),
+                     truth_pose=log["plate_pose"], truth_zeta=log["zeta"], wrench_t=arr("wt")[order],
+                     wrench_force=arr("wf", 3)[order], sim_seconds=t_end,
+                     counters=mon.counters())
+
+
+def replay(rec: RunRecord, spec: DetectorSpec, base_config: Any, scale: float = 1.0
+           ) -> list[tuple[float, str, int, str]]:
+    """The events `spec` at `scale` raises on the recorded residuals (the live CollisionDetector, replayed)."""
+    from hexa.dynamics.observer import CollisionDetector
+
+    det = CollisionDetector(spec.config(base_config, scale))
+    out = []
+    for t, r, s in zip(rec.t.tolist(), rec.residual, rec.servo):
+        for e in det.update(t, r, s)[1]:
+            out.append((e.time, e.kind, e.id, e.axis_name))
+    return out
+
+
+def case_data(name: str, rec: RunRecord, events: list, thresholds: Any, servo_thresholds: Any,
+              with_outputs: bool = True) -> Any:
+    """The demo's CaseData of a run (`with_outputs` False: truth and events only, for the replays)."""
+    from hexa.report.collision_demo import CaseData
+
+    d = CaseData(case=name, truth_t=rec.truth_t, truth_force=rec.truth_force, truth_point=rec.truth_point,
+                 truth_link=rec.truth_link, truth_chain=rec.truth_chain, events=events,
+                 threshold=np.asarray(thresholds, float), servo_threshold=np.asarray(servo_thresholds, float))
+    if with_outputs:
+        d.truth_pose, d.truth_zeta = rec.truth_pose, rec.truth_zeta
+        d.residual_t, d.residual, d.residual_servo = rec.t, rec.residual, rec.servo
+        d.wrench_t, d.wrench_force = rec.wrench_t, rec.wrench_force
+    return d
+
+
+def plate_equivalent_every(d: Any, stride: int) -> np.ndarray:
+    """The true force's plate-equivalent wrench (hexa.report.collision_demo.plate_equivalent_truth) computed on every
+    `stride`-th truth sample and interpolated between them (it costs ~5 ms a sample)."""
+    from hexa.report.collision_demo import plate_equivalent_truth
+
+    idx = np.unique(np.r_[np.arange(0, len(d.truth_t), stride), len(d.truth_t) - 1])
+    sub = dataclasses.replace(d, truth_t=d.truth_t[idx], truth_force=d.truth_force[idx],
+                              truth_point=d.truth_point[idx], truth_link=d.truth_link[idx],
+                              truth_chain=d.truth_chain[idx], truth_pose=d.truth_pose[idx])
+    W = plate_equivalent_truth(sub)
+    return np.stack([np.interp(d.truth_t, sub.truth_t, W[:, k]) for k in range(6)], axis=1)
+
+
+def run_contact_job(job: dict[str, Any]) -> dict[str, Any]:
+    """Worker: one contact case → its metrics (the demo's), the node's and the paper's detection at every scale.
+
+    job: campaign_seed and index (the drawn contact) or collision (ScriptedCollision fields), sim_seed, realism
+    ("ideal" | "realistic"), optional identify (bool) and observer (ObserverConfig fields)."""
+    from hexa.dynamics.observer import ObserverConfig
+    from hexa.report.collision_demo import compute_metrics
+    from hexa.sim.realism import RealismConfig
+
+    realism = RealismConfig.named(job["realism"])
+    ocfg = ObserverConfig(**job.get("observer", {}))
+    c = (ScriptedCollision(**job["collision"]) if "collision" in job
+         else draw_contact(job["campaign_seed"], job["index"]))
+    duration = c.end_time + TAIL
+    rec = simulate(c, c.trajectory, duration, realism, seed=job["sim_seed"], observer_config=ocfg,
+                   identify=job.get("identify", True))
+    out: dict[str, Any] = {"index": job["index"], "realism": job["realism"], "link": c.link, "chain": c.chain,
+                           "trajectory": c.trajectory, "peak_force": c.peak_force, "onset": c.onset + LEAD_IN,
+                           "rise_time": c.rise_time, "hold_time": c.hold_time, "release_time": c.release_time,
+                           "sim_seconds": rec.sim_seconds}
+    touching = np.linalg.norm(rec.truth_force, axis=1) > 0
+    if not touching.any():   # cannot happen with a scripted contact unless the run ended before it
+        out["error"] = "no contact in the ground truth"
+        return out
+    d = case_data(c.name, rec, rec.events, ocfg.thresholds, ocfg.servo_thresholds)
+    m = compute_metrics(d, r_low=R_LOW, plate_equivalent=plate_equivalent_every(d, PLATE_EQUIVALENT_STRIDE))
+    out["metrics"] = m.as_dict()
+    out["detect"] = {}
+    for spec in detectors(ocfg):
+        rows = []
+        for scale in THRESHOLD_SCALES:
+            ev = replay(rec, spec, ocfg, scale)
+            mm = compute_metrics(case_data(c.name, rec, ev, ocfg.thresholds, ocfg.servo_thresholds, False),
+                                 r_low=R_LOW)
+            rows.append({"scale": scale, "detect_time": mm.detect_time, "delay_ms": mm.delay_ms,
+                         "false_starts": mm.false_starts})
+        out["detect"][spec.name] = rows
+    return out
+
+
+def run_free_job(job: dict[str, Any]) -> dict[str, Any]:
+    """Worker: `seconds` of free motion on one trajectory (looped) → STARTs of both detectors at every scale."""
+    from hexa.dynamics.observer import ObserverConfig
+    from hexa.sim.realism import RealismConfig
+
+    realism = RealismConfig.named(job["realism"])
+    ocfg = ObserverConfig(**job.get("observer", {}))
+    rec = simulate(None, job["trajectory"], job["seconds"], realism, seed=job["sim_seed"], observer_config=ocfg,
+                   identify=False)
+    moving = rec.t >= LEAD_IN
+    out: dict[str, Any] = {"trajectory": job["trajectory"], "realism": job["realism"], "seconds": job["seconds"],
+                           "sim_seconds": rec.sim_seconds, "live_starts": sum(1 for e in rec.events if e[1] == "START"),
+                           "starts": {}}
+    rec_moving = dataclasses.replace(rec, t=rec.t[moving], residual=rec.residual[moving], servo=rec.servo[moving])
+    for spec in detectors(ocfg):
+        out["starts"][spec.name] = [sum(1 for e in replay(rec_moving, spec, ocfg, s) if e[1] == "START")
+                                    for s in THRESHOLD_SCALES]
+    return out

@@ -1,0 +1,108 @@
+"""`hexa eval`: the campaign through the nodes' core classes on the simulator (ROS-free), its parallel pool, the
+report's structure — and behaviour that could fail: a strong plate push is detected quickly, ideal free motion raises
+no false alarm, lower thresholds never detect less."""
+from __future__ import annotations
+
+import dataclasses
+import json
+
+import numpy as np
+import pytest
+
+from hexa.eval import CampaignConfig, ProgressBar, jobs_of, run_campaign
+from hexa.eval.campaign import THRESHOLD_SCALES, draw_contact, run_contact_job
+from hexa.eval.report import summarize, write_report
+
+
+def test_contacts_are_drawn_reproducibly_within_their_ranges():
+    cs = [draw_contact(3, i) for i in range(60)]
+    assert [dataclasses.asdict(c) for c in cs[:5]] == [dataclasses.asdict(draw_contact(3, i)) for i in range(5)]
+    assert dataclasses.asdict(draw_contact(4, 0)) != dataclasses.asdict(cs[0])
+    assert {c.link for c in cs} == {"plate", "arm", "rod"}
+    assert {c.trajectory for c in cs} == {"circle", "helix", "ellipse"}
+    for c in cs:
+        assert 1.0 <= c.peak_force <= 10.0 and 1.5 <= c.onset <= 8.0
+        assert (c.chain == 0) == (c.link == "plate") and 0 <= c.chain <= 6
+        assert c.force_magnitude(c.peak_time + c.hold_time / 2) == pytest.approx(c.peak_force)
+        assert c.force_magnitude(c.end_time) == 0.0
+
+
+def test_a_strong_plate_push_is_detected_within_100_ms_and_its_force_identified():
+    plate = {"name": "push", "trajectory": "circle", "link": "plate", "chain": 0, "onset": 2.0, "rise_time": 0.2,
+             "release_time": 0.2, "peak_force": 8.0, "position": -1.75, "elevation": -1.2, "azimuth": 0.0,
+             "approach_time": 0.6, "approach_distance": 0.25, "hold_time": 0.2}
+    r = run_contact_job({"collision": plate, "sim_seed": 1, "realism": "ideal", "index": 0})
+    m = r["metrics"]
+    assert m["true_link"] == "plate" and m["false_starts"] == 0
+    assert np.isfinite(m["exceed_time"]) and 0.0 <= m["delay_ms"] <= 100.0
+    rmse = np.asarray(m["force_rmse"])
+    assert np.all(np.isfinite(rmse)) and np.all(rmse < 2.0)        # the identification ran on the contact
+    # the replays at scale 1 see what the live detector saw
+    node = {row["scale"]: row for row in r["detect"]["node"]}
+    assert node[1.0]["detect_time"] == pytest.approx(m["detect_time"], abs=1e-9)
+
+
+def test_smoke_campaign_on_two_worker_processes_writes_the_report(tmp_path):
+    cfg = CampaignConfig(cases=6, free_seconds=20.0, realisms=("ideal",), seed=5, workers=2)
+    assert len(jobs_of(cfg)) == 7
+    seen: list[float] = []
+    result = run_campaign(cfg, progress=seen.append)
+    assert len(seen) == 7 and result["workers"] == 2
+    assert len(result["contacts"]) == 6 and all("metrics" in c for c in result["contacts"])
+    assert sum(f["seconds"] for f in result["free"]) == pytest.approx(20.0)
+    md = write_report(result, tmp_path)
+    text = md.read_text()
+    for name in ("det_curve.png", "detection_vs_force.png", "delay_per_link.png", "rmse.png"):
+        assert (tmp_path / name).stat().st_size > 5000 and f"]({name})" in text
+    data = json.loads((tmp_path / "report.json").read_text())
+    s = data["summary"]["ideal"]
+    assert s["cases"] == 6 and len(s["det"]["node"]) == len(THRESHOLD_SCALES) == len(s["det"]["paper"])
+    assert set(s["targets"]) >= {"fa_per_10h", "det_plate_3n", "delay_median_ms", "rmse_below_paper"}
+    assert s["live_false_starts_free"] == 0                    # ideal free motion raises no false alarm
+    assert sum(f["starts"]["node"][THRESHOLD_SCALES.index(1.0)] for f in result["free"]) == 0
+    # a lower threshold never detects fewer contacts nor raises fewer false alarms
+    for name in ("node", "paper"):
+        rows = s["det"][name]
+        det = [sum(1 for c in result["contacts"] for row in c["detect"][name]
+                   if row["scale"] == r["scale"] and np.isfinite(row["detect_time"])) for r in rows]
+        assert det == sorted(det, reverse=True)
+        fa = [r["false_alarms"] for r in rows]
+        assert fa == sorted(fa, reverse=True)
+    # the campaign's contacts: the drawn ones, so the summary counts them per link
+    links = [draw_contact(5, i).link for i in range(6)]
+    assert {k: v["cases"] for k, v in s["links"].items()} == {k: links.count(k) for k in ("plate", "arm", "rod")}
+    assert summarize(result)["ideal"]["targets"] == pytest.approx(s["targets"], nan_ok=True)
+
+
+def test_progress_bar_counts_jobs_and_simulated_time():
+    import io
+
+    buf = io.StringIO()
+    bar = ProgressBar(2, 20.0, stream=buf, width=10)
+    bar.update(8.0)
+    line = bar.update(12.0)
+    assert "2/2 jobs" in line and "20 s simulated" in line and "[##########]" in line
+    assert buf.getvalue().endswith("\n")
+
+
+def test_bad_campaign_settings_are_refused_with_their_name():
+    with pytest.raises(ValueError, match="realism must be one of"):
+        CampaignConfig(realisms=("kind",))
+    with pytest.raises(ValueError, match="nothing to run"):
+        CampaignConfig(cases=0, free_seconds=0.0)
+    with pytest.raises(ValueError, match="workers"):
+        CampaignConfig(workers=0)
+
+
+def test_cli_writes_the_report_and_refuses_bad_sizes(tmp_path, capsys):
+    from hexa_bringup.cli import main
+
+    assert main(["eval", "--cases", "-1", "--ideal"]) == 2
+    assert "cases (-1)" in capsys.readouterr().err
+    assert main(["eval", "--cases", "1", "--minutes", "0", "--ideal", "--workers", "1", "--no-identify",
+                 "--out", str(tmp_path), "--json"]) == 0
+    out = capsys.readouterr()
+    summary = json.loads(out.out)
+    assert list(summary) == ["ideal"] and summary["ideal"]["cases"] == 1
+    assert "1/1 jobs" in out.err                                   # the progress bar
+    assert (tmp_path / "report.md").exists() and (tmp_path / "det_curve.png").exists()
