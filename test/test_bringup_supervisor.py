@@ -102,3 +102,19 @@ def test_robot_mode_approaches_the_start_slowly_by_default_and_sim_only_when_ask
         mode_node_args(args("robot", -1.0))
     with pytest.raises(SupervisorError, match="approach-speed"):
         mode_node_args(args("robot", float("nan")))
+
+
+def test_realism_reaches_the_simulator_in_sim_mode_and_is_refused_elsewhere():
+    import argparse
+
+    from hexa_bringup.commands.bringup import mode_node_args
+    from hexa_bringup.supervisor import SupervisorError
+
+    def args(mode, realism):
+        return argparse.Namespace(mode=mode, uno="/dev/ttyACM0", mega="/dev/ttyACM1", cameras=[],
+                                  approach_speed=None, realism=realism)
+
+    assert mode_node_args(args("sim", "realistic"))["sim"] == ["-p", "realism:=realistic"]
+    assert "sim" not in mode_node_args(args("sim", None))        # the sim node's own default (ideal)
+    with pytest.raises(SupervisorError, match="realism"):
+        mode_node_args(args("robot", "realistic"))

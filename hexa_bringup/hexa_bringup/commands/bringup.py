@@ -27,6 +27,9 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="the trajectory node first moves the arms from the camera's plate pose to the trajectory's "
                         "start at most this fast (rad/s); 0 = off (first command at full servo speed). "
                         f"Default {ROBOT_APPROACH_SPEED} in robot mode, 0 in sim (the simulator starts there)")
+    p.add_argument("--realism", choices=["ideal", "realistic"], default=None,
+                   help="sim mode: the simulated robot, ideal or realistic (docs/simulator.md); default: the sim "
+                        "node's parameter (ideal)")
     p.add_argument("--compose", action="store_true",
                    help="run pose + isolation in one process and observer + rnea + singularity in another "
                         "(hexa_ros.compose; fewer processes, one interpreter per group)")
@@ -66,6 +69,10 @@ def mode_node_args(args: argparse.Namespace) -> dict[str, list[str]]:
             if not speed >= 0:
                 raise SupervisorError(f"--approach-speed must be >= 0 rad/s, got {speed}")
             node_args["trajectory"] = ["-p", f"approach_speed:={float(speed)}"]
+    if getattr(args, "realism", None):
+        if args.mode != "sim":
+            raise SupervisorError(f"--realism is for sim mode only, not {args.mode}")
+        node_args["sim"] = ["-p", f"realism:={args.realism}"]
     if args.mode == "upsrpu":
         node_args["singularity"] = ["-p", "robot:=upsrpu", "-p", "input:=markers"]
         node_args["srm"] = ["-p", "input:=markers"]

@@ -22,6 +22,10 @@ def register(sub: argparse._SubParsersAction) -> None:
                         "a capsule pushes through MuJoCo contacts with friction (truth = MuJoCo's contact force)")
     p.add_argument("--params", default=None,
                    help="node parameter YAML (default: the bundled hexa_bringup/config/hexa_params.yaml)")
+    p.add_argument("--realism", choices=["ideal", "realistic"], default="ideal",
+                   help="the simulated robot: ideal (the nodes' model, set-points applied at once; default) or "
+                        "realistic (a truth drawn from --seed within the documented tolerances, servo friction, gear "
+                        "play, dead band, ACS712 noise, the 20 ms pulse frame: docs/simulator.md)")
     p.add_argument("--ns", default="/hexa")
     p.add_argument("--json", action="store_true", help="print the metrics as JSON")
     p.set_defaults(func=run)
@@ -59,7 +63,7 @@ def run(args: argparse.Namespace) -> int:
         try:
             run = run_case(case, out, env, ns=args.ns, seed=args.seed, real_time_factor=rtf,
                            record_images=args.record_images, contact_model=args.contact_model,
-                           params=params)
+                           params=params, realism=args.realism)
         except SupervisorError as exc:
             print(f"hexa demo: cannot start the graph: {exc}", file=sys.stderr)
             return 2
