@@ -97,9 +97,9 @@ def test_bad_campaign_settings_are_refused_with_their_name():
 def test_cli_writes_the_report_and_refuses_bad_sizes(tmp_path, capsys):
     from hexa_bringup.cli import main
 
-    assert main(["eval", "--cases", "-1", "--ideal"]) == 2
+    assert main(["eval", "--cases", "-1", "--realism", "ideal"]) == 2
     assert "cases (-1)" in capsys.readouterr().err
-    assert main(["eval", "--cases", "1", "--minutes", "0", "--ideal", "--workers", "1", "--no-identify",
+    assert main(["eval", "--cases", "1", "--minutes", "0", "--realism", "ideal", "--workers", "1", "--no-identify",
                  "--out", str(tmp_path), "--json"]) == 0
     out = capsys.readouterr()
     summary = json.loads(out.out)

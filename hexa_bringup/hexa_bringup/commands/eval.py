@@ -20,9 +20,9 @@ def register(sub: argparse._SubParsersAction) -> None:
     size.add_argument("--minutes", type=float, help="free motion per robot, minutes (default 2)")
     size.add_argument("--hours", type=float, help="free motion per robot, hours")
     p.add_argument("--seed", type=int, default=0, help="campaign seed: draws the contacts and seeds the simulators")
-    robot = p.add_mutually_exclusive_group()
-    robot.add_argument("--realistic", action="store_true", help="only the realistic robot (docs/simulator.md)")
-    robot.add_argument("--ideal", action="store_true", help="only the ideal robot (the simulator is the model)")
+    p.add_argument("--realism", choices=["ideal", "realistic", "both"], default="both",
+                   help="the simulated robot: ideal (the simulator is the model), realistic (docs/simulator.md) or "
+                        "both, each on the same contacts (default both)")
     p.add_argument("--workers", type=int, default=None, help="worker processes (default: the CPU count)")
     p.add_argument("--no-identify", action="store_true", help="skip the force identification (no RMSE)")
     p.add_argument("--no-plots", action="store_true", help="no PNG figures")
@@ -36,7 +36,7 @@ def run(args: argparse.Namespace) -> int:
     from hexa.eval.report import summarize, write_report
 
     hours = args.hours if args.hours is not None else (args.minutes if args.minutes is not None else 2.0) / 60.0
-    realisms = ("realistic",) if args.realistic else ("ideal",) if args.ideal else ("ideal", "realistic")
+    realisms = ("ideal", "realistic") if args.realism == "both" else (args.realism,)
     try:
         if not math.isfinite(hours) or hours < 0:
             raise ValueError(f"free motion must be >= 0, got {hours} h")
