@@ -1,5 +1,6 @@
 """The trajectory node's logic without ROS: when trajectory time starts (delay, set time, approach from a fresh
-measured pose), the command per tick, requests before the clock runs, settings refused by name."""
+measured pose, the collision monitoring's first OK), the command per tick, requests before the clock runs, the hold on
+a monitoring LOST and the resume refused until OK, settings refused by name."""
 from __future__ import annotations
 
 import numpy as np
@@ -19,6 +20,7 @@ def desc():
 
 
 def _runner(desc, log=None, **kw) -> TrajectoryRunner:
+    kw.setdefault("require_monitoring", False)   # the monitoring contract has tests of its own below
     return TrajectoryRunner.from_settings(desc, TrajectorySettings(**kw), log)
 
 
@@ -100,3 +102,46 @@ def test_a_pose_file_is_interpolated_with_its_rates(tmp_path):
     f.write_text("0,0,0,-0.55,0,0,0\n0,0.1,0,-0.55,0,0,0\n")
     with pytest.raises(ValueError, match="increase"):
         load_pose_file(f)
+
+
+def test_nothing_moves_before_the_first_monitoring_ok_then_the_trajectory_starts_from_0(desc):
+    r = _runner(desc, start_delay=1.0, start_blend=0.0, require_monitoring=True)
+    z0 = hexa6rus.inverse_kinematics(desc, START)
+    for now in (10.0, 11.0, 12.5):                               # past the start delay: still the start pose, at rest
+        tick = r.tick(now)
+        assert tick.state == "waiting_for_monitoring" and not tick.zeta_dot.any() and np.allclose(tick.zeta, z0)
+    assert r.on_monitoring("DEGRADED", "settling: residuals fresh for 0.2 of 0.5 s", 12.6) is None
+    assert r.tick(12.7).state == "waiting_for_monitoring"
+    assert "may start" in r.on_monitoring("OK", "", 13.0)
+    assert r.tick(13.0).state == "running" and r.time(13.5) == pytest.approx(0.5)   # from trajectory time 0
+    assert r.diagnostic_values()["monitoring"] == "OK"
+
+
+def test_a_monitoring_lost_holds_and_resume_is_refused_until_ok(desc):
+    r = _runner(desc, start_time=0.0, require_monitoring=True)
+    r.on_monitoring("OK", "", 0.005)
+
+    def play(t0: float, t1: float) -> list:                      # the node's 100 Hz ticks
+        return [r.tick(t) for t in np.arange(t0, t1, 0.01)]
+
+    before = play(0.01, 2.0)[-1]
+    assert before.state == "running"
+    text = r.on_monitoring("LOST", "no fresh residual for 60 ms: motor_currents silent for 60 ms", 2.0)
+    assert "held" in text and "motor_currents silent" in text
+    held = play(2.0, 3.1)
+    assert all(h.state == "held" and np.allclose(h.zeta, held[0].zeta) and not h.zeta_dot.any() for h in held)
+    assert np.abs(held[0].zeta - before.zeta).max() < 0.01          # held where it was
+    assert not r.resume(3.1) and "LOST" in r.refusal and "motor_currents silent" in r.refusal
+    r.on_monitoring("DEGRADED", "settling: residuals fresh for 0.1 of 0.5 s", 3.2)
+    assert not r.resume(3.3) and "DEGRADED" in r.refusal and play(3.1, 3.6)[-1].state == "held"
+    r.on_monitoring("OK", "", 3.6)
+    assert play(3.6, 3.8)[-1].state == "held"                     # OK alone does not move the robot: the operator does
+    assert r.resume(3.8) and r.refusal == ""
+    assert play(3.8, 3.9)[-1].state == "resuming"
+    assert r.monitoring_holds == 1 and r.diagnostic_values()["monitoring_holds"] == "1"
+
+
+def test_without_required_monitoring_its_states_are_ignored(desc):
+    r = _runner(desc, start_time=0.0)
+    assert r.tick(1.0).state == "running"
+    assert r.on_monitoring("LOST", "no fresh residual", 1.0) is None and r.tick(1.1).state == "running"

@@ -69,7 +69,10 @@ class SimNode(Node):
         self.sim = Simulator(seed=self.seed, scenario=None if self.scenario in ("", "none") else self.scenario,
                              cameras=cameras, randomize=bool(v["randomize"]), lead_in=float(v["lead_in"]),
                              contact_model=str(v["contact_model"]), trajectory=str(v["trajectory"]) or None,
-                             servo_frame_period=None if frame < 0 else frame)
+                             servo_frame_period=None if frame < 0 else frame,
+                             # with the boards the servos take only the driver's commands, and hold the start pose
+                             # until the first one (a trajectory drive would move them on its own until then)
+                             drive="external" if v["boards"] else None)
         self.runner = SimRunner(self.sim, pacer, clock_rate, truth_rate, cam_rate if cameras else None, duration,
                                 start_delay)
         self.boards = VirtualBoards(self.sim, link_dir=str(v["link_dir"])).start() if v["boards"] else None
