@@ -62,7 +62,8 @@ def one_run(k: int, args: argparse.Namespace, env: dict[str, str], root: Path) -
     for spec in specs:
         if spec.name == "sim":
             spec.ends_graph, spec.respawn = True, False
-    with open(run_dir / "supervisor.log", "w") as out, contextlib.redirect_stdout(out):
+    with open(run_dir / "supervisor.log", "w") as out, contextlib.redirect_stdout(out), \
+            contextlib.redirect_stderr(out):
         rc = Supervisor(specs, env, log_dir=str(run_dir / "logs"), status_every=1e9).run(duration=args.wall_limit)
     wall = time.monotonic() - t0
     logs = run_dir / "logs"
@@ -76,7 +77,8 @@ def one_run(k: int, args: argparse.Namespace, env: dict[str, str], root: Path) -
     return {"run": k, "rc": rc, "wall_s": round(wall, 1),
             "startup_false_starts": [s for s in starts if s["onset"] < running + START_UP],
             "false_starts": starts, "first_ok": next((t for lv, t in monitoring if lv == "OK"), None),
-            "running_at": None if running == math.inf else running, "monitoring": monitoring,
+            "running_at": None if running == math.inf else running,
+            "lost": [t for lv, t in monitoring if lv == "LOST"], "monitoring": monitoring,
             "trajectory_states": states, "logs": str(logs)}
 
 
@@ -105,12 +107,13 @@ def main() -> int:
             else:
                 print(f"run {k + 1:2d}/{args.n}: rc {r['rc']}, {r['wall_s']:5.1f} s wall, first OK at "
                       f"{r['first_ok']} s, running at {r['running_at']} s, false STARTs "
-                      f"{[(s['axis'], s['onset']) for s in r['false_starts']]}, monitoring {r['monitoring'][:4]}",
+                      f"{[(s['axis'], s['onset']) for s in r['false_starts']]}, LOST at {r['lost']}",
                       flush=True)
     bad = sum(1 for r in runs if r["startup_false_starts"])
     print(json.dumps({"runs": len(runs), "runs_with_startup_false_start": bad,
                       "startup_false_starts": sum(len(r["startup_false_starts"]) for r in runs),
                       "false_starts": sum(len(r["false_starts"]) for r in runs),
+                      "runs_with_lost": sum(1 for r in runs if r["lost"]),
                       "failed_runs": sum(1 for r in runs if r["rc"] != 0), "out": str(root)}))
     return 0 if bad == 0 else 1
 

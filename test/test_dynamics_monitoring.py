@@ -42,6 +42,7 @@ class Feed:
         self.now = 0.0
         self.wall = 100.0
         self.events: list = []     # (now, level, reason)
+        self.board = self.mon.config.time_source != "stamp"
 
     def run(self, until: float, currents: bool = True, states: bool = True, poses: bool = True,
             board_us=None) -> None:
@@ -55,8 +56,8 @@ class Feed:
                 us = int(round(t * 1e6)) if board_us is None else board_us(t)
                 if currents:
                     self.watch.push_currents(t, us, cur)
-                if states:
-                    self.watch.push_states(t, cmd, None, None)
+                if states:   # without the current board, joint_states carry τ (the driver's effort)
+                    self.watch.push_states(t, cmd, None, None if self.board else cur * self.mon.k_t)
                 if poses and self.k % 7 == 0:
                     self.watch.push_pose(t, self.pose)
             if round(self.wall / DT) % round(EVAL / DT) == 0:
@@ -180,3 +181,12 @@ def test_the_watch_rejects_bad_bounds_naming_them():
         WatchConfig(wall_timeout=math.nan)
     with pytest.raises(MonitoringError, match="settle_time"):
         WatchConfig(settle_time=-1.0)
+
+
+def test_joint_states_alone_are_the_only_stream_expected_without_the_current_board(rest):
+    f = Feed(rest, monitor_config=MonitorConfig(sim_clock=True, time_source="stamp"))
+    f.run(1.6, currents=False)
+    assert f.watch.streams == ("joint_states",) and f.watch.status.level == OK
+    f.run(1.8, currents=False, states=False)
+    _t, reason = f.first(LOST)
+    assert "joint_states silent" in reason and "motor_currents" not in reason, reason

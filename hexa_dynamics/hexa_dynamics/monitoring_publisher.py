@@ -38,7 +38,11 @@ class MonitoringPublisher:
         m = MonitoringState(level=getattr(MonitoringState, st.level), level_name=st.level, reason=st.reason,
                             residual_age=st.residual_age, timeout=self.watch.config.timeout,
                             lost_count=self.watch.lost_count)
-        m.header.stamp, m.header.frame_id = to_stamp(st.since), self.frame_id
+        now = self.now()
+        m.header.stamp, m.header.frame_id = to_stamp(now), self.frame_id
         self.pub.publish(m)
-        log = self.node.get_logger().error if st.level == LOST else self.node.get_logger().info
-        log(f"monitoring {st.level} at {st.since:.3f} s" + (f": {st.reason}" if st.reason else ""))
+        text = f"monitoring {st.level} at {now:.3f} s" + (f": {st.reason}" if st.reason else "")
+        if st.level == LOST:   # (rclpy fixes one severity per call site)
+            self.node.get_logger().error(text)
+        else:
+            self.node.get_logger().info(text)

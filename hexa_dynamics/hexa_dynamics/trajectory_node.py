@@ -141,8 +141,10 @@ class TrajectoryNode(Node):
 
     def _on_monitoring(self, msg: MonitoringState) -> None:
         text = self.runner.on_monitoring(msg.level_name, msg.reason, self._now())
-        if text is not None:
-            (self.get_logger().error if msg.level == MonitoringState.LOST else self.get_logger().info)(text)
+        if text is not None and msg.level == MonitoringState.LOST:   # (rclpy fixes one severity per call site)
+            self.get_logger().error(text)
+        elif text is not None:
+            self.get_logger().info(text)
         self._tick()   # a hold takes effect at once, not at the next tick
 
     def _on_resume(self, _req, resp):

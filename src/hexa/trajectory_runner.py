@@ -209,13 +209,14 @@ class TrajectoryRunner:
         LOST after it holds as a collision START does. Returns what to log, or None."""
         if not self.require_monitoring:
             return None
+        was = self.monitoring
         self.monitoring, self.monitoring_reason = level, reason
         if level == "OK" and not self._watched:
             self._watched = True
             if self._t0 is not None and not self.approach_pending:
                 self._t0 = max(self._t0, now)   # trajectory time 0 is now at the latest
             return "monitoring OK: the trajectory may start"
-        if level != "LOST" or not self._watched:
+        if level != "LOST" or not self._watched or was == "LOST":
             return None
         t = self.time(now)
         if t is None:

@@ -19,6 +19,7 @@ wall clock (`wall`, which also runs when a simulator's /clock stalls):
 from __future__ import annotations
 
 import math
+import re
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
 
@@ -84,10 +85,9 @@ class MonitoringWatch:
     def __init__(self, monitor: CollisionMonitor, config: WatchConfig | None = None, now: float = 0.0) -> None:
         self.monitor = monitor
         self.config = config or WatchConfig()
-        self.streams = ("joint_states",) + (() if monitor.config.time_source == "stamp" else ("motor_currents",))
         #: ζ from the estimator with camera updates: without usable plate poses the servo-model bias goes unchecked
         self.pose_needed = monitor.config.zeta_source == "estimator" and monitor.estimator.config.camera_sigma > 0
-        self.received = {s: 0 for s in (*self.streams, "plate_pose")}
+        self.received = {s: 0 for s in ("joint_states", "motor_currents", "plate_pose")}
         self._seen = dict(self.received)
         self._arrived = {s: -math.inf for s in self.received}
         self._residuals = monitor.observer.accepted
@@ -99,14 +99,22 @@ class MonitoringWatch:
         self._rejects = self._reject_counts()
         self._phase = "starting"         # starting | watching | lost | settling
         self._grace = now                # LOST is not raised for a residual age counted from before this
-        self._cause = ""
+        self._cause: frozenset[str] = frozenset()
         self._suspect = False            # a bound was broken at the previous evaluation
         self.status = MonitoringStatus(DEGRADED, "settling: no joint_states received yet", math.inf, now)
         self.lost_count = 0
 
+    @property
+    def streams(self) -> tuple[str, ...]:
+        """The sample streams residuals come from: joint_states, and motor_currents when the sample times come
+        from the current board's clock (time_source "board", or "auto" once board samples have been seen)."""
+        tsrc = self.monitor.config.time_source
+        board = tsrc == "board" or (tsrc == "auto" and self.monitor.board_seen)
+        return ("joint_states", "motor_currents") if board else ("joint_states",)
+
     # ------------------------------------------------------------------ inputs (counted, then to the monitor)
     def push_currents(self, stamp: float, board_us: int, currents: Any) -> list[MonitorSample]:
-        self.received["motor_currents"] = self.received.get("motor_currents", 0) + 1
+        self.received["motor_currents"] += 1
         return self.monitor.push_currents(stamp, board_us, currents)
 
     def push_states(self, stamp: float, position: Any, velocity: Any, effort: Any) -> list[MonitorSample]:
@@ -246,7 +254,7 @@ class MonitoringWatch:
         return f"residuals fresh for {run:.2f} of {self.config.settle_time:g} s"
 
     def _set(self, level: str, reason: str, now: float, age: float = math.inf) -> MonitoringStatus | None:
-        cause = reason.split(":", 2)[-1].split(" for ")[0] if level != OK else ""
+        cause = frozenset(re.sub(r"[-+]?\d[\d.]*", " ", reason).replace(",", " ").split())   # names, not counts
         if level == self.status.level and cause == self._cause:
             return None
         self._cause = cause
