@@ -11,15 +11,19 @@ from hexa_ros import qos
 from hexa_ros.stamps import to_stamp
 from rclpy.clock import Clock, ClockType
 
-from hexa.dynamics.monitoring import LOST, MonitoringStatus, MonitoringWatch
+from hexa.dynamics.monitor import CollisionMonitor
+from hexa.dynamics.monitoring import LOST, MonitoringStatus, MonitoringWatch, WatchConfig
 
 
 class MonitoringPublisher:
-    """Evaluates `watch` every timeout/5 of the node's clock and every 0.1 s of a steady clock (which runs when a
-    simulator's /clock stalls); publishes each new state and calls `on_change` (the node's diagnostics)."""
+    """A MonitoringWatch of `monitor` (the node sends its inputs through `watch`), evaluated every timeout/5 of the
+    node's clock and every 0.1 s of a steady clock (which runs when a simulator's /clock stalls); publishes each new
+    state and calls `on_change` (the node's diagnostics)."""
 
-    def __init__(self, node: Any, watch: MonitoringWatch, frame_id: str, on_change: Callable[[], Any]) -> None:
-        self.node, self.watch, self.frame_id, self.on_change = node, watch, frame_id, on_change
+    def __init__(self, node: Any, monitor: CollisionMonitor, config: WatchConfig, frame_id: str,
+                 on_change: Callable[[], Any]) -> None:
+        self.node, self.frame_id, self.on_change = node, frame_id, on_change
+        self.watch = watch = MonitoringWatch(monitor, config, self.now())
         self.pub = node.create_publisher(MonitoringState, "monitoring", qos.LATCHED)
         self._publish(watch.status)
         node.create_timer(watch.config.timeout / 5, self.evaluate)

@@ -7,8 +7,7 @@ Sub `joint_states`, `motor_currents` (hexa_ros.qos.STREAM), `plate_pose`; pub `r
 standard types beside them: `external_wrench` (geometry_msgs/WrenchStamped, the residual in `plate`) and
 `external_joint_torques` (JointState effort: the residual in servo space), one per sample while subscribed;
 `collision_state` (the last CollisionEvent, transient local; END with id 0 before the first collision); `monitoring`
-(hexa_msgs/MonitoringState, transient local: OK / DEGRADED / LOST with the reason, hexa.dynamics.monitoring,
-docs/monitoring.md); /tf (base → plate, arm_i, rod_i at tf_rate_hz) and /tf_static (the robot YAML's cameras).
+(OK / DEGRADED / LOST: docs/monitoring.md); /tf (base → plate, arm_i, rod_i) and /tf_static (the YAML's cameras).
 Service `~/reset`. Parameters: hexa_dynamics.observer_params (descriptors; start-up ones read-only), defaults in
 hexa_bringup/config/hexa_params.yaml (`/**/observer`), docs/observer_node.md.
 """
@@ -35,7 +34,7 @@ from visualization_msgs.msg import MarkerArray
 
 from hexa import frames
 from hexa.dynamics.monitor import ESTIMATOR_KEYS, CollisionMonitor, MonitorConfig
-from hexa.dynamics.monitoring import MonitoringWatch, WatchConfig
+from hexa.dynamics.monitoring import WatchConfig
 from hexa.dynamics.observer import ObserverConfig
 from hexa.estimation import EstimatorConfig
 from hexa.kinematics.hexa6rus import rotation_zyx
@@ -59,8 +58,6 @@ class ObserverNode(Node):
         ocfg = ObserverConfig(**{k: _value(v[k]) for k in OBSERVER_KEYS}, max_gap=float(v["max_gap"]))
         ecfg = EstimatorConfig(**{k: float(v[k]) for k in ESTIMATOR_KEYS})
         self.monitor = CollisionMonitor(desc, mcfg, ocfg, ecfg)   # raises ValueError naming a bad value
-        self.watch = MonitoringWatch(self.monitor, WatchConfig(*(float(v[f"monitoring_{k}"]) for k in (
-            "timeout", "wall_timeout", "pose_timeout", "settle_time"))), self.get_clock().now().nanoseconds * 1e-9)
         self.set = {k: v[k] for k in ("calibration_duration", "marker_rate_hz", "marker_scale",
                                       "pose_estimate_rate_hz", "tf_rate_hz")}
         self.frame_id = str(v["frame_id"])
@@ -86,7 +83,9 @@ class ObserverNode(Node):
         self.create_service(ResetObserver, "~/reset", self._on_reset)
         self.add_on_set_parameters_callback(self._on_set_parameters)
         self.create_timer(1.0, self._diagnostics)
-        self.monitoring = MonitoringPublisher(self, self.watch, self.frame_id, self._diagnostics)
+        self.monitoring = MonitoringPublisher(self, self.monitor, WatchConfig.from_values(v), self.frame_id,
+                                              self._diagnostics)   # the inputs pass through its watch
+        self.watch = self.monitoring.watch
         self.get_logger().info(f"observer: ζ from {mcfg.zeta_source}, r_low {list(ocfg.thresholds)}, servo "
                                f"thresholds {list(ocfg.servo_thresholds)} N·m, K {list(ocfg.gains)}")
 
@@ -115,7 +114,7 @@ class ObserverNode(Node):
             self.monitor.rejects["bad_joint_names"] += 1
             return
         self._publish(self.watch.push_states(t, ordered_values(names, pos), ordered_values(names, vel),
-                                               ordered_values(names, eff)))
+                                             ordered_values(names, eff)))
 
     def _on_currents(self, data: bytes) -> None:
         try:

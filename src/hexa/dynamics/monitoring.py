@@ -18,6 +18,7 @@ wall clock (`wall`, which also runs when a simulator's /clock stalls):
 """
 from __future__ import annotations
 
+import dataclasses
 import math
 import re
 from dataclasses import dataclass
@@ -47,6 +48,11 @@ class WatchConfig:
     wall_timeout: float = 1.0
     pose_timeout: float = 1.5
     settle_time: float = 0.5
+
+    @classmethod
+    def from_values(cls, values: dict[str, Any], prefix: str = "monitoring_") -> WatchConfig:
+        """The bounds from parameter values named prefix + field (the observer node's `monitoring_timeout`, …)."""
+        return cls(**{f.name: float(values[prefix + f.name]) for f in dataclasses.fields(cls)})
 
     def __post_init__(self) -> None:
         for name in ("timeout", "wall_timeout", "pose_timeout"):
