@@ -10,9 +10,9 @@ wall clock (`wall`, which also runs when a simulator's /clock stalls):
   for `settle_time`, with the detector out of collision;
 - OK while the newest residual is at most `timeout` old (and, where ζ needs the camera, the newest usable plate pose
   at most `pose_timeout` old);
-- LOST when either bound is broken at two evaluations in a row (a timer that runs before the samples already queued
-  for the node does not count as a loss); the reason names the input (silent, or rejected by reason since the last
-  fresh residual);
+- LOST when either bound is still broken at an evaluation at least CONFIRM_GAP of wall time after the one that found
+  it broken (a timer that runs before the samples already queued for the node does not count as a loss); the reason
+  names the input (silent, or rejected by reason since the last fresh residual);
 - DEGRADED "clock stalled" when no residual came for `wall_timeout` of wall time while the node's clock stood still
   (sim time not advancing: the simulated robot stands still too; with the clock, the residuals and OK come back).
 """
@@ -29,6 +29,8 @@ if TYPE_CHECKING:
 
 OK, DEGRADED, LOST = "OK", "DEGRADED", "LOST"
 LEVELS = (OK, DEGRADED, LOST)
+#: wall s between the evaluation that finds a bound broken and the one that confirms it (LOST)
+CONFIRM_GAP = 0.002
 
 
 class MonitoringError(ValueError):
@@ -106,7 +108,7 @@ class MonitoringWatch:
         self._phase = "starting"         # starting | watching | lost | settling
         self._grace = now                # LOST is not raised for a residual age counted from before this
         self._cause: frozenset[str] = frozenset()
-        self._suspect = False            # a bound was broken at the previous evaluation
+        self._suspect: float | None = None   # wall time of the first evaluation that found a bound broken
         self.status = MonitoringStatus(DEGRADED, "settling: no joint_states received yet", math.inf, now)
         self.lost_count = 0
 
@@ -176,7 +178,10 @@ class MonitoringWatch:
                 return self._watch(now, age)
             return self._set(DEGRADED, "settling: " + self._missing(now, age, pose_ok), now, age)
         lost = self._lost_cause(now, age, pose_ok)
-        confirmed, self._suspect = lost is not None and self._suspect, lost is not None
+        # confirmed by a later evaluation (not by the other timer in the same executor wake-up)
+        confirmed = lost is not None and self._suspect is not None and wall - self._suspect >= CONFIRM_GAP
+        if lost is None or self._suspect is None:
+            self._suspect = None if lost is None else wall
         if confirmed or (lost is not None and self._phase == "lost"):
             if self._phase != "lost":
                 self._phase = "lost"
