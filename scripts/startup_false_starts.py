@@ -2,7 +2,7 @@
 """Consecutive `hexa bringup sim` start-ups with no collision scenario, counting false collision STARTs.
 
     .venv/bin/python scripts/startup_false_starts.py [-n 20] [--trajectory circle] [--rtf 0.3] [--sim-seconds 4]
-                                                      [--wall-limit 150] [--out DIR] [--json]
+                                                      [--wall-limit 150] [--out DIR] [--json] [--stall-driver MS]
 
 Each run is the README's set-up for free motion: the shipped parameters with the simulator's `scenario: none` and its
 `trajectory` set to the trajectory node's (the robot starts at rest at the trajectory's start pose), at real-time
@@ -10,7 +10,9 @@ factor `--rtf`, until `--sim-seconds` of sim time (the simulator's `duration` en
 observer logs is false (nothing touches the robot); those with an onset before the trajectory has run for 1 s (its
 start blend) count as start-up STARTs, later ones are the loaded host's (README, Troubleshooting). Per run it prints
 the STARTs (axis, onset in sim s), the observer's `monitoring` transitions and the trajectory's states, read from the
-node logs; at the end the totals. Exit code 1 when a run had a start-up START.
+node logs; at the end the totals. Exit code 1 when a run had a start-up START. With `--stall-driver MS` the run's
+driver process is stopped for MS of wall time once the trajectory runs (a silent board): `monitoring` turns LOST
+naming the silent streams and the trajectory holds (it stays held: nothing calls resume).
 docs/monitoring.md has the figures.
 """
 from __future__ import annotations
@@ -21,7 +23,10 @@ import json
 import math
 import os
 import re
+import signal
+import subprocess
 import sys
+import threading
 import tempfile
 import time
 from pathlib import Path
@@ -32,6 +37,7 @@ REPO = Path(__file__).resolve().parents[1]
 START = re.compile(r"collision (\d+) START on (\w+): (-?[\d.]+) \(peak (-?[\d.]+), onset ([\d.]+) s\)")
 MONITORING = re.compile(r"monitoring (OK|DEGRADED|LOST)(?: at ([\d.]+) s)?")
 STATE = re.compile(r"trajectory state (\w+) at ([\d.]+) s")
+LOST_REASON = re.compile(r"monitoring LOST at ([\d.]+) s: (.*)")
 #: sim s after the trajectory starts running that still count as start-up (its start_blend is 1 s)
 START_UP = 1.0
 
@@ -62,6 +68,9 @@ def one_run(k: int, args: argparse.Namespace, env: dict[str, str], root: Path) -
     for spec in specs:
         if spec.name == "sim":
             spec.ends_graph, spec.respawn = True, False
+    stall: dict = {}
+    if args.stall_driver > 0:
+        threading.Thread(target=stall_driver, args=(run_dir, args.stall_driver / 1000.0, stall), daemon=True).start()
     with open(run_dir / "supervisor.log", "w") as out, contextlib.redirect_stdout(out), \
             contextlib.redirect_stderr(out):
         rc = Supervisor(specs, env, log_dir=str(run_dir / "logs"), status_every=1e9).run(duration=args.wall_limit)
@@ -79,7 +88,28 @@ def one_run(k: int, args: argparse.Namespace, env: dict[str, str], root: Path) -
             "false_starts": starts, "first_ok": next((t for lv, t in monitoring if lv == "OK"), None),
             "running_at": None if running == math.inf else running,
             "lost": [t for lv, t in monitoring if lv == "LOST"], "monitoring": monitoring,
-            "trajectory_states": states, "logs": str(logs)}
+            "trajectory_states": states, "driver_stall": stall, "lost_reasons": LOST_REASON.findall(obs),
+            "logs": str(logs)}
+
+
+def stall_driver(run_dir: Path, seconds: float, out: dict) -> None:
+    """2 s of wall time after this run's trajectory runs, stop this run's driver process (SIGSTOP) for `seconds`:
+    the board goes silent for the graph, as on a starved or hung driver."""
+    log = run_dir / "logs" / "trajectory.log"
+    end = time.monotonic() + 300
+    while time.monotonic() < end and not (log.exists() and "trajectory state running" in log.read_text()):
+        time.sleep(0.2)
+    time.sleep(2.0)
+    found = subprocess.run(["pgrep", "-f", f"driver_node.*{run_dir}/params.yaml"], capture_output=True, text=True)
+    pids = [int(p) for p in found.stdout.split()]
+    for pid in pids:
+        os.kill(pid, signal.SIGSTOP)
+    try:
+        time.sleep(seconds)
+    finally:
+        for pid in pids:
+            os.kill(pid, signal.SIGCONT)
+    out.update(pids=pids, seconds=seconds)
 
 
 def main() -> int:
@@ -92,6 +122,8 @@ def main() -> int:
     ap.add_argument("--out", default=None, help="directory for the runs' parameters and logs (default: a temp dir)")
     ap.add_argument("--domain", type=int, default=None, help="ROS_DOMAIN_ID (default: a free one)")
     ap.add_argument("--json", action="store_true", help="print each run as one JSON line")
+    ap.add_argument("--stall-driver", type=float, default=0.0, metavar="MS",
+                    help="stop this run's driver for MS of wall time, 2 s after the trajectory runs (0 = no)")
     args = ap.parse_args()
     from hexa_ros.env import held_ros_domain, ros_env
 
