@@ -89,7 +89,19 @@ def one_run(k: int, args: argparse.Namespace, env: dict[str, str], root: Path) -
             "running_at": None if running == math.inf else running,
             "lost": [t for lv, t in monitoring if lv == "LOST"], "monitoring": monitoring,
             "trajectory_states": states, "driver_stall": stall, "lost_reasons": LOST_REASON.findall(obs),
+            "lost_after_stop_s": _after(stall, obs, "monitoring LOST"),
+            "held_after_stop_s": _after(stall, traj, "state held"),
             "logs": str(logs)}
+
+
+def _after(stall: dict, log: str, text: str) -> float | None:
+    """Wall s from the driver's stop to the first log line with `text` after it (ROS log stamps: wall time)."""
+    if "stopped_at" not in stall:
+        return None
+    for m in re.finditer(r"\[(\d+\.\d+)\] \[[^\]]+\]: (.*)", log):
+        if float(m[1]) >= stall["stopped_at"] and text in m[2]:
+            return round(float(m[1]) - stall["stopped_at"], 3)
+    return None
 
 
 def stall_driver(run_dir: Path, seconds: float, out: dict) -> None:
@@ -102,6 +114,7 @@ def stall_driver(run_dir: Path, seconds: float, out: dict) -> None:
     time.sleep(2.0)
     found = subprocess.run(["pgrep", "-f", f"driver_node.*{run_dir}/params.yaml"], capture_output=True, text=True)
     pids = [int(p) for p in found.stdout.split()]
+    stopped = time.time()
     for pid in pids:
         os.kill(pid, signal.SIGSTOP)
     try:
@@ -109,7 +122,7 @@ def stall_driver(run_dir: Path, seconds: float, out: dict) -> None:
     finally:
         for pid in pids:
             os.kill(pid, signal.SIGCONT)
-    out.update(pids=pids, seconds=seconds)
+    out.update(pids=pids, seconds=seconds, stopped_at=stopped)
 
 
 def main() -> int:
