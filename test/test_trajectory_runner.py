@@ -145,3 +145,20 @@ def test_without_required_monitoring_its_states_are_ignored(desc):
     r = _runner(desc, start_time=0.0)
     assert r.tick(1.0).state == "running"
     assert r.on_monitoring("LOST", "no fresh residual", 1.0) is None and r.tick(1.1).state == "running"
+
+
+def test_with_an_approach_the_measured_pose_is_held_at_rest_until_monitoring_is_ok(desc):
+    """Robot mode: the first command is the measured pose's IK (the driver's joint_states need a command before the
+    observer can compute a residual); the approach moves only after the first OK."""
+    r = _runner(desc, start_delay=0.0, approach_speed=0.3, require_monitoring=True)
+    here = START + np.array([0.015, -0.02, 0.01, 0.04, 0.0, -0.03])
+    assert r.tick(5.0).zeta is None and r.state == "waiting_for_pose"
+    r.on_pose(here, 5.0, 5.0)
+    z_here = hexa6rus.inverse_kinematics(desc, here)
+    for now in (5.01, 5.5, 6.0):
+        tick = r.tick(now)
+        assert tick.state == "waiting_for_monitoring" and np.allclose(tick.zeta, z_here) and not tick.zeta_dot.any()
+    r.on_monitoring("OK", "", 6.0)
+    ticks = [r.tick(t) for t in np.arange(6.01, 6.5, 0.01)]
+    assert ticks[0].state == "approaching" and np.abs(ticks[0].zeta - z_here).max() < 1e-3   # from rest, no step
+    assert np.abs(ticks[-1].zeta - z_here).max() > 1e-3                                        # and it moves
