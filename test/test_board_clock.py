@@ -139,11 +139,26 @@ def test_clock_wrap_and_board_restart():
     assert after == pytest.approx(near_end * 1e-6 + 0.005, abs=1e-6)
     assert after == pytest.approx(BOARD_CLOCK_WRAP_S + 0.002)
     assert m.restarts == 0
-    m.update(5_000_000, 10.010)          # 5 s: a jump forward is just time
-    restarted = m.update(1000, 10.015)   # back by 5 s: the board was reset, the map starts over
+    m.update(5_000_000, 15.0)            # 5 s of silence: a jump forward as long as the host's is just time
+    restarted = m.update(1000, 15.005)   # back by 5 s: the board was reset, the map starts over
     assert restarted == pytest.approx(0.001)
     assert m.restarts == 1
-    assert m.board_time_at(10.015) == pytest.approx(0.001)
+    assert m.board_time_at(15.005) == pytest.approx(0.001)
+
+
+def test_one_board_time_far_ahead_is_rejected_and_a_lasting_jump_adopted():
+    from hexa.protocol.board_clock import ADOPT_AFTER
+
+    m = BoardClockMap()
+    for k in range(10):
+        m.update(1_000_000 + 5000 * k, 0.005 * k)
+    est = m.update(1_045_000 + 2_000_000_000, 0.050)     # 2e9 µs ahead after 5 ms of host time
+    assert m.rejected == 1 and m.restarts == 0 and est == pytest.approx(1.050, abs=0.011)
+    assert m.update(1_050_000, 0.050) == pytest.approx(1.050)     # the next sample goes on, on the same map
+    # the board clock jumped for good: rejected until ADOPT_AFTER consistent samples, then the map starts over
+    out = [m.update(500_000_000 + 5000 * k, 0.055 + 0.005 * k) for k in range(ADOPT_AFTER + 1)]
+    assert m.rejected == ADOPT_AFTER and m.restarts == 1
+    assert out[-1] == pytest.approx(500.0 + 0.005 * ADOPT_AFTER)
 
 
 def test_timeline_before_any_command_and_monotonic_stamps():

@@ -221,11 +221,17 @@ def test_a_camera_pose_on_another_branch_restarts_the_tracking_from_the_camera()
     assert tr.plate_pose is None
 
 
-def test_sample_time_going_back_restarts_the_stream():
+def test_one_sample_time_far_off_is_rejected_and_a_stream_that_went_back_restarts():
     tr = _tracker()
     _run(tr, 0.0, 0.5)
-    tr.step_state(0.1, ZETA[100], ZETA_DOT[100], TAU[100])
-    assert tr.restarts == 1 and tr.state.time == 0.1 and np.all(tr.state.zeta_ddot == 0)
+    newest = tr.state.time
+    assert tr.step_state(newest - 100.0, ZETA[100], ZETA_DOT[100], TAU[100]) == []    # one stamp in the past
+    assert tr.step_state(newest + 1e6, ZETA[100], ZETA_DOT[100], TAU[100]) == []      # one far in the future
+    assert tr.restarts == 0 and tr.state.time == newest
+    assert (tr.rejects["time_past"], tr.rejects["time_jump"]) == (1, 1)
+    for k in range(5):                                   # the stream started again at 0.1 s: adopted at the 5th
+        tr.step_state(0.1 + 0.001 * k, ZETA[100], ZETA_DOT[100], TAU[100])
+    assert tr.restarts == 1 and tr.state.time == pytest.approx(0.104) and np.all(tr.state.zeta_ddot == 0)
 
 
 @pytest.mark.parametrize("field, value", [("arm_friction", -0.5), ("arm_force_model", "guess"), ("accel_tau", 0.0),

@@ -2,6 +2,7 @@
 irregular timing, camera-rate poses, momentum vs direct form, detection events, calibration, reset, bad input."""
 from __future__ import annotations
 
+import dataclasses
 import math
 
 import numpy as np
@@ -349,3 +350,20 @@ def test_vectorized_lag_equals_the_sample_by_sample_recursion():
         rk = a[k] * rk + (1 - a[k]) * w[k + 1]
         ref[k + 1] = rk
     np.testing.assert_allclose(r, ref, atol=1e-10)
+
+
+def test_one_sample_time_far_off_is_rejected_and_a_clock_restart_is_adopted_with_detection_and_camera_anew():
+    obs = ResidualObserver(PRM, dataclasses.replace(CFG, adopt_after=3))
+    d = DATA
+    for k in range(100):
+        obs.update_arm(T[k], d["zeta"][k], d["tau"][k], d["zeta_dot"][k], pose=d["pose"][k])
+    assert obs.update_pose(T[99], d["pose"][99])
+    assert obs.update_arm(1e6, d["zeta"][100], d["tau"][100], d["zeta_dot"][100]) is None      # one far ahead
+    assert obs.update_arm(-5.0, d["zeta"][100], d["tau"][100], d["zeta_dot"][100]) is None     # one far back
+    assert obs.update_arm(T[100], d["zeta"][100], d["tau"][100], d["zeta_dot"][100]) is not None   # goes on
+    assert obs.rejected["time_jump"] == 1 and obs.rejected["time_not_increasing"] == 1
+    # the clock restarts near 0 (a restarted simulator): adopted at the 3rd sample, r and the detector start over
+    out = [obs.update_arm(T[k] - 0.09, d["zeta"][k], d["tau"][k], d["zeta_dot"][k]) for k in range(101, 104)]
+    assert out[:2] == [None, None] and out[2] is not None and obs.clock_jumps == 1
+    assert np.allclose(out[2].wrench, 0.0, atol=1e-6)
+    assert obs.update_pose(T[103] - 0.09, d["pose"][103])       # camera poses on the new time axis are taken

@@ -36,7 +36,7 @@ def test_observer_node_detects_the_push_and_takes_runtime_thresholds(procs, ros_
     assert r["events_phase2"] == 0 and r["residuals_phase2"] > 100
     # bad input is counted by reason; the node keeps publishing
     d = r["diag"]
-    assert int(d["reject_estimator_non_finite"]) == 5 and int(d["reject_node_bad_joint_names"]) == 3
+    assert int(d["reject_input_states_non_finite"]) == 5 and int(d["reject_node_bad_joint_names"]) == 3
     assert r["alive_after_bad_input"] > 10
     assert node.poll() is None
     node.send_signal(signal.SIGINT)                                            # clean Ctrl-C

@@ -18,12 +18,13 @@ import math
 import sys
 from typing import Any
 
+import numpy as np
 from geometry_msgs.msg import PoseStamped, WrenchStamped
 from hexa_msgs.msg import CollisionEvent, MotorCurrents, Residual
 from hexa_msgs.srv import ResetObserver
 from hexa_ros import cdr, diagnostics, markers, node, qos
 from hexa_ros.cdr import CdrError, joint_state_from_cdr, motor_currents_from_cdr
-from hexa_ros.conversions import JOINT_NAMES, fill_pose_msg, hexa_pose_from_msg, ordered_values, wrench_stamped
+from hexa_ros.conversions import JOINT_NAMES, fill_pose_msg, ordered_values, pose_fields, wrench_stamped
 from hexa_ros.stamps import to_sec, to_stamp
 from hexa_ros.node import DESCRIPTION, declare_parameters
 from hexa_ros.tf import TfPublisher
@@ -125,12 +126,7 @@ class ObserverNode(Node):
         self._publish(self.watch.push_currents(t, board_us, current))
 
     def _on_pose(self, msg: PoseStamped) -> None:
-        try:
-            pose = hexa_pose_from_msg(msg.pose)
-        except ValueError:
-            self.monitor.rejects["bad_pose"] += 1
-            return
-        self._publish(self.watch.push_pose(to_sec(msg.header.stamp), pose))
+        self._publish(self.watch.push_pose(to_sec(msg.header.stamp), np.concatenate(pose_fields(msg.pose))))
 
     def _publish(self, samples: list) -> None:
         det = self.monitor.observer.detector

@@ -28,9 +28,11 @@ from visualization_msgs.msg import Marker, MarkerArray
 import hexa_ros.node
 from hexa import frames
 from hexa.dynamics.contact_force import ContactForce, ContactForceConfig, ContactForceTracker, LocatedContact
+from hexa.pose_check import PoseCheck
+from hexa.rotations import pose6_from_transform
 from hexa_ros import diagnostics, markers, qos
 from hexa_ros.node import DESCRIPTION, DESCRIPTION_PARAM, Param, declare_parameters
-from hexa_ros.conversions import hexa_pose_from_msg, ordered_joints, wrench_stamped
+from hexa_ros.conversions import ordered_joints, pose_fields, wrench_stamped
 from hexa_ros.stamps import to_sec, to_stamp
 from hexa_ros.tf import TfPublisher
 
@@ -62,7 +64,8 @@ class RneaNode(Node):
         desc = load_hexa(str(cfg.pop(DESCRIPTION)) or None)
         self.marker_scale, self.frame_id = float(cfg.pop("marker_scale")), str(cfg.pop("frame_id"))
         self.tracker = ContactForceTracker(desc, ContactForceConfig(**cfg))
-        self.rejects = {"bad_joint_names": 0, "no_velocity": 0, "bad_orientation": 0}
+        self.rejects = {"bad_joint_names": 0, "no_velocity": 0}
+        self.pose_check = PoseCheck.for_hexa(desc)   # non-unit quaternions, off the workspace, jumps: counted
         self.published = 0
         self.pub_wrench = self.create_publisher(ContactWrench, "contact_wrench", qos.STREAM)
         self.pub_markers = self.create_publisher(MarkerArray, "contact_markers", qos.RELIABLE)
@@ -86,10 +89,9 @@ class RneaNode(Node):
         self._publish(self.tracker.step_state(to_sec(msg.header.stamp), zeta, zeta_dot, tau))
 
     def _on_pose(self, msg: PoseStamped) -> None:
-        try:
-            self.tracker.on_pose(to_sec(msg.header.stamp), hexa_pose_from_msg(msg.pose))
-        except ValueError:                          # a zero or non-finite orientation
-            self.rejects["bad_orientation"] += 1
+        T = self.pose_check.check(to_sec(msg.header.stamp), *pose_fields(msg.pose))
+        if T is not None:
+            self.tracker.on_pose(to_sec(msg.header.stamp), pose6_from_transform(T))
 
     def _on_collision(self, msg: CollisionEvent) -> None:
         was = self.tracker.active
@@ -135,6 +137,7 @@ class RneaNode(Node):
         values: dict[str, Any] = {"published": self.published, "backfilled": t.backfilled, "active_collision": t.active,
                                   "stream_restarts": t.restarts, "last_identification_error": t.last_error}
         values.update({f"reject_{k}": v for k, v in {**self.rejects, **t.rejects}.items()})
+        values.update(self.pose_check.counters())
         level, message = (diagnostics.OK, "ok") if t.state is not None else (diagnostics.WARN, "no zeta_estimate yet")
         st = diagnostics.status(self.get_fully_qualified_name(), level, message, values)
         self.pub_diag.publish(diagnostics.array(self, [st]))

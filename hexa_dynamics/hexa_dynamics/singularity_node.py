@@ -20,9 +20,13 @@ from hexa_msgs.msg import SingularityIndices
 from rclpy.node import Node
 
 import hexa_ros.node
+from hexa.pose_check import PoseCheck
+from hexa.rotations import pose6_from_transform
 from hexa.singularity import SingularityMonitor
+from hexa.srm.tracking import pose_from_transform
 from hexa_ros import diagnostics, qos
-from hexa_ros.conversions import hexa_pose_from_msg, points_from_pose_array, upsrpu_pose_from_msg
+from hexa_ros.conversions import points_from_pose_array, pose_fields
+from hexa_ros.stamps import to_sec
 from hexa_ros.node import DESCRIPTION, DESCRIPTION_PARAM, Param, declare_parameters
 
 
@@ -50,6 +54,9 @@ class SingularityNode(Node):
         self.pub_diag = self.create_publisher(DiagnosticArray, "/diagnostics", qos.RELIABLE)
         self.rejected = 0
         self.published = 0
+        # the Hexa's plate poses pass its speed bounds and workspace; the 3UPS+RPU's the generic bounds (its
+        # workspace is checked by the indices themselves)
+        self.pose_check = PoseCheck.for_hexa(m.desc) if robot == "hexa" else PoseCheck()
         if mode == "markers":
             if robot != "upsrpu":
                 raise ValueError("input=markers is only for the 3UPS+RPU")
@@ -76,12 +83,11 @@ class SingularityNode(Node):
             self._publish(X, msg.header)
 
     def _on_pose(self, msg: PoseStamped) -> None:
-        try:
-            X = (upsrpu_pose_from_msg(msg.pose) if self.monitor.robot == "upsrpu"
-                 else hexa_pose_from_msg(msg.pose))
-        except ValueError as exc:
-            self._reject(f"pose rejected: {exc}")
+        T = self.pose_check.check(to_sec(msg.header.stamp), *pose_fields(msg.pose))
+        if T is None:
+            self._reject(f"pose rejected: {', '.join(sorted(self.pose_check.rejected))} so far")
             return
+        X = pose_from_transform(T[:3, :3], T[:3, 3]) if self.monitor.robot == "upsrpu" else pose6_from_transform(T)
         self._publish(X, msg.header)
 
     def _reject(self, why: str) -> None:
@@ -104,7 +110,8 @@ class SingularityNode(Node):
     def _diagnostics(self) -> None:
         st = diagnostics.status(self.get_fully_qualified_name(), diagnostics.OK,
                                 "ok" if self.rejected == 0 else "some inputs rejected",
-                                {"published": self.published, "rejected": self.rejected})
+                                {"published": self.published, "rejected": self.rejected,
+                                 **self.pose_check.counters()})
         self.pub_diag.publish(diagnostics.array(self, [st]))
 
 

@@ -22,13 +22,14 @@ import numpy as np
 from diagnostic_msgs.msg import DiagnosticArray
 from geometry_msgs.msg import PoseStamped
 from hexa_ros import diagnostics, node, qos, stamps
-from hexa_ros.conversions import transform_from_pose_msg
+from hexa_ros.conversions import pose_fields
 from hexa_ros.node import DESCRIPTION, DESCRIPTION_PARAM
 from rcl_interfaces.msg import ParameterDescriptor
 from rclpy.node import Node
 from sensor_msgs.msg import CameraInfo, Image
 from std_srvs.srv import Trigger
 
+from hexa.pose_check import PoseCheck
 from hexa.robots.hexa_description import load_hexa
 from hexa.vision.isolation import LINK_UNKNOWN
 from hexa.vision.isolation_scheduler import BACKGROUND, ContactLocator, IsolationScheduler, Located
@@ -57,7 +58,9 @@ class IsolationNode(Node):
             eval_period=p("eval_period", 0.1, "s of frame time between evaluated pairs during a collision"))
         coarse = p("coarse_margin", 0.008, "m around the drawn robot when the pose is carried forward")
         models = description_cameras(desc_path)
-        self.locator = ContactLocator(load_hexa(desc_path or None), {c: models[c] for c in CAMERAS}, coarse)
+        desc = load_hexa(desc_path or None)
+        self.locator = ContactLocator(desc, {c: models[c] for c in CAMERAS}, coarse)
+        self.pose_checks = {k: PoseCheck.for_hexa(desc) for k in ("plate_pose", "plate_pose_estimate")}
         for c in CAMERAS:
             for topic, color in (("color/image_raw", True), ("aligned_depth_to_color/image_raw", False)):
                 self.create_subscription(Image, f"{c}/{topic}", lambda m, c=c, k=color: self._on_image(c, m, k),
@@ -88,11 +91,15 @@ class IsolationNode(Node):
         self._run()
 
     def _on_pose(self, msg: PoseStamped) -> None:
-        self.sched.add_pose(stamps.to_sec(msg.header.stamp), transform_from_pose_msg(msg.pose))
-        self._run()
+        T = self.pose_checks["plate_pose"].check(stamps.to_sec(msg.header.stamp), *pose_fields(msg.pose))
+        if T is not None:     # non-unit quaternions, poses off the workspace and jumps are counted, not used
+            self.sched.add_pose(stamps.to_sec(msg.header.stamp), T)
+            self._run()
 
     def _on_estimate(self, msg: PoseStamped) -> None:
-        self.sched.add_pose_estimate(stamps.to_sec(msg.header.stamp), transform_from_pose_msg(msg.pose))
+        T = self.pose_checks["plate_pose_estimate"].check(stamps.to_sec(msg.header.stamp), *pose_fields(msg.pose))
+        if T is not None:
+            self.sched.add_pose_estimate(stamps.to_sec(msg.header.stamp), T)
 
     def _on_capture(self, request: Trigger.Request, response: Trigger.Response) -> Trigger.Response:
         self.sched.capture_background()
@@ -143,6 +150,8 @@ class IsolationNode(Node):
     def _diagnostics(self) -> None:
         counters = self.locator.all_counters()
         counters.update(self.sched.counters)
+        for topic, check in self.pose_checks.items():
+            counters.update({f"reject: {topic} {k}": v for k, v in check.rejected.items()})
         state = "waiting for collisions" if self.sched.active is None else "isolating"
         self.pub_diag.publish(diagnostics.array(self, [diagnostics.counter_status(
             "hexa_vision: isolation", counters, state, "+".join(CAMERAS))]))

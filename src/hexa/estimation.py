@@ -30,16 +30,18 @@ Bad input never touches the state and is counted by reason in `rejected`.
 from __future__ import annotations
 
 import math
-from collections import deque
+from collections import Counter, deque
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from hexa.stream_gate import ACCEPTED, TimeGate
+
 if TYPE_CHECKING:
     from numpy.typing import NDArray
 
-REJECT_REASONS = ("bad_shape", "non_finite", "time_not_increasing", "gap", "camera_unreachable",
+REJECT_REASONS = ("bad_shape", "non_finite", "time_not_increasing", "time_jump", "gap", "camera_unreachable",
                   "camera_gate", "camera_too_old", "camera_before_start")
 
 
@@ -99,7 +101,10 @@ class EstimatorConfig:
     (re)start the estimate is flagged not `settled` this long (s) while ζ̇ converges from 0; gate_reset_frames: an arm
     whose camera innovation exceeds camera_gate in this many consecutive frames is restarted from the camera;
     command_smoothing: time constant (s) of a first-order low-pass on the commanded angles before the servo model —
-    a staircase of commands that reaches the servo with a varying latency is better modelled as a ramp (0 = off)."""
+    a staircase of commands that reaches the servo with a varying latency is better modelled as a ramp (0 = off);
+    max_jump: a sample more than this after the last accepted one (s) is rejected (`time_jump`), as one before it is
+    (`time_not_increasing`), leaving the state alone; adopt_after: this many such samples in a row that follow one
+    another are a clock that really jumped: the filter restarts at them (`clock_jumps`)."""
 
     accel_sigma: float = 2.0
     stall_accel_sigma: float = 30.0
@@ -115,6 +120,8 @@ class EstimatorConfig:
     settle_time: float = 0.03
     command_smoothing: float = 0.0
     gate_reset_frames: int = 5
+    max_jump: float = 1.0
+    adopt_after: int = 5
 
     def __post_init__(self) -> None:
         checks = {"accel_sigma": self.accel_sigma > 0, "stall_accel_sigma": self.stall_accel_sigma > 0,
@@ -124,7 +131,8 @@ class EstimatorConfig:
                   "bias_sigma": self.bias_sigma > 0, "bias_walk": self.bias_walk >= 0,
                   "camera_gate": self.camera_gate > 0, "max_gap": self.max_gap > 0, "history": self.history > 0,
                   "settle_time": self.settle_time >= 0,
-                  "command_smoothing": self.command_smoothing >= 0, "gate_reset_frames": self.gate_reset_frames >= 1}
+                  "command_smoothing": self.command_smoothing >= 0, "gate_reset_frames": self.gate_reset_frames >= 1,
+                  "max_jump": self.max_jump > self.max_gap, "adopt_after": self.adopt_after >= 1}
         for name, ok in checks.items():
             if not (ok and math.isfinite(getattr(self, name))):
                 raise EstimationError(f"estimator {name} out of range, got {getattr(self, name)!r}")
@@ -171,6 +179,8 @@ class ZetaEstimator:
         self.camera_accepted = 0
         self.saturated = 0
         self.camera_resets = 0
+        self.clock_jumps = 0
+        self._time_gate = TimeGate(self.config.max_jump, self.config.adopt_after)
         self._gated = np.zeros(6, dtype=int)
         self.torque_max = float(getattr(desc, "torque_max", math.inf))
         self._commands: deque[tuple[float, NDArray]] = deque()
@@ -228,9 +238,13 @@ class ZetaEstimator:
             return None
         sv = self.servo
         cfg = self.config
-        if self._t is not None and t <= self._t:
-            self._reject("time_not_increasing")
+        verdict = self._time_gate.check(t)   # the filter's own time, not `_t`: it lives on across a gap restart
+        if verdict not in ACCEPTED:
+            self._reject("time_jump" if verdict == "time_future" else "time_not_increasing")
             return None
+        if verdict == "adopted":             # the clock jumped for good: restart at it
+            self.clock_jumps += 1
+            self.reset()
         if self._t is not None and t - self._t > cfg.max_gap:
             self._reject("gap")
             self.reset()
@@ -404,6 +418,57 @@ class ZetaEstimator:
         return True
 
 
+class InputCheck:
+    """Values of the driver's sample streams that no working robot sends, rejected before they are paired: so a bad
+    message costs only itself (paired first, it would take its good partner down with it). Counted by reason in
+    `rejected`.
+
+    currents (A): six finite values within ±current_factor·current_max (beyond the sensors' range);
+    states: six finite commanded (or measured) angles within the joint range ± angle_margin (rad; the driver rejects
+    commands outside it), finite velocities and efforts when present, efforts within ±current_factor·K_t·current_max.
+    """
+
+    def __init__(self, desc: Any, current_factor: float = 4.0, angle_margin: float = 0.1) -> None:
+        self.current_max = current_factor * float(desc.current_max)
+        self.torque_max = self.current_max * float(desc.K_t)
+        self.zeta_range = (float(desc.zeta_min) - angle_margin, float(desc.zeta_max) + angle_margin)
+        self.rejected: Counter[str] = Counter()
+
+    def currents(self, currents: Any) -> NDArray | None:
+        """The six currents as an array, or None (counted: currents_bad_shape, currents_non_finite, currents_range)."""
+        cur = _six(currents)
+        if cur is None:
+            self.rejected["currents_bad_shape"] += 1
+        elif not np.all(np.isfinite(cur)):
+            self.rejected["currents_non_finite"] += 1
+        elif np.any(np.abs(cur) > self.current_max):
+            self.rejected["currents_range"] += 1
+        else:
+            return cur
+        return None
+
+    def states(self, position: Any, velocity: Any, effort: Any) -> bool:
+        """Whether a joint_states sample is usable (counted when not: states_bad_shape, states_non_finite,
+        states_range)."""
+        arrays = [_six(position)] + [_six(v) for v in (velocity, effort) if v is not None]
+        if any(a is None for a in arrays):
+            self.rejected["states_bad_shape"] += 1
+            return False
+        if not all(np.all(np.isfinite(a)) for a in arrays):
+            self.rejected["states_non_finite"] += 1
+            return False
+        lo, hi = self.zeta_range
+        if np.any(arrays[0] < lo) or np.any(arrays[0] > hi) or (
+                effort is not None and np.any(np.abs(arrays[-1]) > self.torque_max)):
+            self.rejected["states_range"] += 1
+            return False
+        return True
+
+
+#: the other topic of a sample's pair
+OTHER = {"currents": "states", "states": "currents"}
+
+
 class SampleSequencer:
     """Deterministic ordering of the three input streams of the live nodes: the result depends only on message
     stamps and contents, never on the order in which DDS delivers the topics, so a replayed bag gives the same
@@ -421,12 +486,24 @@ class SampleSequencer:
     0.1-0.47 s on this loaded machine); a pose that arrives later than that is released on arrival and counted in
     `late_poses` (only those can make a run non-deterministic). In `stamp` mode (no motor_currents: a bag or peer
     without them) each joint_states is a sample at its stamp with τ = effort. In `auto` mode the board mode is
-    chosen when a motor_currents arrives before `auto_wait` joint_states are queued.
+    chosen when a motor_currents arrives before `auto_wait` joint_states are queued; a motor_currents that arrives
+    after auto mode settled on stamps switches it to board mode for good (`to_board`): a node that starts while the
+    driver runs can match its joint_states subscription before its motor_currents one.
 
-    Output items: ("sample", t, commanded ζ, τ, velocity or None) and ("pose", t_image, pose)."""
+    Output items: ("sample", t, commanded ζ, τ, velocity or None) and ("pose", t_image, pose).
+
+    One message with a stamp far from its stream's costs only itself: the stamps of each stream pass a
+    hexa.stream_gate.TimeGate (each at or after the last accepted one, at most `max_step` s later; a stream that
+    really jumped — a restarted simulator, a bag played again — is adopted after `adopt_after` consistent messages, or
+    at once when the other topic's newest stamp is already within `max_step` of it (both resume after a silence),
+    and the queued messages the jump left behind, or ahead of it in the adopted stream, are dropped as unpaired), and
+    a pose stamped more than `max_step` after the newest sample time waits for nothing: it is rejected. A message
+    stamped less than `max_step` ahead is accepted and holds the good ones back until `adopt_after` of them re-adopt
+    the stream: it costs that many samples, not one. Rejects are counted by reason in `rejected`
+    (currents_time_past, states_time_future, pose_time_future, ...)."""
 
     def __init__(self, mode: str = "auto", pose_delay: float = 0.5, auto_wait: int = 20,
-                 max_queue: int = 2000) -> None:
+                 max_queue: int = 2000, max_step: float = 0.25, adopt_after: int = 5) -> None:
         if mode not in ("auto", "board", "stamp"):
             raise EstimationError(f"sequencer mode must be 'auto', 'board' or 'stamp', got {mode!r}")
         if not (math.isfinite(pose_delay) and pose_delay >= 0):
@@ -442,13 +519,55 @@ class SampleSequencer:
         self.last_t = -math.inf
         self.late_poses = 0
         self.unpaired = 0
+        self.to_board = 0
+        self.max_step = float(max_step)
+        self._gates = {k: TimeGate(self.max_step, adopt_after, repeats=True) for k in ("currents", "states")}
+        self._seen = {"currents": -math.inf, "states": -math.inf}   # each topic's newest stamp, accepted or not
+        self.rejected: Counter[str] = Counter()
+
+    @property
+    def takes_currents(self) -> bool:
+        """False in stamp mode: current samples are ignored."""
+        return self.mode != "stamp"
+
+    @property
+    def adopted(self) -> int:
+        """How many times a stream's stamps jumped for good and were adopted."""
+        return sum(g.adopted for g in self._gates.values())
+
+    def admit(self, stream: str, stamp: float) -> bool:
+        """Whether a message of `stream` ("currents" | "states") stamped `stamp` follows its stream (counted by
+        reason when not); on a re-adopted jump, the queued messages more than max_step away from the new stamp are
+        dropped as unpaired. push_currents and push_states call it unless told the caller did (`admitted`): the
+        monitor checks a current sample's stamp before its board time, so that a bad stamp never moves the board
+        clock."""
+        gate = self._gates[stream]
+        verdict = gate.check(stamp)
+        if verdict == "time_future" and abs(stamp - self._seen[OTHER[stream]]) <= self.max_step:
+            gate.adopt(stamp)     # the other topic is there already: both resume after a silence, not one bad stamp
+            verdict = "adopted"
+        self._seen[stream] = stamp
+        if verdict == "adopted":   # drop what the jump left behind, and this stream's messages ahead of it (the one
+            own = self._cur if stream == "currents" else self._js     # that moved the reference, if that was bad)
+            for q in (self._cur, self._js):
+                keep = [m for m in q if stamp - self.max_step <= m[0] and (q is not own or m[0] <= stamp)]
+                self.unpaired += len(q) - len(keep)
+                q.clear()
+                q.extend(keep)
+        elif verdict != "ok":
+            self.rejected[f"{stream}_{verdict}"] += 1
+            return False
+        return True
 
     # ------------------------------------------------------------------ inputs
-    def push_currents(self, stamp: float, t: float, tau: NDArray) -> list[tuple]:
-        if self.mode == "stamp":
+    def push_currents(self, stamp: float, t: float, tau: NDArray, admitted: bool = False) -> list[tuple]:
+        if not self.takes_currents:
             return []
-        if self._stamp_mode:  # auto mode already settled on joint_states stamps
+        if not (admitted or self.admit("currents", stamp)):
             return []
+        if self._stamp_mode:     # auto mode had settled on stamps before the first motor_currents: board mode now
+            self._stamp_mode = False
+            self.to_board += 1
         self.board = True
         self._cur.append((float(stamp), float(t), tau))
         if len(self._cur) > self.max_queue:  # no joint_states at all: nothing to pair with
@@ -457,6 +576,8 @@ class SampleSequencer:
         return self._drain()
 
     def push_states(self, stamp: float, commanded: NDArray, velocity: Any, effort: Any) -> list[tuple]:
+        if not self.admit("states", stamp):
+            return []
         self._js.append((float(stamp), commanded, velocity, effort))
         if len(self._js) > self.max_queue:
             self._js.popleft()
@@ -467,6 +588,12 @@ class SampleSequencer:
         import heapq
 
         stamp = float(stamp)
+        if not math.isfinite(stamp):
+            self.rejected["pose_non_finite"] += 1
+            return []
+        if stamp > self.last_t + self.max_step and math.isfinite(self.last_t):   # a pose from the future
+            self.rejected["pose_time_future"] += 1
+            return []
         if stamp + self.pose_delay < self.last_t:  # later than its slot: released now (counted)
             self.late_poses += 1
             return [("pose", stamp, pose)]
@@ -485,7 +612,7 @@ class SampleSequencer:
     def _sample(self, t: float, cmd: NDArray, tau: NDArray, vel: Any, out: list) -> None:
         self._release_poses(t, out)
         out.append(("sample", t, cmd, tau, vel))
-        self.last_t = max(self.last_t, t)
+        self.last_t = t   # sample times only go back when a clock jump was adopted upstream: follow it
 
     def _drain(self) -> list[tuple]:
         out: list[tuple] = []

@@ -31,14 +31,15 @@ import numpy as np
 from hexa.dynamics.identification import ARM_FORCE_MODELS, LINKS, identify_contact_force
 from hexa.dynamics.lagrange import DynamicsError, HexaDynamicParameters, motion_from_joint_rates
 from hexa.kinematics.hexa6rus import forward_kinematics
+from hexa.stream_gate import TimeGate
 
 if TYPE_CHECKING:
     from numpy.typing import NDArray
 
     from hexa.robots.hexa_description import HexaDescription
 
-REJECT_REASONS = ("non_finite", "repeated_time", "bad_pose", "unknown_link", "bad_chain", "no_state",
-                  "not_in_collision", "pose_tracking", "identification")
+REJECT_REASONS = ("non_finite", "repeated_time", "time_past", "time_jump", "bad_pose", "unknown_link", "bad_chain",
+                  "no_state", "not_in_collision", "pose_tracking", "identification")
 #: m: a camera pose this far (position) from FK of ζ at its image time means the tracking is on another branch
 BRANCH_TOLERANCE = 0.02
 #: s: states are kept at least this long for the camera's branch check (the vision's latency is below 0.5 s)
@@ -151,7 +152,10 @@ class ContactForceTracker:
         self.rejects = {k: 0 for k in REJECT_REASONS}
         self.forces = 0          # ContactForce results returned
         self.backfilled = 0      # of which identified retroactively
-        self.restarts = 0        # sample time went backwards: the stream started again
+        self.restarts = 0        # sample time went back (or jumped ahead) for good: the stream started again
+        # one sample time before the newest or more than 1 s after it is rejected; 5 in a row that follow one another
+        # are a stream that started again (hexa.stream_gate)
+        self._time_gate = TimeGate(1.0, adopt_after=5)
         self.last_error = ""     # message of the last failed identification
         self._states: deque[ArmState] = deque()      # the last max(history, POSE_LOOKBACK) s
         self._tau: deque[tuple[float, NDArray]] = deque()   # the samples of the last torque_window s
@@ -197,10 +201,14 @@ class ContactForceTracker:
             return []
         zeta, zeta_dot, tau = x[:6], x[6:12], x[12:]
         newest = self.state
-        if newest is not None and t == newest.time:
-            self.rejects["repeated_time"] += 1
+        verdict = self._time_gate.check(t)
+        if verdict == "time_past":
+            self.rejects["repeated_time" if newest is not None and t == newest.time else "time_past"] += 1
             return []
-        if newest is not None and t < newest.time:
+        if verdict == "time_future":
+            self.rejects["time_jump"] += 1
+            return []
+        if verdict == "adopted":
             self._restart()
         if self._zd_prev is not None:
             h = t - self._zd_prev[0]

@@ -17,7 +17,10 @@ import numpy as np
 from numpy.typing import NDArray
 
 from hexa.dynamics.observer import ObserverConfig, ObserverError, ResidualObserver, ResidualSample
-from hexa.estimation import EstimatorConfig, SampleSequencer, ServoModel, ZetaEstimator
+from hexa.estimation import EstimatorConfig, InputCheck, SampleSequencer, ServoModel, ZetaEstimator
+from hexa.pose_check import PoseCheck
+from hexa.rotations import pose6_from_transform
+from hexa.stream_gate import ACCEPTED, StreamGate
 
 ZETA_SOURCES = ("estimator", "measured")
 #: estimator settings the monitor takes at run time
@@ -31,40 +34,59 @@ class SampleClock:
     t = offset + unwrapped board time, the offset following the mean of (stamp − board time) with time constant `tau`
     (receive latency, host/board clock drift), re-anchored when they disagree by more than `jump` s (board reset).
     Host receive stamps jitter by milliseconds (USB, scheduling; in sim mode they are quantized by /clock), which at
-    200-1000 Hz would corrupt the observer's Δt; the board's clock does not. A repeated or older board time returns
-    None and counts in `backwards`."""
+    200-1000 Hz would corrupt the observer's Δt; the board's clock does not.
 
-    def __init__(self, tau: float = 10.0, jump: float = 0.5, fixed_offset: float | None = None) -> None:
+    Board times pass a hexa.stream_gate.StreamGate: a repeated or older board time, or one more than `jump` s after the
+    last accepted one beyond the host time between their stamps (a board that was silent for a while comes back that
+    much later), returns None and is counted by reason in `rejected` (older or repeated ones also in `backwards`),
+    leaving the clock as it was — one board time 2·10⁹ µs ahead costs that one sample. A board clock that really
+    jumped (a reset) is adopted after `adopt_after` consistent samples."""
+
+    def __init__(self, tau: float = 10.0, jump: float = 0.5, fixed_offset: float | None = None,
+                 adopt_after: int = 5) -> None:
         self.tau, self.jump, self.fixed_offset = tau, jump, fixed_offset
+        self.gate: StreamGate[tuple[float, float]] = StreamGate(self._follows, adopt_after)
         self._raw: int | None = None
         self._board = 0.0
         self._offset = 0.0
         self.backwards = 0
 
+    @property
+    def rejected(self) -> dict[str, int]:
+        """Rejected board times by reason (time_past, time_future)."""
+        return dict(self.gate.rejected)
+
+    def _follows(self, prev: tuple[float, float], new: tuple[float, float]) -> str | None:
+        """(board time, stamp) `new` may follow `prev`: later on the board, by at most `jump` + the stamps' step."""
+        step = new[0] - prev[0]
+        if step <= 0.0:
+            return "time_past"
+        return "time_future" if step > self.jump + max(new[1] - prev[1], 0.0) else None
+
     def time(self, stamp: float, board_us: int) -> float | None:
         """The sample time (s) of a sample received at host time `stamp` with board time `board_us` (µs)."""
         raw = int(board_us) & 0xFFFFFFFF
-        if self._raw is not None:
-            d = (raw - self._raw) & 0xFFFFFFFF
-            if d == 0 or d >= 1 << 31:
-                self.backwards += 1
-                return None
-        if self.fixed_offset is not None:
-            self._board = raw * 1e-6 if self._raw is None else self._board + d * 1e-6
-            self._raw = raw
-            return self._board + self.fixed_offset
         if self._raw is None:
-            self._raw, self._board, self._offset = raw, 0.0, stamp
+            board = raw * 1e-6 if self.fixed_offset is not None else 0.0
+        else:   # the signed step from the last accepted board time, across the 2³² µs wrap
+            board = self._board + ((((raw - self._raw) + (1 << 31)) & 0xFFFFFFFF) - (1 << 31)) * 1e-6
+        verdict = self.gate.check((board, float(stamp)))
+        if verdict not in ACCEPTED:
+            self.backwards += verdict == "time_past"
+            return None
+        first, dt = self._raw is None, board - self._board
+        self._raw, self._board = raw, board
+        if self.fixed_offset is not None:
+            return board + self.fixed_offset
+        if first or verdict == "adopted":
+            self._offset = stamp - board
             return stamp
-        dt = d * 1e-6
-        self._raw = raw
-        self._board += dt
-        err = stamp - (self._offset + self._board)
+        err = stamp - (self._offset + board)
         if abs(err) > self.jump:
-            self._offset = stamp - self._board
+            self._offset = stamp - board
         else:
             self._offset += err * min(1.0, dt / self.tau)
-        return self._offset + self._board
+        return self._offset + board
 
 
 @dataclass(frozen=True)
@@ -143,7 +165,9 @@ class CollisionMonitor:
         self.clock = SampleClock(fixed_offset=0.0 if self.config.sim_clock else None)
         self.sequencer = SampleSequencer(self.config.time_source, pose_delay=self.config.pose_delay)
         self.rejects = {"bad_currents": 0, "board_time": 0, "bad_joint_names": 0, "bad_pose": 0, "estimator": 0,
-                        "observer": 0}
+                        "observer": 0, "bad_states": 0}
+        self.inputs = InputCheck(desc)
+        self.pose_check = PoseCheck.for_hexa(desc)
         self.settling = 0
         self.log: list[str] = []   # what the owner should log (calibration results)
         self._tracking = False
@@ -183,15 +207,18 @@ class CollisionMonitor:
     # ------------------------------------------------------------------ inputs
     def push_currents(self, stamp: float, board_us: int, currents: Any) -> list[MonitorSample]:
         """A current sample (A) received at host time `stamp` with board time `board_us` (µs)."""
-        cur = np.asarray(currents, dtype=float)
-        if cur.shape != (6,):
+        cur = self.inputs.currents(currents)
+        if cur is None:
             self.rejects["bad_currents"] += 1
+            return []
+        seq = self.sequencer
+        if not seq.takes_currents or not seq.admit("currents", stamp):   # a bad stamp never moves the board clock
             return []
         t = self.clock.time(stamp, board_us)
         if t is None:
             self.rejects["board_time"] += 1
             return []
-        return self._run(self.sequencer.push_currents(stamp, t, self.k_t * cur))
+        return self._run(seq.push_currents(stamp, t, self.k_t * cur, admitted=True))
 
     def push_states(self, stamp: float, position: NDArray | None, velocity: NDArray | None,
                     effort: NDArray | None) -> list[MonitorSample]:
@@ -199,17 +226,23 @@ class CollisionMonitor:
         if position is None:
             self.rejects["bad_joint_names"] += 1
             return []
+        if not self.inputs.states(position, velocity, effort):
+            self.rejects["bad_states"] += 1
+            return []
         if effort is None and not self.sequencer.board:
             self.rejects["bad_joint_names"] += 1
         return self._run(self.sequencer.push_states(stamp, position, velocity, effort))
 
     def push_pose(self, stamp: float, pose: NDArray) -> list[MonitorSample]:
-        """A camera plate pose [x y z α β γ] (Z-Y-X, m, rad) at image time `stamp`."""
-        pose = np.asarray(pose, dtype=float)
-        if pose.shape != (6,) or not np.all(np.isfinite(pose)):
+        """A camera plate pose at image time `stamp`: [x y z α β γ] (Z-Y-X, m, rad) or, as the message carries it,
+        [x y z qx qy qz qw]; one that fails hexa.pose_check (a non-unit quaternion, off the workspace, a jump) is
+        dropped and counted."""
+        T = self.pose_check.check_pose6(stamp, pose) if np.size(pose) != 7 else self.pose_check.check(
+            stamp, np.ravel(pose)[:3], np.ravel(pose)[3:])
+        if T is None:
             self.rejects["bad_pose"] += 1
             return []
-        return self._run(self.sequencer.push_pose(stamp, pose))
+        return self._run(self.sequencer.push_pose(stamp, pose6_from_transform(T)))
 
     # ------------------------------------------------------------------ the pipeline
     def _run(self, items: list[tuple]) -> list[MonitorSample]:
@@ -286,6 +319,17 @@ class CollisionMonitor:
                                   "time_source": "board" if seq.board else "stamp",
                                   "estimator_settling_samples": self.settling}
         values.update({f"reject_node_{k}": v for k, v in self.rejects.items()})
+        values.update(self.input_counters())
         values.update({f"reject_observer_{k}": v for k, v in obs.rejected.items()})
         values.update({f"reject_estimator_{k}": v for k, v in est.rejected.items()})
+        return values
+
+    def input_counters(self) -> dict[str, int]:
+        """Rejects by reason of the input checks (values, board clock, stamps, poses) and the clock jumps adopted."""
+        values = {f"reject_input_{k}": v for k, v in self.inputs.rejected.items()}
+        values.update({f"reject_board_{k}": v for k, v in self.clock.rejected.items()})
+        values.update({f"reject_stamp_{k}": v for k, v in self.sequencer.rejected.items()})
+        values.update(self.pose_check.counters())
+        values["clock_jumps_adopted"] = (self.clock.gate.adopted + self.estimator.clock_jumps
+                                         + self.observer.clock_jumps + self.sequencer.adopted)
         return values

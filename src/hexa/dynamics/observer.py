@@ -43,6 +43,7 @@ from hexa.dynamics._kernel import KernelError, SampleKernel, chain_jacobian_rows
 from hexa.dynamics.lagrange import (DynamicsError, HexaDynamicParameters, MotionState, _Geometry, _momentum_terms,
                                     _Velocity, inverse_dynamics, motion_from_joint_rates, pose_to_position_rotation,
                                     wrench_to_generalized_zyz)
+from hexa.stream_gate import ACCEPTED, TimeGate
 
 if TYPE_CHECKING:
     from numpy.typing import NDArray
@@ -50,8 +51,8 @@ if TYPE_CHECKING:
 AXIS_NAMES = ("fx", "fy", "fz", "mx", "my", "mz")
 SERVO_AXIS_NAMES = ("servo1", "servo2", "servo3", "servo4", "servo5", "servo6")
 EVENT_AXIS_NAMES = AXIS_NAMES + SERVO_AXIS_NAMES  # CollisionEvent.axis 0..11
-REJECT_REASONS = ("non_finite", "time_not_increasing", "gap", "bad_shape", "pose_tracking", "singular", "no_pose",
-                  "pose_stale")
+REJECT_REASONS = ("non_finite", "time_not_increasing", "time_jump", "gap", "bad_shape", "pose_tracking", "singular",
+                  "no_pose", "pose_stale")
 KINEMATICS = ("arm", "pose")
 
 
@@ -67,7 +68,10 @@ class ObserverConfig:
     servo 1..6 (N·m), on the residual as servo torques τ_r = J_ζ⁻ᵀ r, 0 switches that servo's check off;
     release_ratio: an axis releases below release_ratio·threshold (hysteresis); min_duration (s): over a threshold
     this long before START, all axes released this long before END; max_gap (s): longer arm-sample spacing is a gap;
-    pose_tolerance (m²): largest |f_i| accepted after pose tracking.
+    pose_tolerance (m²): largest |f_i| accepted after pose tracking; max_jump (s): an arm sample more than this after
+    the last one is rejected (time_jump), as one before it (time_not_increasing), and `adopt_after` of them in a row
+    that follow one another are a clock that jumped for good: integration restarts there, as after a gap
+    (hexa.stream_gate).
 
     kinematics: "arm" — ζ (and ζ̇) come with the arm samples, the plate pose is tracked from them (servos with
     angle feedback, the simulator); "pose" — the arm samples bring only τ (and at most the commanded ζ, used as a
@@ -97,6 +101,8 @@ class ObserverConfig:
     pose_window: int = 8
     pose_fit_order: int = 1
     max_pose_age: float = 0.1
+    max_jump: float = 1.0
+    adopt_after: int = 5
 
     def __post_init__(self) -> None:
         g = np.asarray(self.gains, dtype=float)
@@ -112,6 +118,9 @@ class ObserverConfig:
             raise ObserverError(f"min_duration must be >= 0 s, got {self.min_duration!r}")
         if not self.max_gap > 0.0:
             raise ObserverError(f"max_gap must be > 0 s, got {self.max_gap!r}")
+        if not (self.max_jump > self.max_gap and self.adopt_after >= 1):
+            raise ObserverError(f"max_jump must be > max_gap ({self.max_gap!r} s), got {self.max_jump!r}, and "
+                                f"adopt_after >= 1, got {self.adopt_after!r}")
         if self.kinematics not in KINEMATICS:
             raise ObserverError(f"kinematics must be one of {KINEMATICS}, got {self.kinematics!r}")
         if not (0 <= self.pose_fit_order <= 3 and self.pose_window >= self.pose_fit_order + 1):
@@ -356,6 +365,7 @@ class ResidualObserver:
         self.detector = CollisionDetector(self.config)
         self.rejected: dict[str, int] = {k: 0 for k in REJECT_REASONS}
         self.accepted = 0
+        self.clock_jumps = 0
         self._est: tuple | None = None  # (t, p, R, V) of the last accepted sample (pose tracked from it)
         self._cam: tuple | None = None  # (t, p, R) newest camera pose not yet used
         self._cam_t = -math.inf
@@ -369,6 +379,7 @@ class ResidualObserver:
         self._prev: _ArmSample | None = None
         self._angles: tuple[float, list] | None = None
         self._last_t = -math.inf
+        self._time_gate = TimeGate(self.config.max_jump, self.config.adopt_after)
         self.r = np.zeros(6)
         self.detector.reset()
 
@@ -453,11 +464,19 @@ class ResidualObserver:
                 and (q is None or _all_finite(q))):
             self._reject("non_finite")
             return None
-        if t <= self._last_t:
-            self._reject("time_not_increasing")
+        verdict = self._time_gate.check(t)
+        if verdict not in ACCEPTED:
+            self._reject("time_jump" if verdict == "time_future" else "time_not_increasing")
             return None
-        if self._last_t > -math.inf and t - self._last_t > self.config.max_gap:
-            self._reject("gap")  # do not integrate across the gap; r is kept, integration restarts here
+        if verdict == "adopted" or (self._last_t > -math.inf and t - self._last_t > self.config.max_gap):
+            # a gap, or a clock that jumped for good: do not integrate across it; r is kept, integration restarts here
+            if verdict == "adopted":   # a new stream (a restarted board or simulator): detection starts over, and
+                self.clock_jumps += 1  # camera poses are taken on the new time axis
+                self.r = np.zeros(6)
+                self.detector.reset()
+                self._cam, self._cam_t = None, -math.inf
+            else:
+                self._reject("gap")
             self._prev = None
             self._angles = None
             if self._est is not None:  # predict across the gap at rest, Newton does the rest

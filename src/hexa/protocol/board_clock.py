@@ -36,6 +36,10 @@ import numpy as np
 BOARD_CLOCK_WRAP_S = 2 ** 32 * 1e-6
 #: a board clock that goes back by more than this (µs) was restarted (a board reset); less: a sample out of order
 RESTART_STEP_US = 100_000
+#: a board clock that runs ahead of the host's by more than this (s) beyond the fastest rate allowed, between two
+#: samples, is one bad board time (rejected, `BoardClockMap.rejected`), unless ADOPT_AFTER samples agree on it
+FORWARD_SLACK = 1.0
+ADOPT_AFTER = 5
 #: the rate is refitted every this many samples
 RATE_EVERY = 10
 #: a command's board time raised by more than this (s) by a later read is counted (`CommandTimeline.redated`): a
@@ -77,6 +81,7 @@ class BoardClockMap:
         self.min_rate_span = float(min_rate_span)
         self.max_extrapolation = float(max_extrapolation)
         self.restarts = 0           # board clock went backwards (board reset): the map started over
+        self.rejected = 0           # single board times far ahead of what the host's clock allows
         self.reset()
 
     def reset(self) -> None:
@@ -85,12 +90,22 @@ class BoardClockMap:
         self._last_raw: int | None = None
         self._wraps = 0
         self._count = 0
+        self._ahead: list[tuple[int, float]] = []   # (raw, host time) of the board times rejected in a row
         self.rate = self.nominal_rate
 
     def update(self, board_time_us: int, t_host: float) -> float:
         """Record a sample measured at board time `board_time_us` (µs, wrapping at 2³²) that arrived at host time
-        `t_host` (s, monotonic); returns its unwrapped board time (s)."""
+        `t_host` (s, monotonic); returns its unwrapped board time (s).
+
+        A board time further ahead of the last one than the host's clock allows (the fastest rate times the host
+        time between, plus FORWARD_SLACK) is one bad sample: counted in `rejected`, the map left alone, and the
+        map's estimate for `t_host` returned — unless ADOPT_AFTER such samples in a row agree with one another (the
+        board clock really jumped): then the map starts over at them, as on a restart."""
         raw = int(board_time_us) & 0xFFFFFFFF
+        if self._runs_ahead(raw, float(t_host)):
+            self.rejected += 1
+            est = self.board_time_at(float(t_host))
+            return (self._last_raw or 0) * 1e-6 + self._wraps * BOARD_CLOCK_WRAP_S if est is None else est
         wraps = self._wraps
         if self._last_raw is not None and raw < self._last_raw:
             if self._last_raw - raw > 2 ** 31:      # the counter wrapped
@@ -113,6 +128,28 @@ class BoardClockMap:
         if self._count % RATE_EVERY == 0 and t_host - self._pairs[0][0] >= self.min_rate_span:
             self._fit_rate()
         return b
+
+    def _runs_ahead(self, raw: int, t_host: float) -> bool:
+        """Whether board time `raw` (µs) is further ahead of the newest sample than the host's clock allows and not
+        yet confirmed by ADOPT_AFTER samples that follow one another (then the map starts over)."""
+        if self._last_raw is None or not self._pairs:
+            return False
+        step = ((raw - self._last_raw + (1 << 31)) & 0xFFFFFFFF) - (1 << 31)
+        allowed = self.rate_bounds[1] * max(t_host - self._pairs[-1][0], 0.0) + FORWARD_SLACK
+        if step * 1e-6 <= allowed:
+            self._ahead.clear()
+            return False
+        if self._ahead:
+            r0, t0 = self._ahead[-1]
+            s0 = ((raw - r0 + (1 << 31)) & 0xFFFFFFFF) - (1 << 31)
+            if not 0 < s0 * 1e-6 <= self.rate_bounds[1] * max(t_host - t0, 0.0) + FORWARD_SLACK:
+                self._ahead.clear()
+        self._ahead.append((raw, t_host))
+        if len(self._ahead) < ADOPT_AFTER:
+            return True
+        self.restarts += 1           # the board clock jumped for good: start over at it
+        self.reset()
+        return False
 
     def _fit_rate(self) -> None:
         """Rate between the least-delayed samples at the two ends of the rate window (late samples of a burst

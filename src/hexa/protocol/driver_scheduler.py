@@ -387,7 +387,7 @@ def driver_reports(sched: DriverScheduler, uno: Any, mega: Any, now: float, stal
         "sample_rate_hz": f"{rate:.1f}", "sample_rate_commanded_hz": mega.rate_hz, "samples": mega.samples,
         "sample_gaps": mega.sample_gaps, "data_age_s": f"{age:.3f}",
         "board_clock_rate": f"{sched.board_clock.rate:.4f}", "board_clock_restarts": sched.board_clock.restarts,
-        "commands_redated": sched.timeline.redated,
+        "board_clock_rejected": sched.board_clock.rejected, "commands_redated": sched.timeline.redated,
         "board_overruns": mega.status.overruns if mega.status else "?", **_recovery_values("stream", mega.watch)})
     if mega_r.level == "OK" and age > stale_timeout:
         mega_r = mega_r._replace(level="ERROR", message=f"telemetry stale (no sample for {age:.2f} s)")

@@ -87,6 +87,13 @@ def hexa_pose_from_msg(pose: Any) -> np.ndarray:
     return pose6_from_transform(transform_from_pose_msg(pose))
 
 
+def pose_fields(pose: Any) -> tuple[tuple[float, float, float], tuple[float, float, float, float]]:
+    """(position, quaternion x y z w) of a geometry_msgs/Pose as sent: not normalised, not checked (hexa.pose_check
+    checks them)."""
+    p, q = pose.position, pose.orientation
+    return (p.x, p.y, p.z), (q.x, q.y, q.z, q.w)
+
+
 def upsrpu_pose_to_msg_fields(X: np.ndarray) -> tuple[tuple[float, float, float], tuple[float, float, float, float]]:
     """(position, quaternion) of the 3UPS+RPU pose X = (x_m, z_m, θ, ψ) in the fixed frame."""
     from hexa.kinematics.upsrpu import rotation_yz
