@@ -7,6 +7,8 @@ again and times OK; calls resume (accepted). Prints a JSON summary on the last l
 from __future__ import annotations
 
 import json
+import os
+import signal
 import sys
 import time
 
@@ -166,6 +168,13 @@ def main() -> int:
     out["resume_when_ok"] = call_resume()
     stream(0.5)
     out["state_after_resume"] = last("trajectory")
+    if len(sys.argv) > 1:                                 # the observer's pid: kill it (-9), as a crash would
+        n_traj = len(seen["trajectory"])
+        t_kill = time.monotonic()
+        os.kill(int(sys.argv[1]), signal.SIGKILL)
+        stream(10.0, lambda: any(st == "held" for _t, st in seen["trajectory"][n_traj:]))
+        held = next((t for t, st in seen["trajectory"][n_traj:] if st == "held"), None)
+        out["held_after_observer_kill"] = None if held is None else held - t_kill
     print(json.dumps(out), flush=True)
     node.destroy_node()
     rclpy.try_shutdown()

@@ -2,8 +2,8 @@
 stands in for the driver and the camera (test/monitoring_peer.py). Start-up: DEGRADED settling, then OK, and only
 then does the trajectory run; the board goes silent: `monitoring` LOST naming the silent stream, `trajectory_state`
 held, the observer's /diagnostics ERROR; resume is refused while LOST; the stream returns: settling, OK, and resume
-works. Wall-time bounds are generous (a loaded 2-core host); the measured latencies are printed and reported in
-docs/monitoring.md."""
+works; the observer killed: the trajectory holds (no `monitoring` state for 0.25 s). Wall-time bounds are generous
+(a loaded 2-core host); the measured latencies are printed and reported in docs/monitoring.md."""
 from __future__ import annotations
 
 import json
@@ -17,14 +17,15 @@ PY = sys.executable
 
 
 def test_a_silent_board_is_lost_the_trajectory_holds_and_resumes_only_once_ok(procs, ros_env):
-    procs.start([PY, "-m", "hexa_dynamics.observer_node", "--ros-args", "-r", "__ns:=/hexa"], ros_env)
+    observer = procs.start([PY, "-m", "hexa_dynamics.observer_node", "--ros-args", "-r", "__ns:=/hexa"], ros_env)
     procs.start([PY, "-m", "hexa_dynamics.trajectory_node", "--ros-args", "-r", "__ns:=/hexa",
                  "-p", "start_delay:=0.2", "-p", "trajectory:=circle"], ros_env)
-    peer = procs.start([PY, "test/monitoring_peer.py"], ros_env)
+    peer = procs.start([PY, "test/monitoring_peer.py", str(observer.pid)], ros_env)
     out, err = peer.communicate(timeout=240)
     assert peer.returncode == 0, err[-3000:]
     r = json.loads(out.strip().splitlines()[-1])
-    print(json.dumps({k: r[k] for k in ("lost_after", "held_after", "diag_error_after", "ok_after")}))
+    print(json.dumps({k: r[k] for k in ("lost_after", "held_after", "diag_error_after", "ok_after",
+                                        "held_after_observer_kill")}))
     # start-up: settling, then OK; the trajectory waited for it
     assert r["ok"], r
     assert r["startup"][0][0] == "DEGRADED" and r["startup"][0][1].startswith("settling"), r["startup"]
@@ -47,3 +48,6 @@ def test_a_silent_board_is_lost_the_trajectory_holds_and_resumes_only_once_ok(pr
     assert r["state_before_resume"] == "held"
     assert r["resume_when_ok"] == [True, "resumed"]
     assert r["state_after_resume"] in ("resuming", "running"), r
+    # the observer killed: its state stops (re-published every 50 ms); after monitoring_timeout (0.25 s) the
+    # trajectory holds
+    assert r["held_after_observer_kill"] is not None and 0.2 < r["held_after_observer_kill"] < 3.0, r

@@ -105,7 +105,8 @@ def test_a_pose_file_is_interpolated_with_its_rates(tmp_path):
 
 
 def test_nothing_moves_before_the_first_monitoring_ok_then_the_trajectory_starts_from_0(desc):
-    r = _runner(desc, start_delay=1.0, start_blend=0.0, require_monitoring=True)
+    r = _runner(desc, start_delay=1.0, start_blend=0.0, require_monitoring=True,
+                monitoring_timeout=1e6)   # no heartbeats here
     z0 = hexa6rus.inverse_kinematics(desc, START)
     for now in (10.0, 11.0, 12.5):                               # past the start delay: still the start pose, at rest
         tick = r.tick(now)
@@ -118,7 +119,8 @@ def test_nothing_moves_before_the_first_monitoring_ok_then_the_trajectory_starts
 
 
 def test_a_monitoring_lost_holds_and_resume_is_refused_until_ok(desc):
-    r = _runner(desc, start_time=0.0, require_monitoring=True)
+    r = _runner(desc, start_time=0.0, require_monitoring=True,
+                monitoring_timeout=1e6)   # no heartbeats here
     r.on_monitoring("OK", "", 0.005)
 
     def play(t0: float, t1: float) -> list:                      # the node's 100 Hz ticks
@@ -150,7 +152,8 @@ def test_without_required_monitoring_its_states_are_ignored(desc):
 def test_with_an_approach_the_measured_pose_is_held_at_rest_until_monitoring_is_ok(desc):
     """Robot mode: the first command is the measured pose's IK (the driver's joint_states need a command before the
     observer can compute a residual); the approach moves only after the first OK."""
-    r = _runner(desc, start_delay=0.0, approach_speed=0.3, require_monitoring=True)
+    r = _runner(desc, start_delay=0.0, approach_speed=0.3, require_monitoring=True,
+                monitoring_timeout=1e6)   # no heartbeats here
     here = START + np.array([0.015, -0.02, 0.01, 0.04, 0.0, -0.03])
     assert r.tick(5.0).zeta is None and r.state == "waiting_for_pose"
     r.on_pose(here, 5.0, 5.0)
@@ -162,3 +165,22 @@ def test_with_an_approach_the_measured_pose_is_held_at_rest_until_monitoring_is_
     ticks = [r.tick(t) for t in np.arange(6.01, 6.5, 0.01)]
     assert ticks[0].state == "approaching" and np.abs(ticks[0].zeta - z_here).max() < 1e-3   # from rest, no step
     assert np.abs(ticks[-1].zeta - z_here).max() > 1e-3                                        # and it moves
+
+
+def test_silence_on_monitoring_counts_as_lost_after_its_timeout(desc):
+    """The observer killed or hung: no state (it re-publishes every 50 ms) for monitoring_timeout holds the robot."""
+    logs: list[tuple[str, str]] = []
+    r = _runner(desc, lambda lv, t: logs.append((lv, t)), start_time=0.0, require_monitoring=True,
+                monitoring_timeout=0.25)
+    for t in np.arange(0.0, 1.0, 0.05):                           # heartbeats
+        r.on_monitoring("OK", "", t)
+        r.tick(t + 0.01)
+    assert r.tick(1.0 + 0.2).state == "running"                   # 0.25 s since the last state: not yet
+    assert r.tick(0.95 + 0.26).state == "held"
+    assert r.monitoring == "LOST" and "no monitoring state from the observer" in r.monitoring_reason
+    assert logs[-1][0] == "error" and "held" in logs[-1][1]
+    assert not r.resume(1.3) and "observer down" in r.refusal
+    r.on_monitoring("DEGRADED", "settling: no joint_states received yet", 5.0)   # the observer respawned
+    assert r.tick(5.1).state == "held" and not r.resume(5.1)
+    r.on_monitoring("OK", "", 6.0)
+    assert r.resume(6.0) and r.monitoring_holds == 1

@@ -58,6 +58,8 @@ PARAMETERS = {
                                 range=(0.0, 1.0)),
     "require_monitoring": Param(True, "start only once the observer's `monitoring` is OK, hold on LOST (false: "
                                       "no collision monitoring, e.g. a graph without the observer)"),
+    "monitoring_timeout": Param(0.25, "s without a `monitoring` state (the observer re-publishes it every 50 ms) "
+                                      "that count as LOST", range=(0.05, 10.0)),
     DESCRIPTION: DESCRIPTION_PARAM}
 
 
@@ -141,9 +143,11 @@ class TrajectoryNode(Node):
 
     def _on_monitoring(self, msg: MonitoringState) -> None:
         text = self.runner.on_monitoring(msg.level_name, msg.reason, self._now())
-        if text is not None and msg.level == MonitoringState.LOST:   # (rclpy fixes one severity per call site)
+        if text is None:
+            return
+        if msg.level == MonitoringState.LOST:   # (rclpy fixes one severity per call site)
             self.get_logger().error(text)
-        elif text is not None:
+        else:
             self.get_logger().info(text)
         self._tick()   # a hold takes effect at once, not at the next tick
 

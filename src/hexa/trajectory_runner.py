@@ -46,6 +46,7 @@ class TrajectorySettings:
     approach_speed: float = 0.0
     approach_tolerance: float = 0.02
     require_monitoring: bool = True
+    monitoring_timeout: float = 0.25
 
     def check(self) -> None:
         if not (math.isfinite(self.approach_speed) and self.approach_speed >= 0):
@@ -54,6 +55,8 @@ class TrajectorySettings:
             raise ValueError(f"approach_tolerance must be >= 0 rad, got {self.approach_tolerance}")
         if not self.rate_hz > 0:
             raise ValueError(f"rate_hz must be > 0, got {self.rate_hz}")
+        if not (math.isfinite(self.monitoring_timeout) and self.monitoring_timeout > 0):
+            raise ValueError(f"monitoring_timeout must be > 0 s, got {self.monitoring_timeout}")
         if not self.start_blend >= 0:
             raise ValueError(f"start_blend must be >= 0 s, got {self.start_blend}")
         m = self.max_step
@@ -81,7 +84,8 @@ class TrajectoryRunner:
     started) commands nothing. With `require_monitoring`, trajectory time stays at 0 (the start pose, or the
     approach's first pose, commanded at rest: "waiting_for_monitoring") until the collision monitoring is first OK
     (`on_monitoring`); a LOST then holds the robot as a collision START does, and `resume` is refused until it is
-    OK again.
+    OK again. The observer re-publishes its state every 50 ms: no state for `monitoring_timeout` (the observer
+    killed or hung) counts as LOST.
 
     Args:
         player: the trajectory player.
@@ -90,11 +94,13 @@ class TrajectoryRunner:
         approach_tolerance: rad; no approach when every arm is this close to its start angle.
         log: called with ("info" | "warn" | "error", message) for what an operator should read.
         require_monitoring: wait for the monitoring's first OK, hold on LOST (False: no collision monitoring).
+        monitoring_timeout: s of clock time without a monitoring state that count as LOST.
     """
 
     def __init__(self, player: TrajectoryPlayer, start_time: float = -1.0, start_delay: float = 1.0,
                  approach_speed: float = 0.0, approach_tolerance: float = 0.02,
-                 log: Callable[[str, str], Any] | None = None, require_monitoring: bool = True) -> None:
+                 log: Callable[[str, str], Any] | None = None, require_monitoring: bool = True,
+                 monitoring_timeout: float = 0.25) -> None:
         self.player = player
         self.start_time, self.start_delay = start_time, start_delay
         self.approach_speed, self.approach_tolerance = approach_speed, approach_tolerance
@@ -111,6 +117,8 @@ class TrajectoryRunner:
         self.monitoring, self.monitoring_reason = ("unknown", "no monitoring state received yet")
         self._watched = not require_monitoring      # monitoring has been OK at least once
         self.monitoring_holds = 0
+        self.monitoring_timeout = monitoring_timeout
+        self._monitoring_at = -math.inf             # clock time of the newest monitoring state
         self.refusal = ""                           # why the last resume was refused
 
     @classmethod
@@ -130,7 +138,7 @@ class TrajectoryRunner:
                                   retract_distance=s.retract_distance, retract_time=s.retract_time, loop=s.loop,
                                   max_step=s.max_step or None, start_blend=s.start_blend, loop_blend=s.loop_blend)
         return cls(player, s.start_time, s.start_delay, s.approach_speed, s.approach_tolerance, log,
-                   s.require_monitoring)
+                   s.require_monitoring, s.monitoring_timeout)
 
     # -- inputs --------------------------------------------------------------------------------------------------
     def reject_pose(self, why: str) -> None:
@@ -182,6 +190,11 @@ class TrajectoryRunner:
     # -- per tick and on request ---------------------------------------------------------------------------------
     def tick(self, now: float) -> Tick:
         """The command and state at clock time `now`; after an IK failure the previous command again."""
+        if (self._watched and self.require_monitoring and self.monitoring != "LOST"
+                and now - self._monitoring_at > self.monitoring_timeout):
+            text = self.on_monitoring("LOST", f"no monitoring state from the observer for "
+                                      f"{now - self._monitoring_at:.2f} s (observer down or hung)", now)
+            self._log("error", text or "monitoring silent")
         t = self.time(now)
         if t is None:
             if not self.approach_pending:
@@ -211,6 +224,8 @@ class TrajectoryRunner:
             return None
         was = self.monitoring
         self.monitoring, self.monitoring_reason = level, reason
+        if not (level == "LOST" and reason.startswith("no monitoring state")):
+            self._monitoring_at = now
         if level == "OK" and not self._watched:
             self._watched = True
             if self._t0 is not None and not self.approach_pending:
@@ -246,4 +261,5 @@ class TrajectoryRunner:
         return {"state": self.state, "collisions": str(self.collisions), "ik_failures": str(p.ik_failures),
                 "lag_events": str(p.lag_events), "lag_time_s": f"{p.lag_time:.3f}",
                 "approach_time_s": f"{p.approach_time:.3f}", "rejected_poses": str(self.bad_poses),
-                "monitoring": self.monitoring, "monitoring_holds": str(self.monitoring_holds)}
+                "monitoring": self.monitoring, "monitoring_reason": self.monitoring_reason,
+                "monitoring_holds": str(self.monitoring_holds)}
