@@ -191,3 +191,15 @@ def test_joint_states_alone_are_the_only_stream_expected_without_the_current_boa
     f.run(1.8, currents=False, states=False)
     _t, reason = f.first(LOST)
     assert "joint_states silent" in reason and "motor_currents" not in reason, reason
+
+
+def test_a_clock_that_goes_back_does_not_make_old_residuals_fresh(rest):
+    """A restarted simulator starts its clock at 0 again: the residual age runs on across the jump (LOST when no
+    residual follows), instead of counting from a time that now lies in the future."""
+    f = Feed(rest)
+    f.run(1.6)
+    assert f.watch.status.level == OK
+    st = None
+    for k in range(1, 10):                       # no samples; the clock restarted near 0 and runs on
+        st = f.watch.evaluate(0.01 * k, f.wall + 0.01 * k) or st
+    assert st is not None and st.level == LOST and "silent" in st.reason, st

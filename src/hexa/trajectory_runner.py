@@ -190,6 +190,7 @@ class TrajectoryRunner:
     # -- per tick and on request ---------------------------------------------------------------------------------
     def tick(self, now: float) -> Tick:
         """The command and state at clock time `now`; after an IK failure the previous command again."""
+        self._monitoring_at = min(self._monitoring_at, now)   # a clock that went back restarts the count
         if (self._watched and self.require_monitoring and self.monitoring != "LOST"
                 and now - self._monitoring_at > self.monitoring_timeout):
             text = self.on_monitoring("LOST", f"no monitoring state from the observer for "

@@ -107,6 +107,7 @@ class MonitoringWatch:
         self._rejects = self._reject_counts()
         self._phase = "starting"         # starting | watching | lost | settling
         self._grace = now                # LOST is not raised for a residual age counted from before this
+        self._now = now                  # the node's clock at the previous evaluation
         self._cause: frozenset[str] = frozenset()
         self._suspect: float | None = None   # wall time of the first evaluation that found a bound broken
         self.status = MonitoringStatus(DEGRADED, "settling: no joint_states received yet", math.inf, now)
@@ -199,6 +200,12 @@ class MonitoringWatch:
 
     # ------------------------------------------------------------------ helpers
     def _observe(self, now: float, wall: float) -> None:
+        if now < self._now:   # the node's clock went back (a restarted simulator): ages run on across the jump
+            shift = now - self._now
+            self._fresh, self._pose_at, self._grace = self._fresh + shift, self._pose_at + shift, self._grace + shift
+            self._arrived = {k: v + shift for k, v in self._arrived.items()}
+            self._window = None if self._window is None else self._window + shift
+        self._now = now
         for s, n in self.received.items():
             if n != self._seen[s]:
                 self._seen[s], self._arrived[s] = n, now
