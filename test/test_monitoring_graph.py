@@ -48,6 +48,6 @@ def test_a_silent_board_is_lost_the_trajectory_holds_and_resumes_only_once_ok(pr
     assert r["state_before_resume"] == "held"
     assert r["resume_when_ok"] == [True, "resumed"]
     assert r["state_after_resume"] in ("resuming", "running"), r
-    # the observer killed: its state stops (re-published every 50 ms); after monitoring_timeout (0.25 s) the
-    # trajectory holds
-    assert r["held_after_observer_kill"] is not None and 0.2 < r["held_after_observer_kill"] < 3.0, r
+    # the observer killed: its state stops (re-published every 50 ms); after monitoring_timeout (0.25 s) without one
+    # the trajectory holds (≈ 0.2–0.25 s after the kill; less if the heartbeats were already late)
+    assert r["held_after_observer_kill"] is not None and 0.0 < r["held_after_observer_kill"] < 3.0, r
