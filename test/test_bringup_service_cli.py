@@ -19,7 +19,7 @@ def _hexa(procs, env, *args):
 
 def test_service_call_holds_and_resumes_the_trajectory_node(procs, ros_env):
     procs.start([PY, "-m", "hexa_dynamics.trajectory_node", "--ros-args", "-r", "__ns:=/hexa",
-                 "-p", "start_delay:=0.2"], ros_env)
+                 "-p", "start_delay:=0.2", "-p", "require_monitoring:=false"], ros_env)   # no observer here
     rc, out, err = _hexa(procs, ros_env, "service", "call", "/hexa/trajectory/hold", "--json", "--timeout", "30")
     assert rc == 0, err
     assert json.loads(out) == {"success": True, "message": "held"}

@@ -53,6 +53,8 @@ def _peer(seconds: float, until_clock: float) -> int:
     def on_pose(m):
         seen["poses"] += 1
         seen["z"] = m.pose.position.z
+        seen.setdefault("first_xyz", [m.pose.position.x, m.pose.position.y, m.pose.position.z])
+        seen["last_xyz"] = [m.pose.position.x, m.pose.position.y, m.pose.position.z]
 
     subs = [node.create_subscription(Clock, "/clock", on_clock, 10)]
     for cam in ("cam_top", "cam_side"):
@@ -112,6 +114,29 @@ def test_sim_node_publishes_clock_cameras_and_ground_truth(procs, ros_env, tmp_p
         # the plate case's contact (the peer cannot keep up with every 250 Hz truth message: no exact peak here)
         assert 0 in seen["links"] and 1.0 < seen["max_force"] <= 6.0 + 1e-9
     assert (tmp_path / "uno").is_symlink() is False      # links removed at shutdown
+
+
+def test_sim_node_with_boards_holds_the_trajectorys_start_pose_until_the_first_command(procs, ros_env, tmp_path):
+    """scenario none + trajectory circle (the README's free-motion set-up): the robot starts at rest at the circle's
+    start pose and stays there until the driver's first command (none here) — it used to follow the circle on its own
+    until then, and the first command snapped it back (a false START at start-up)."""
+    pytest.importorskip("rclpy", reason="ROS 2 Jazzy wheels not installed")
+    pytest.importorskip("mujoco")
+    from hexa.trajectories import TRAJECTORIES
+
+    peer = procs.start([PY, __file__, "peer", "60", "1.5"], ros_env)
+    assert peer.stdout.readline().strip() == "ready"
+    node = procs.start([PY, "-m", "hexa_bringup.sim_node", "--ros-args", "-r", "__ns:=/hexa", "-r", "__node:=sim",
+                        "-p", "scenario:=none", "-p", "trajectory:=circle", "-p", "cameras:=false",
+                        "-p", "duration:=1.5", "-p", f"link_dir:={tmp_path}", "-p", "truth_rate_hz:=50.0",
+                        "-p", "start_delay:=1.0"], ros_env)
+    out, _err = peer.communicate(timeout=90)
+    seen = json.loads(out.strip().splitlines()[-1])
+    node.communicate(timeout=20)
+    assert seen["clock_last"] == pytest.approx(1.5, abs=0.01) and seen["poses"] > 20
+    start = TRAJECTORIES["circle"](0.0)[0][:3]
+    assert max(abs(a - b) for a, b in zip(seen["first_xyz"], start)) < 2e-3, seen
+    assert max(abs(a - b) for a, b in zip(seen["last_xyz"], seen["first_xyz"])) < 2e-4, seen   # the circle: 9 cm
 
 
 if __name__ == "__main__" and len(sys.argv) > 1 and sys.argv[1] == "peer":

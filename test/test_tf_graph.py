@@ -79,4 +79,5 @@ def test_bringup_sim_publishes_tf_and_external_wrench_for_an_independent_listene
     assert late.returncode == 0, (out[-2000:], err[-2000:])
     s = json.loads(out.strip().splitlines()[-1])["states"]
     assert s["collision"][0] in (0, 1) and s["trajectory"] in (
-        "waiting", "waiting_for_pose", "approaching", "running", "held", "retracting", "resuming", "finished")
+        "waiting", "waiting_for_monitoring", "waiting_for_pose", "approaching", "running", "held", "retracting",
+        "resuming", "finished")

@@ -13,7 +13,7 @@ PY = sys.executable
 
 def test_trajectory_node_holds_on_collision_and_resumes_on_service_call(procs, ros_env):
     procs.start([PY, "-m", "hexa_dynamics.trajectory_node", "--ros-args", "-r", "__ns:=/hexa",
-                 "-p", "start_delay:=0.5", "-p", "trajectory:=circle"], ros_env)
+                 "-p", "start_delay:=0.5", "-p", "trajectory:=circle", "-p", "require_monitoring:=false"], ros_env)
     peer = procs.start([PY, "test/trajectory_peer.py"], ros_env)
     out, err = peer.communicate(timeout=90)
     assert peer.returncode == 0, err
@@ -37,7 +37,8 @@ def test_trajectory_node_approaches_the_start_slowly_from_the_measured_pose(proc
     used, then the first command is the measured pose's IK and the arms move no faster than approach_speed to the
     start."""
     procs.start([PY, "-m", "hexa_dynamics.trajectory_node", "--ros-args", "-r", "__ns:=/hexa",
-                 "-p", "start_delay:=0.0", "-p", "trajectory:=circle", "-p", "approach_speed:=0.3"], ros_env)
+                 "-p", "start_delay:=0.0", "-p", "trajectory:=circle", "-p", "approach_speed:=0.3",
+                 "-p", "require_monitoring:=false"], ros_env)
     peer = procs.start([PY, "test/trajectory_approach_peer.py"], ros_env)
     out, err = peer.communicate(timeout=120)
     assert peer.returncode == 0, err

@@ -1,5 +1,6 @@
 """The trajectory node's logic without ROS: when trajectory time starts (delay, set time, approach from a fresh
-measured pose), the command per tick, requests before the clock runs, settings refused by name."""
+measured pose, the collision monitoring's first OK), the command per tick, requests before the clock runs, the hold on
+a monitoring LOST and the resume refused until OK, settings refused by name."""
 from __future__ import annotations
 
 import numpy as np
@@ -19,6 +20,7 @@ def desc():
 
 
 def _runner(desc, log=None, **kw) -> TrajectoryRunner:
+    kw.setdefault("require_monitoring", False)   # the monitoring contract has tests of its own below
     return TrajectoryRunner.from_settings(desc, TrajectorySettings(**kw), log)
 
 
@@ -100,3 +102,85 @@ def test_a_pose_file_is_interpolated_with_its_rates(tmp_path):
     f.write_text("0,0,0,-0.55,0,0,0\n0,0.1,0,-0.55,0,0,0\n")
     with pytest.raises(ValueError, match="increase"):
         load_pose_file(f)
+
+
+def test_nothing_moves_before_the_first_monitoring_ok_then_the_trajectory_starts_from_0(desc):
+    r = _runner(desc, start_delay=1.0, start_blend=0.0, require_monitoring=True,
+                monitoring_timeout=1e6)   # no heartbeats here
+    z0 = hexa6rus.inverse_kinematics(desc, START)
+    for now in (10.0, 11.0, 12.5):                               # past the start delay: still the start pose, at rest
+        tick = r.tick(now)
+        assert tick.state == "waiting_for_monitoring" and not tick.zeta_dot.any() and np.allclose(tick.zeta, z0)
+    assert r.on_monitoring("DEGRADED", "settling: residuals fresh for 0.2 of 0.5 s", 12.6) is None
+    assert r.tick(12.7).state == "waiting_for_monitoring"
+    assert "may start" in r.on_monitoring("OK", "", 13.0)
+    assert r.tick(13.0).state == "running" and r.time(13.5) == pytest.approx(0.5)   # from trajectory time 0
+    assert r.diagnostic_values()["monitoring"] == "OK"
+
+
+def test_a_monitoring_lost_holds_and_resume_is_refused_until_ok(desc):
+    r = _runner(desc, start_time=0.0, require_monitoring=True,
+                monitoring_timeout=1e6)   # no heartbeats here
+    r.on_monitoring("OK", "", 0.005)
+
+    def play(t0: float, t1: float) -> list:                      # the node's 100 Hz ticks
+        return [r.tick(t) for t in np.arange(t0, t1, 0.01)]
+
+    before = play(0.01, 2.0)[-1]
+    assert before.state == "running"
+    text = r.on_monitoring("LOST", "no fresh residual for 60 ms: motor_currents silent for 60 ms", 2.0)
+    assert "held" in text and "motor_currents silent" in text
+    held = play(2.0, 3.1)
+    assert all(h.state == "held" and np.allclose(h.zeta, held[0].zeta) and not h.zeta_dot.any() for h in held)
+    assert np.abs(held[0].zeta - before.zeta).max() < 0.01          # held where it was
+    assert not r.resume(3.1) and "LOST" in r.refusal and "motor_currents silent" in r.refusal
+    r.on_monitoring("DEGRADED", "settling: residuals fresh for 0.1 of 0.5 s", 3.2)
+    assert not r.resume(3.3) and "DEGRADED" in r.refusal and play(3.1, 3.6)[-1].state == "held"
+    r.on_monitoring("OK", "", 3.6)
+    assert play(3.6, 3.8)[-1].state == "held"                     # OK alone does not move the robot: the operator does
+    assert r.resume(3.8) and r.refusal == ""
+    assert play(3.8, 3.9)[-1].state == "resuming"
+    assert r.monitoring_holds == 1 and r.diagnostic_values()["monitoring_holds"] == "1"
+
+
+def test_without_required_monitoring_its_states_are_ignored(desc):
+    r = _runner(desc, start_time=0.0)
+    assert r.tick(1.0).state == "running"
+    assert r.on_monitoring("LOST", "no fresh residual", 1.0) is None and r.tick(1.1).state == "running"
+
+
+def test_with_an_approach_the_measured_pose_is_held_at_rest_until_monitoring_is_ok(desc):
+    """Robot mode: the first command is the measured pose's IK (the driver's joint_states need a command before the
+    observer can compute a residual); the approach moves only after the first OK."""
+    r = _runner(desc, start_delay=0.0, approach_speed=0.3, require_monitoring=True,
+                monitoring_timeout=1e6)   # no heartbeats here
+    here = START + np.array([0.015, -0.02, 0.01, 0.04, 0.0, -0.03])
+    assert r.tick(5.0).zeta is None and r.state == "waiting_for_pose"
+    r.on_pose(here, 5.0, 5.0)
+    z_here = hexa6rus.inverse_kinematics(desc, here)
+    for now in (5.01, 5.5, 6.0):
+        tick = r.tick(now)
+        assert tick.state == "waiting_for_monitoring" and np.allclose(tick.zeta, z_here) and not tick.zeta_dot.any()
+    r.on_monitoring("OK", "", 6.0)
+    ticks = [r.tick(t) for t in np.arange(6.01, 6.5, 0.01)]
+    assert ticks[0].state == "approaching" and np.abs(ticks[0].zeta - z_here).max() < 1e-3   # from rest, no step
+    assert np.abs(ticks[-1].zeta - z_here).max() > 1e-3                                        # and it moves
+
+
+def test_silence_on_monitoring_counts_as_lost_after_its_timeout(desc):
+    """The observer killed or hung: no state (it re-publishes every 50 ms) for monitoring_timeout holds the robot."""
+    logs: list[tuple[str, str]] = []
+    r = _runner(desc, lambda lv, t: logs.append((lv, t)), start_time=0.0, require_monitoring=True,
+                monitoring_timeout=0.25)
+    for t in np.arange(0.0, 1.0, 0.05):                           # heartbeats
+        r.on_monitoring("OK", "", t)
+        r.tick(t + 0.01)
+    assert r.tick(1.0 + 0.2).state == "running"                   # 0.25 s since the last state: not yet
+    assert r.tick(0.95 + 0.26).state == "held"
+    assert r.monitoring == "LOST" and "no monitoring state from the observer" in r.monitoring_reason
+    assert logs[-1][0] == "error" and "held" in logs[-1][1]
+    assert not r.resume(1.3) and "observer down" in r.refusal
+    r.on_monitoring("DEGRADED", "settling: no joint_states received yet", 5.0)   # the observer respawned
+    assert r.tick(5.1).state == "held" and not r.resume(5.1)
+    r.on_monitoring("OK", "", 6.0)
+    assert r.resume(6.0) and r.monitoring_holds == 1

@@ -74,6 +74,9 @@ class SimNode(Node):
                              cameras=cameras, randomize=bool(v["randomize"]), lead_in=float(v["lead_in"]),
                              contact_model=str(v["contact_model"]), trajectory=str(v["trajectory"]) or None,
                              servo_frame_period=None if frame < 0 else frame,
+                             # with the boards the servos take only the driver's commands, and hold the start pose
+                             # until the first one (a trajectory drive would move them on its own until then)
+                             drive="external" if v["boards"] else None,
                              realism=RealismConfig.named(str(v["realism"])))
         self.runner = SimRunner(self.sim, pacer, clock_rate, truth_rate, cam_rate if cameras else None, duration,
                                 start_delay)

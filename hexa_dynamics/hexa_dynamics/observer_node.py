@@ -6,8 +6,8 @@ Sub `joint_states`, `motor_currents` (hexa_ros.qos.STREAM), `plate_pose`; pub `r
 (the plate pose tracked from ζ̂, at pose_estimate_rate_hz), `markers` (only while subscribed), `/diagnostics`;
 standard types beside them: `external_wrench` (geometry_msgs/WrenchStamped, the residual in `plate`) and
 `external_joint_torques` (JointState effort: the residual in servo space), one per sample while subscribed;
-`collision_state` (the last CollisionEvent, transient local; END with id 0 before the first collision); /tf (base →
-plate, arm_i, rod_i at tf_rate_hz) and /tf_static (the cameras of the robot YAML: hexa.frames).
+`collision_state` (the last CollisionEvent, transient local; END with id 0 before the first collision); `monitoring`
+(OK / DEGRADED / LOST: docs/monitoring.md); /tf (base → plate, arm_i, rod_i) and /tf_static (the YAML's cameras).
 Service `~/reset`. Parameters: hexa_dynamics.observer_params (descriptors; start-up ones read-only), defaults in
 hexa_bringup/config/hexa_params.yaml (`/**/observer`), docs/observer_node.md.
 """
@@ -35,10 +35,12 @@ from visualization_msgs.msg import MarkerArray
 
 from hexa import frames
 from hexa.dynamics.monitor import ESTIMATOR_KEYS, CollisionMonitor, MonitorConfig
+from hexa.dynamics.monitoring import WatchConfig
 from hexa.dynamics.observer import ObserverConfig
 from hexa.estimation import EstimatorConfig
 from hexa.kinematics.hexa6rus import rotation_zyx
 from hexa.robots.hexa_description import load_hexa
+from hexa_dynamics.monitoring_publisher import MonitoringPublisher
 from hexa_dynamics.observer_params import observer_parameters
 
 OBSERVER_KEYS = ("gains", "thresholds", "servo_thresholds", "release_ratio", "min_duration")
@@ -82,6 +84,9 @@ class ObserverNode(Node):
         self.create_service(ResetObserver, "~/reset", self._on_reset)
         self.add_on_set_parameters_callback(self._on_set_parameters)
         self.create_timer(1.0, self._diagnostics)
+        self.monitoring = MonitoringPublisher(self, self.monitor, WatchConfig.from_values(v), self.frame_id,
+                                              self._diagnostics)   # the inputs pass through its watch
+        self.watch = self.monitoring.watch
         self.get_logger().info(f"observer: ζ from {mcfg.zeta_source}, r_low {list(ocfg.thresholds)}, servo "
                                f"thresholds {list(ocfg.servo_thresholds)} N·m, K {list(ocfg.gains)}")
 
@@ -109,8 +114,8 @@ class ObserverNode(Node):
         except CdrError:
             self.monitor.rejects["bad_joint_names"] += 1
             return
-        self._publish(self.monitor.push_states(t, ordered_values(names, pos), ordered_values(names, vel),
-                                               ordered_values(names, eff)))
+        self._publish(self.watch.push_states(t, ordered_values(names, pos), ordered_values(names, vel),
+                                             ordered_values(names, eff)))
 
     def _on_currents(self, data: bytes) -> None:
         try:
@@ -118,10 +123,10 @@ class ObserverNode(Node):
         except CdrError:
             self.monitor.rejects["bad_currents"] += 1
             return
-        self._publish(self.monitor.push_currents(t, board_us, current))
+        self._publish(self.watch.push_currents(t, board_us, current))
 
     def _on_pose(self, msg: PoseStamped) -> None:
-        self._publish(self.monitor.push_pose(to_sec(msg.header.stamp), np.concatenate(pose_fields(msg.pose))))
+        self._publish(self.watch.push_pose(to_sec(msg.header.stamp), np.concatenate(pose_fields(msg.pose))))
 
     def _publish(self, samples: list) -> None:
         det = self.monitor.observer.detector
@@ -187,13 +192,14 @@ class ObserverNode(Node):
 
     def _on_reset(self, req: Any, resp: Any) -> Any:
         resp.message = self.monitor.reset(bool(req.recalibrate), float(self.set["calibration_duration"]))
+        self.watch.restart(self.monitoring.now())
         resp.success = True
         self.get_logger().info(resp.message)
         return resp
 
     def _diagnostics(self) -> None:
-        level, msg = self.monitor.health()
-        values = {**self.monitor.counters(), "events_sent": self.events_sent}
+        level, msg = self.watch.health()
+        values = {**self.watch.values(), "events_sent": self.events_sent}
         st = diagnostics.status(self.get_fully_qualified_name(), getattr(diagnostics, level), msg, values)
         self.pub_diag.publish(diagnostics.array(self, [st]))
 

@@ -2,6 +2,7 @@
 which ones a running node takes (the rest are read-only: a set is refused with the reason)."""
 from __future__ import annotations
 
+from hexa.dynamics.monitoring import WatchConfig
 from hexa.dynamics.observer import ObserverConfig
 from hexa.estimation import EstimatorConfig
 from hexa_ros.node import DESCRIPTION, DESCRIPTION_PARAM, Param
@@ -14,7 +15,7 @@ RUNTIME = ("gains", "thresholds", "servo_thresholds", "release_ratio", "min_dura
 
 def observer_parameters() -> dict[str, Param]:
     """Name → Param of every observer parameter (hexa_bringup/config/hexa_params.yaml has the same defaults)."""
-    o, e = ObserverConfig(), EstimatorConfig()
+    o, e, w = ObserverConfig(), EstimatorConfig(), WatchConfig()
     def six(v: tuple) -> list[float]:
         return [float(x) for x in v]
 
@@ -48,5 +49,13 @@ def observer_parameters() -> dict[str, Param]:
         "pose_estimate_rate_hz": Param(100.0, "plate_pose_estimate rate (Hz of sample time)", range=(0.001, 1000.0)),
         "tf_rate_hz": Param(30.0, "/tf rate of the plate, arm and rod frames (Hz of sample time)",
                             range=(0.001, 1000.0)),
+        "monitoring_timeout": Param(w.timeout, "s (node clock) without a fresh residual before `monitoring` is LOST",
+                                    range=(0.005, 10.0)),
+        "monitoring_pose_timeout": Param(w.pose_timeout, "s without a plate pose the estimator used before LOST "
+                                         "(zeta_source estimator with camera_sigma > 0)", range=(0.05, 60.0)),
+        "monitoring_wall_timeout": Param(w.wall_timeout, "wall s without a fresh residual while the node's clock "
+                                         "stands still (sim time) before DEGRADED 'clock stalled'", range=(0.05, 60.0)),
+        "monitoring_settle_time": Param(w.settle_time, "s of fresh residuals before OK (start-up, reset, after LOST)",
+                                        range=(0.0, 10.0)),
         "frame_id": Param("base", "frame of residual, collision and plate_pose_estimate")}
     return {k: Param(p.default, p.description, k in RUNTIME, p.range, p.choices) for k, p in table.items()}

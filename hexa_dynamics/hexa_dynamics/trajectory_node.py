@@ -7,11 +7,13 @@ at start-up (read-only: a set on the running node is refused). With the simulato
 that sim time = trajectory time; `hexa bringup robot` sets approach_speed 0.3.
 Topics (relative): pub `joint_commands` (sensor_msgs/JointState, arm_1..arm_6, ζ rad and ζ̇ rad/s),
 `trajectory_state` (std_msgs/String, transient local: a late subscriber gets the current state; waiting |
-waiting_for_pose | approaching | running | held | retracting |
-resuming | finished); sub `collision` (hexa_msgs/CollisionEvent, reliable), `residual`
+waiting_for_monitoring | waiting_for_pose | approaching | running | held | retracting | resuming | finished); sub
+`collision` (hexa_msgs/CollisionEvent, reliable), `monitoring` (hexa_msgs/MonitoringState, transient local: nothing
+moves before its first OK, LOST holds like a START; docs/monitoring.md), `residual`
 (hexa_msgs/Residual, only with collision_policy "retract", for its direction), `plate_pose`
 (geometry_msgs/PoseStamped, only with approach_speed > 0, until the approach is planned).
-Services: `~/resume`, `~/hold` (std_srvs/Trigger). `/diagnostics`.
+Services: `~/resume` (refused with the reason while monitoring is not OK), `~/hold` (std_srvs/Trigger).
+`/diagnostics`.
 """
 from __future__ import annotations
 
@@ -20,7 +22,7 @@ import sys
 import numpy as np
 from diagnostic_msgs.msg import DiagnosticArray
 from geometry_msgs.msg import PoseStamped
-from hexa_msgs.msg import CollisionEvent, Residual
+from hexa_msgs.msg import CollisionEvent, MonitoringState, Residual
 from rclpy.node import Node
 from sensor_msgs.msg import JointState
 from std_msgs.msg import String
@@ -54,6 +56,10 @@ PARAMETERS = {
                                  "(0 = off)", range=(0.0, 2.0)),
     "approach_tolerance": Param(0.02, "rad; no approach when every arm is this close to the start pose",
                                 range=(0.0, 1.0)),
+    "require_monitoring": Param(True, "start only once the observer's `monitoring` is OK, hold on LOST (false: "
+                                      "no collision monitoring, e.g. a graph without the observer)"),
+    "monitoring_timeout": Param(0.25, "s without a `monitoring` state (the observer re-publishes it every 50 ms) "
+                                      "that count as LOST", range=(0.05, 10.0)),
     DESCRIPTION: DESCRIPTION_PARAM}
 
 
@@ -72,6 +78,7 @@ class TrajectoryNode(Node):
         self.pub_state = self.create_publisher(String, "trajectory_state", qos.LATCHED)
         self.pub_diag = self.create_publisher(DiagnosticArray, "/diagnostics", qos.RELIABLE)
         self.create_subscription(CollisionEvent, "collision", self._on_collision, qos.EVENT)
+        self.create_subscription(MonitoringState, "monitoring", self._on_monitoring, qos.LATCHED)
         if s.collision_policy == "retract":
             self.create_subscription(Residual, "residual", self._on_residual, qos.RELIABLE)
         self._pose_sub = None
@@ -80,6 +87,7 @@ class TrajectoryNode(Node):
         self.create_service(Trigger, "~/resume", self._on_resume)
         self.create_service(Trigger, "~/hold", self._on_hold)
         self._last_force = np.zeros(3)
+        self._state = ""
         self.create_timer(1.0 / s.rate_hz, self._tick)
         self.create_timer(1.0, self._diagnostics)
         self.get_logger().info(f"trajectory {s.trajectory} ({self.runner.player.duration:.1f} s) at {s.rate_hz:g} Hz, "
@@ -118,6 +126,9 @@ class TrajectoryNode(Node):
             self.pub.publish(msg)
         if tick.state is not None:
             self.pub_state.publish(String(data=tick.state))
+            if tick.state != self._state:
+                self._state = tick.state
+                self.get_logger().info(f"trajectory state {tick.state} at {self._now():.3f} s")
 
     def _on_residual(self, msg: Residual) -> None:
         f = msg.wrench.force
@@ -130,9 +141,19 @@ class TrajectoryNode(Node):
         if state is not None:
             self.get_logger().warn(f"collision {msg.id} on axis {msg.axis_name}: {state}")
 
+    def _on_monitoring(self, msg: MonitoringState) -> None:
+        text = self.runner.on_monitoring(msg.level_name, msg.reason, self._now())
+        if text is None:
+            return
+        if msg.level == MonitoringState.LOST:   # (rclpy fixes one severity per call site)
+            self.get_logger().error(text)
+        else:
+            self.get_logger().info(text)
+        self._tick()   # a hold takes effect at once, not at the next tick
+
     def _on_resume(self, _req, resp):
         resp.success = self.runner.resume(self._now())
-        resp.message = "resumed" if resp.success else "not held"
+        resp.message = "resumed" if resp.success else self.runner.refusal
         return resp
 
     def _on_hold(self, _req, resp):
