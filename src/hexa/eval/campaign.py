@@ -1,8 +1,10 @@
 """One simulated run of `hexa eval`: the nodes' core classes on the MuJoCo robot, without ROS, faster than real time.
 
 A run drives the simulator like the live graph does and feeds the same classes the nodes run:
-- the trajectory node's `TrajectoryRunner` commands ζ at 100 Hz; each command reaches the servo board after the host
-  jitter of the realism (`JitterConfig`), then the servos take it through the pulse frame (if any);
+- the trajectory node's `TrajectoryRunner` commands ζ at 100 Hz, starting on the observer's first monitoring OK and
+  holding on a LOST (`hexa.dynamics.monitoring.MonitoringWatch`, evaluated before each command); each command
+  reaches the servo board after the host jitter of the realism (`JitterConfig`), then the servos take it through the
+  pulse frame (if any);
 - the current board samples at the driver's `stream_rate_hz` (200 Hz, as in the live graph): the truth's motor
   currents through the ACS712 + 10-bit ADC with the realism's noise (`hexa.sim.realism.adc_counts`), converted back
   by the driver's sensor model; host stamps carry the jitter;
@@ -119,6 +121,7 @@ def simulate(collision: ScriptedCollision | None, trajectory: str, duration: flo
     from hexa.sim import Simulator
     from hexa.sim.boards import board_offsets
     from hexa.sim.realism import adc_counts
+    from hexa.dynamics.monitoring import MonitoringWatch
     from hexa.trajectory_runner import TrajectoryRunner, TrajectorySettings
 
     desc = desc or load_hexa()
@@ -133,6 +136,8 @@ def simulate(collision: ScriptedCollision | None, trajectory: str, duration: flo
     offsets = board_offsets(sim, seed)
     punctual = jitter.sample_sigma <= 0 and jitter.spike_rate <= 0
     mon = CollisionMonitor(desc, MonitorConfig(sim_clock=punctual), ocfg)
+    # the observer node's monitoring contract: the runner starts on its first OK and holds on LOST, as live
+    watch = MonitoringWatch(mon, now=0.0)
     tracker = ContactForceTracker(desc, ContactForceConfig()) if identify else None
     runner = TrajectoryRunner.from_settings(desc, TrajectorySettings(
         trajectory=trajectory, start_time=LEAD_IN, loop=collision is None,
@@ -150,6 +155,10 @@ def simulate(collision: ScriptedCollision | None, trajectory: str, duration: flo
         while sim.time < t_end - 1e-9:
             now = sim.time
             if now >= next_cmd - 1e-12:
+                # sim time stands for wall time too: the campaign's clock never stalls
+                status = watch.evaluate(now, now)
+                if status is not None:
+                    runner.on_monitoring(status.level, status.reason, now)
                 tick = runner.tick(now)
                 if tick.zeta is not None:
                     seq = (seq + 1) & 0xFF
@@ -170,11 +179,11 @@ def simulate(collision: ScriptedCollision | None, trajectory: str, duration: flo
             counts = adc_counts(sensor, sim.motor_currents(s.tau) + offsets, sim.config.current_noise_counts, rng)
             amps = sensor.current_from_counts(counts) - driver_offsets
             stamp = t + jitter.sample_delay(rng)
-            out = mon.push_currents(stamp, int(round(t * 1e6)), amps)
-            out += mon.push_states(stamp, sim.servo_setpoints(), None, None)
+            out = watch.push_currents(stamp, int(round(t * 1e6)), amps)
+            out += watch.push_states(stamp, sim.servo_setpoints(), None, None)
             if t >= next_cam - 1e-12:
                 pose = s.pose + np.concatenate([rng.normal(0, POSE_NOISE[0], 3), rng.normal(0, POSE_NOISE[1], 3)])
-                out += mon.push_pose(t, pose)
+                out += watch.push_pose(t, pose)
                 if tracker is not None:
                     tracker.on_pose(t, pose)
                 next_cam += CAMERA_PERIOD
@@ -214,7 +223,7 @@ def simulate(collision: ScriptedCollision | None, trajectory: str, duration: flo
                      truth_link=log["link"].astype(int), truth_chain=log["chain"].astype(int),
                      truth_pose=log["plate_pose"], truth_zeta=log["zeta"], wrench_t=arr("wt")[order],
                      wrench_force=arr("wf", 3)[order], sim_seconds=t_end,
-                     counters=mon.counters())
+                     counters={**mon.counters(), "monitoring_lost": watch.lost_count})
 
 
 def replay(rec: RunRecord, spec: DetectorSpec, base_config: Any, scale: float = 1.0
