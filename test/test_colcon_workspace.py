@@ -20,7 +20,7 @@ PACKAGES = {"hexa_ros": REPO / "src" / "hexa_ros", "hexa_bringup": REPO / "hexa_
             "hexa_vision": REPO / "hexa_vision"}
 #: Python modules that are not ROS packages, by the rosdep key a package.xml names for them
 PYTHON_KEYS = {"numpy": "python3-numpy", "yaml": "python3-yaml", "cv2": "python3-opencv", "serial": "python3-serial",
-               "scipy": "python3-scipy"}
+               "scipy": "python3-scipy", "argcomplete": "python3-argcomplete"}
 #: modules a package imports that no package.xml can name: the ROS-free core (pip-installed) and its pip-only deps
 NOT_ROS = {"hexa", "rosbags", "setuptools", "foxglove", "pyrealsense2"}
 
