@@ -233,7 +233,7 @@ def test_demo_prints_its_domain_and_the_line_that_watches_it_from_a_second_shell
     shell = {k: v for k, v in os.environ.items() if not k.startswith(("ROS_", "RMW_", "FAST"))}
     assign, *argv = shlex.split(m.group(1))
     shell[assign.split("=")[0]] = assign.split("=")[1]
-    watch = subprocess.run([*HEXA, *argv[1:], "--timeout", "20"], env=shell, capture_output=True, text=True,
+    watch = subprocess.run([*HEXA, *argv[1:], "--timeout", "6"], env=shell, capture_output=True, text=True,
                            timeout=90)
     # no collision happens here: it found the publisher and waited for messages (exit 1), it did not miss the node
     assert watch.returncode == 1 and "0 of any messages on /hexa/collision" in watch.stderr, watch.stderr
