@@ -129,7 +129,7 @@ def test_sim_node_with_boards_holds_the_trajectorys_start_pose_until_the_first_c
     node = procs.start([PY, "-m", "hexa_bringup.sim_node", "--ros-args", "-r", "__ns:=/hexa", "-r", "__node:=sim",
                         "-p", "scenario:=none", "-p", "trajectory:=circle", "-p", "cameras:=false",
                         "-p", "duration:=1.5", "-p", f"link_dir:={tmp_path}", "-p", "truth_rate_hz:=50.0",
-                        "-p", "start_delay:=1.0"], ros_env)
+                        "-p", "start_delay:=4.0"], ros_env)   # time for discovery: /clock is volatile
     out, _err = peer.communicate(timeout=90)
     seen = json.loads(out.strip().splitlines()[-1])
     node.communicate(timeout=20)
