@@ -5,7 +5,8 @@
 (hexa_ros.cdr): at 1 kHz the message objects cost more to build and convert than the observer's update, and every
 message on a 1 kHz topic costs its subscriber ≈ 0.1 ms in the transport. Standard types beside them go out only while
 someone subscribes: `zeta_estimate` (sensor_msgs/JointState per sample), `external_wrench` (WrenchStamped in
-`plate`), `external_joint_torques` (JointState effort), `markers`. At their rates in sample time:
+`plate`), `external_joint_torques` (JointState effort), `markers` (who subscribes is looked up every 0.1 s of
+sample time, not per sample). At their rates in sample time:
 `plate_pose_estimate` and /tf. Collision events on `collision` and the latched `collision_state`.
 """
 from __future__ import annotations
@@ -17,7 +18,7 @@ from geometry_msgs.msg import PoseStamped, WrenchStamped
 from hexa_msgs.msg import CollisionEvent, Residual, ZetaEstimates
 from hexa_ros import cdr, markers, qos
 from hexa_ros.conversions import JOINT_NAMES, fill_pose_msg, wrench_stamped
-from hexa_ros.stamps import to_stamp
+from hexa_ros.stamps import stamp_parts, to_stamp
 from hexa_ros.tf import TfPublisher
 from sensor_msgs.msg import JointState
 from visualization_msgs.msg import MarkerArray
@@ -26,6 +27,8 @@ from hexa import frames
 from hexa.kinematics.hexa6rus import rotation_zyx
 
 NAN6 = [math.nan] * 6
+#: s of sample time between looks at who subscribes to the outputs sent only while subscribed
+SUBSCRIBERS_EVERY = 0.1
 
 
 class ObserverOutputs:
@@ -50,6 +53,8 @@ class ObserverOutputs:
         self.last = {"marker": -math.inf, "pose": -math.inf, "tf": -math.inf}
         self.batch: tuple[list[float], list[float], list[float], list[float]] = ([], [], [], [])
         self.events_sent = 0
+        self.subscribed: dict[str, bool] = {}
+        self._looked = -math.inf
 
     def _due(self, key: str, t: float, rate: str) -> bool:
         if t - self.last[key] >= 1.0 / max(float(self.set[rate]), 1e-3):
@@ -60,31 +65,35 @@ class ObserverOutputs:
     def publish(self, samples: list, detector: Any) -> None:
         """Every output of `samples` (MonitorSample); `detector` gives the thresholds the residual is shown with."""
         for s in samples:
-            out, stamp = s.residual, to_stamp(s.time)
+            out, (sec, nsec) = s.residual, stamp_parts(s.time)
+            if s.time - self._looked >= SUBSCRIBERS_EVERY or s.time < self._looked:
+                self._looked = s.time
+                self.subscribed = {k: getattr(self, k).get_subscription_count() > 0
+                                   for k in ("zeta", "wrench", "torques", "markers")}
             w = out.wrench.tolist()
             self.residual.publish(cdr.residual_to_cdr(
-                stamp.sec, stamp.nanosec, self.frame_id, out.r_zyz.tolist(), w[:3], w[3:],
-                detector.thresholds.tolist(), out.over.tolist(), out.servo_torque.tolist(),
-                detector.servo_thresholds.tolist(), out.servo_over.tolist(), bool(out.in_collision)))
+                sec, nsec, self.frame_id, out.r_zyz.tolist(), w[:3], w[3:], detector.thresholds.tolist(),
+                out.over.tolist(), out.servo_torque.tolist(), detector.servo_thresholds.tolist(),
+                out.servo_over.tolist(), bool(out.in_collision)))
             zeta, tau = s.zeta.tolist(), s.tau.tolist()
             zeta_dot = NAN6 if s.zeta_dot is None else s.zeta_dot.tolist()
             self._batch(s.time, zeta, zeta_dot, tau, bool(out.events))
-            if self.zeta.get_subscription_count() > 0:
-                self.zeta.publish(cdr.joint_state_to_cdr(stamp.sec, stamp.nanosec, "", JOINT_NAMES, zeta,
+            if self.subscribed["zeta"]:
+                self.zeta.publish(cdr.joint_state_to_cdr(sec, nsec, "", JOINT_NAMES, zeta,
                                                          [] if s.zeta_dot is None else zeta_dot, tau))
-            self._standard(out, stamp)
+            if self.subscribed["wrench"] or self.subscribed["torques"]:
+                self._standard(out, to_stamp(s.time))
             for ev in out.events:
                 self._event(ev)
             if self._due("pose", s.time, "pose_estimate_rate_hz"):
                 ps = PoseStamped()
-                ps.header.stamp, ps.header.frame_id = stamp, self.frame_id
+                ps.header.stamp, ps.header.frame_id = to_stamp(s.time), self.frame_id
                 fill_pose_msg(ps.pose, rotation_zyx(*out.pose[3:6]), out.pose[:3])
                 self.pose.publish(ps)
             if self._due("tf", s.time, "tf_rate_hz"):
-                self.tf.send(frames.robot_transforms(self.desc, out.pose, s.zeta), stamp)
-            if self.markers.get_subscription_count() > 0 and (self._due("marker", s.time, "marker_rate_hz")
-                                                               or out.events):
-                self.markers.publish(self._markers(out, stamp))
+                self.tf.send(frames.robot_transforms(self.desc, out.pose, s.zeta), to_stamp(s.time))
+            if self.subscribed["markers"] and (self._due("marker", s.time, "marker_rate_hz") or out.events):
+                self.markers.publish(self._markers(out, to_stamp(s.time)))
 
     def _batch(self, t: float, zeta: list, zeta_dot: list, tau: list, flush: bool) -> None:
         times, z, zd, ta = self.batch
@@ -93,8 +102,7 @@ class ObserverOutputs:
         zd += zeta_dot
         ta += tau
         if flush or t - times[0] >= float(self.set["zeta_batch_period"]) - 1e-9:
-            stamp = to_stamp(t)
-            self.zetas.publish(cdr.zeta_estimates_to_cdr(stamp.sec, stamp.nanosec, times, z, zd, ta))
+            self.zetas.publish(cdr.zeta_estimates_to_cdr(*stamp_parts(t), times, z, zd, ta))
             self.batch = ([], [], [], [])
 
     def _event(self, ev: Any) -> None:
@@ -110,10 +118,10 @@ class ObserverOutputs:
 
     def _standard(self, out: Any, stamp: Any) -> None:
         """The residual as a WrenchStamped in `plate` (moment about the plate centre) and as servo-space efforts."""
-        if self.wrench.get_subscription_count() > 0:
+        if self.subscribed["wrench"]:
             R = rotation_zyx(*out.pose[3:6])
             self.wrench.publish(wrench_stamped(frames.PLATE, stamp, R.T @ out.wrench[:3], R.T @ out.wrench[3:]))
-        if self.torques.get_subscription_count() > 0:
+        if self.subscribed["torques"]:
             js = JointState(name=list(JOINT_NAMES), effort=out.servo_torque.tolist())
             js.header.stamp = stamp
             self.torques.publish(js)

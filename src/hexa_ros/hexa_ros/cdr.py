@@ -38,6 +38,7 @@ class CdrImage:
 
 
 _U32 = {"<": struct.Struct("<I").unpack_from, ">": struct.Struct(">I").unpack_from}   # compiled once: 1 kHz streams
+_CURRENTS = {o: struct.Struct(o + "6d6H3I").unpack_from for o in "<>"}   # MotorCurrents after its frame_id
 
 
 class _Reader:
@@ -151,13 +152,14 @@ def motor_currents_from_cdr(buf: bytes | memoryview) -> tuple[float, np.ndarray,
     r = _Reader(buf)
     sec, nanosec = r.i32(), r.u32()
     r.string()                                  # frame_id
-    current = r.f64s(6)
-    r.skip_u16s(6)                              # raw ADC counts
-    r.u32()                                     # sequence
-    board_us = r.u32()
-    r.u32()                                     # gaps
+    r._align(8)
+    if r.pos + 72 > len(r.buf):
+        raise CdrError(f"{len(r.buf)} bytes: too short for a MotorCurrents")
+    # currents, raw ADC counts, sequence, board time, gaps: one unpack (no padding between them from here)
+    fields = _CURRENTS[r.order](r.buf, r.pos)
+    r.pos += 72
     setpoint = r.f64s() if r.pos + 4 <= len(r.buf) else np.zeros(0)
-    return sec + 1e-9 * nanosec, current, board_us, setpoint
+    return sec + 1e-9 * nanosec, np.array(fields[:6]), fields[13], setpoint
 
 
 def motor_currents_with_setpoint_field(buf: bytes) -> bytes:
