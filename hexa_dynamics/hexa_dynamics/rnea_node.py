@@ -109,22 +109,25 @@ class RneaNode(Node):
                            link=LINK_NAMES.get(msg.link, f"link {msg.link}"), chain=int(msg.chain),
                            point=np.array([msg.point.x, msg.point.y, msg.point.z]),
                            push_direction=np.array([v.x, v.y, v.z]))
-        self._publish(self.tracker.on_contact(c))
+        self.tracker.on_contact(c, emit=self._publish_one)   # each force as identified: a backfill takes a while
 
     def _publish(self, forces: list[ContactForce]) -> None:
         for f in forces:
-            w = ContactWrench(collision_id=f.collision_id, link=LINK_CODES[f.link], chain=f.chain, rank=f.rank,
-                              condition=f.condition, observable=f.observable, residual_norm=f.residual_norm,
-                              force_model=f.force_model)
-            w.header.stamp, w.header.frame_id = to_stamp(f.time), self.frame_id
-            w.point = markers.point(f.point)
-            w.force.x, w.force.y, w.force.z = (float(v) for v in f.force)
-            self.pub_wrench.publish(w)
-            self.tf.send([(self.frame_id, frames.CONTACT, frames.transform(np.eye(3), f.point))], w.header.stamp)
-            self.pub_force.publish(wrench_stamped(frames.CONTACT, w.header.stamp, f.force))
-            self.published += 1
-            if not f.backfilled and self.pub_markers.get_subscription_count() > 0:  # markers show the present
-                self.pub_markers.publish(self._markers(f, w.header.stamp))
+            self._publish_one(f)
+
+    def _publish_one(self, f: ContactForce) -> None:
+        w = ContactWrench(collision_id=f.collision_id, link=LINK_CODES[f.link], chain=f.chain, rank=f.rank,
+                          condition=f.condition, observable=f.observable, residual_norm=f.residual_norm,
+                          force_model=f.force_model)
+        w.header.stamp, w.header.frame_id = to_stamp(f.time), self.frame_id
+        w.point = markers.point(f.point)
+        w.force.x, w.force.y, w.force.z = (float(v) for v in f.force)
+        self.pub_wrench.publish(w)
+        self.tf.send([(self.frame_id, frames.CONTACT, frames.transform(np.eye(3), f.point))], w.header.stamp)
+        self.pub_force.publish(wrench_stamped(frames.CONTACT, w.header.stamp, f.force))
+        self.published += 1
+        if not f.backfilled and self.pub_markers.get_subscription_count() > 0:  # markers show the present
+            self.pub_markers.publish(self._markers(f, w.header.stamp))
 
     def _markers(self, f: ContactForce, stamp: Any) -> MarkerArray:
         rgba = (1.0, 0.2, 0.2, 1.0) if f.observable else (1.0, 0.6, 0.2, 1.0)
