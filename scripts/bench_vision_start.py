@@ -104,7 +104,7 @@ def main() -> int:
                         fill_stamp(ev.header.stamp, args.start)
                         fill_stamp(ev.onset, args.onset)
                         pub.publish(ev)
-                        seen["start_wall"] = time.monotonic()
+                        seen["start_wall"], seen["start_time"] = time.monotonic(), time.time()
                     if not ended and seen["clock"] >= args.end:
                         ev = CollisionEvent(event=CollisionEvent.END, id=1, axis=2, axis_name="fz")
                         fill_stamp(ev.header.stamp, args.end)
@@ -124,6 +124,7 @@ def main() -> int:
         lat = [t - frames[round(st, 6)] for t, st in seen["poses"] if round(st, 6) in frames]
         first = next((c for c in seen["contacts"] if c[2] == 1), None)
         out = {"rate": args.rate, "load_average": open("/proc/loadavg").read().split()[:3],
+               "start_published_unix_s": seen.get("start_time"),
                "start_to_first_contact_s": None if first is None or seen["start_wall"] is None
                else first[0] - seen["start_wall"],
                "contacts": [{"stamp": round(c[1], 3), "link": c[3], "chain": c[4],
