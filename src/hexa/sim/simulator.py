@@ -743,6 +743,24 @@ class Simulator:
         return (noisy_rgb(rgb, self.rgb_noise_sigma, bank),
                 depth_image_mm(depth, cfg, self.depth_noise_rel, bank))
 
+    def skip_render(self, camera: str) -> None:
+        """Advance `camera`'s image noise as `render` would, without rendering (a frame nobody wants): the frames
+        rendered after it are those of a run that rendered every frame.
+
+        Raises:
+            SimulatorError: unknown camera.
+        """
+        if camera not in self._cam_ids:
+            raise SimulatorError(f"unknown camera {camera!r}; cameras: {list(self._cam_ids)}")
+        bank = self._noise.get(camera)
+        if bank is None:
+            return
+        cfg = self.config.cameras[camera]
+        if self.rgb_noise_sigma > 0:                      # the draws of noisy_rgb and depth_image_mm, in order
+            bank.draw(cfg.width * cfg.height * 3)
+        if self.depth_noise_rel > 0:
+            bank.draw(cfg.width * cfg.height)
+
     def render_raw(self, camera: str) -> tuple[np.ndarray, np.ndarray]:
         """Noise-free colour and metric depth (float32 m, inf = nothing hit) of `camera`."""
         if self._renderer is None:
