@@ -4,7 +4,8 @@
     .venv/bin/python scripts/startup_false_starts.py [-n 20] [--trajectory circle] [--rtf 0.3] [--sim-seconds 4]
                                                       [--wall-limit 150] [--out DIR] [--json] [--stall-driver MS]
 
-Each run is the set-up for free motion of docs/troubleshooting.md: the shipped parameters with the simulator's `scenario: none` and its
+Each run is the set-up for free motion of docs/troubleshooting.md: the shipped parameters with the simulator's
+`scenario: none` and its
 `trajectory` set to the trajectory node's (the robot starts at rest at the trajectory's start pose), at real-time
 factor `--rtf`, until `--sim-seconds` of sim time (the simulator's `duration` ends the graph). Every START the
 observer logs is false (nothing touches the robot); those with an onset before the trajectory has run for 1 s (its
