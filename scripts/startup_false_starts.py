@@ -5,16 +5,15 @@
                                                       [--wall-limit 150] [--out DIR] [--json] [--stall-driver MS]
 
 Each run is the set-up for free motion of docs/troubleshooting.md: the shipped parameters with the simulator's
-`scenario: none` and its
-`trajectory` set to the trajectory node's (the robot starts at rest at the trajectory's start pose), at real-time
-factor `--rtf`, until `--sim-seconds` of sim time (the simulator's `duration` ends the graph). Every START the
-observer logs is false (nothing touches the robot); those with an onset before the trajectory has run for 1 s (its
-start blend) count as start-up STARTs, later ones are the loaded host's (docs/troubleshooting.md). Per run it prints
-the STARTs (axis, onset in sim s), the observer's `monitoring` transitions and the trajectory's states, read from the
-node logs; at the end the totals. Exit code 1 when a run had a start-up START. With `--stall-driver MS` the run's
-driver process is stopped for MS of wall time once the trajectory runs (a silent board): `monitoring` turns LOST
-naming the silent streams and the trajectory holds (it stays held: nothing calls resume).
-docs/monitoring.md has the figures.
+`scenario: none` and its `trajectory` set to the trajectory node's (the robot starts at rest at the trajectory's start
+pose), at real-time factor `--rtf`, until `--sim-seconds` of sim time (the simulator's `duration` ends the graph).
+Every START the observer logs is false (nothing touches the robot); those with an onset before the trajectory has run
+for 1 s (its start blend) count as start-up STARTs, later ones are the loaded host's (docs/troubleshooting.md). Per
+run it prints the STARTs (axis, onset in sim s), the observer's `monitoring` transitions and the trajectory's states,
+read from the node logs; at the end the totals. Exit code 1 when a run had a start-up START. With `--stall-driver MS`
+the run's driver process is stopped for MS of wall time once the trajectory runs (a silent board): `monitoring` turns
+LOST naming the silent streams and the trajectory holds (it stays held: nothing calls resume). docs/monitoring.md has
+the figures.
 """
 from __future__ import annotations
 
