@@ -12,6 +12,8 @@ from hexa.protocol import frames as fr
 from hexa.protocol.link import CurrentLink, LinkError, ServoLink
 from hexa.protocol.simavr import SERVO_PINS, SimavrBoard, simavr_counts
 
+pytestmark = pytest.mark.slow   # the firmware in simavr: left out of `make check`
+
 
 def _wait(cond, timeout=3.0):
     t_end = time.monotonic() + timeout
