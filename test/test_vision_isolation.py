@@ -127,6 +127,7 @@ def desc():
     return load_hexa()
 
 
+@pytest.mark.slow
 @needs_sim
 def test_isolation_accuracy_against_simulator_truth(desc) -> None:
     """24 feasible randomised contacts (8 per link, chains 1..6): median error ≤ 10 mm and link+chain ≥ 90 %.

@@ -78,8 +78,8 @@ def simulate(path: Callable[[np.ndarray], np.ndarray], duration: float, contact:
         rows.append((s.time, s.zeta, s.zeta_dot, s.zeta_ddot, s.tau, s.pose, g.force, g.point))
     sim.close()
     cols = list(zip(*rows))
-    arr = [np.asarray(c, dtype=float) for c in cols]
-    return SimRun(*arr, desc=desc)
+    a = [np.asarray(c, dtype=float) for c in cols]
+    return SimRun(a[0], a[1], a[2], a[3], a[4], a[5], a[6], a[7], desc=desc)
 
 
 def contact_point(desc: Any, zeta: np.ndarray, pose: np.ndarray, link: str, chain: int, fraction: Any) -> np.ndarray:
@@ -135,7 +135,7 @@ def pose_driven_residual(run: SimRun, params: HexaDynamicParameters, pose_noise:
     obs = ResidualObserver(params, ObserverConfig(kinematics="pose", gains=(25.0,) * 6, min_duration=0.01))
     rng = np.random.default_rng(seed)
     out = np.full((run.t.size, 6), np.nan)
-    events = []
+    events: list[Any] = []
     for k, t in enumerate(run.t):
         if k % camera_every == 0:
             noise = np.concatenate([rng.normal(scale=pose_noise[0], size=3), rng.normal(scale=pose_noise[1], size=3)])
@@ -173,7 +173,7 @@ def contact_figures(run: SimRun, params: HexaDynamicParameters, link: str, chain
 
 
 FREE_TRAJECTORIES = ("circle", "helix", "ellipse")
-CONTACT_CASES = (
+CONTACT_CASES: tuple[dict[str, Any], ...] = (
     {"link": "plate", "chain": 0, "fraction": (0.06, 0.03, 0.0), "force": (1.5, -2.0, 3.0)},
     {"link": "plate", "chain": 0, "fraction": (-0.05, 0.05, 0.0), "force": (-3.0, 1.0, -2.0)},
     {"link": "rod", "chain": 1, "fraction": 0.5, "force": (2.0, 1.0, -1.5)},

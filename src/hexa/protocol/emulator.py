@@ -474,7 +474,8 @@ class MegaEmulator(_BoardEmulator):
 
     kind = fr.BOARD_CURRENT
 
-    def __init__(self, current_source: Callable[[float], Sequence[float]] | None = None, units: str = "amps",
+    def __init__(self, current_source: Callable[[float], Sequence[float] | np.ndarray] | None = None,
+                 units: str = "amps",
                  sensor: CurrentSensorModel = DEFAULT_SENSOR, noise_counts: float = 0.0, seed: int = 0,
                  link: str | os.PathLike | None = None, tx_filter: Callable[[bytes], bytes] | None = None,
                  clock: Callable[[], float] = time.monotonic) -> None:

@@ -144,7 +144,7 @@ def _camera(name: str, d: Mapping[str, Any]) -> CameraConfig:
     fwd = cam.look_at - cam.position
     if np.linalg.norm(fwd) < 1e-6:
         raise SimConfigError(f"cameras.{name}: look_at {cam.look_at.tolist()} equals position")
-    if np.linalg.norm(np.cross(fwd, cam.up)) < 1e-6 * np.linalg.norm(fwd) * max(np.linalg.norm(cam.up), 1e-12):
+    if np.linalg.norm(np.cross(fwd, cam.up)) < 1e-6 * np.linalg.norm(fwd) * max(float(np.linalg.norm(cam.up)), 1e-12):
         raise SimConfigError(f"cameras.{name}.up {cam.up.tolist()} is parallel to the viewing direction")
     if cam.depth_max <= cam.depth_min:
         raise SimConfigError(f"cameras.{name}.depth_max {cam.depth_max} must exceed depth_min {cam.depth_min}")

@@ -342,7 +342,7 @@ def write_debug_images(desc: Any, folder: str, seed: int = 0) -> list[str]:
                 box = dets[0].box if dets else None
             except Exception:  # noqa: BLE001 - no weights: no box in the mosaic
                 box = None
-        img = debug_image(est.per_camera[est.camera], iso, geom, box=box)
+        img = debug_image(est.per_camera[est.camera], iso, geom, box=None if box is None else box.tolist())
         path = os.path.join(folder, f"vision_{s.link}.png")
         cv2.imwrite(path, cv2.cvtColor(img, cv2.COLOR_RGB2BGR))
         done.append(s.link)
