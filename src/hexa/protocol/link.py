@@ -16,7 +16,7 @@ import select
 import threading
 import time
 from dataclasses import dataclass, field
-from typing import Callable, Sequence
+from typing import Callable, Self, Sequence
 
 import serial
 
@@ -122,7 +122,7 @@ class BoardLink:
         self._token = 0
 
     # --------------------------------------------------------------------------------------------- lifecycle
-    def start(self) -> "BoardLink":
+    def start(self) -> Self:
         if self._thread is None:
             self._stop.clear()
             self._thread = threading.Thread(target=self._run, name=f"{type(self).__name__}({self.port})",
@@ -138,7 +138,7 @@ class BoardLink:
         self._close(count=False)
         self._set_state(DISCONNECTED)
 
-    def __enter__(self) -> "BoardLink":
+    def __enter__(self) -> Self:
         return self.start()
 
     def __exit__(self, *exc: object) -> None:

@@ -296,6 +296,8 @@ class Simulator:
         self._step_count = 0
         self._tau_hist_t = np.full(4096, -np.inf)
         self._tau_hist = np.zeros((4096, 6))
+        #: the last consistent sample: t, qpos, qvel, qacc, tau, targets, contact (set by every step)
+        self._sample: tuple[Any, ...] = ()
 
         # settle under gravity at the start targets, then restart the clock at t = 0
         mujoco.mj_forward(m, self.data)
@@ -309,7 +311,6 @@ class Simulator:
         self._step_count = 0
         self._latch_at = None                 # the pulse frames start with the clock
         self._tau_hist_t[:] = -np.inf
-        self._sample = None
         self._step_once(use_schedule=True, advance=False)
 
         self._renderer: RGBDRenderer | None = None
@@ -640,9 +641,9 @@ class Simulator:
     # ------------------------------------------------------------------ reading
     def _plate_pose_of(self, qpos: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         a = self._plate_qpos
-        R = np.zeros(9)
-        mujoco.mju_quat2Mat(R, qpos[a + 3:a + 7])
-        R = R.reshape(3, 3)
+        r9 = np.zeros(9)
+        mujoco.mju_quat2Mat(r9, qpos[a + 3:a + 7])
+        R = r9.reshape(3, 3)
         return np.concatenate([qpos[a:a + 3], zyx_from_matrix(R)]), R
 
     def _truth_of(self, sample: tuple) -> GroundTruth:

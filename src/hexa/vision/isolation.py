@@ -666,7 +666,9 @@ class CollisionIsolator:
 
 
 # ----------------------------------------------------------------------------------------------------------------
-def _tile(img: np.ndarray, title: str, size: tuple[int, int]) -> np.ndarray:
+def _tile(img: np.ndarray | None, title: str, size: tuple[int, int]) -> np.ndarray:
+    if img is None:    # a step that did not run: an empty tile
+        img = np.zeros((size[1], size[0], 3), np.uint8)
     if img.dtype == bool:
         img = img.astype(np.uint8) * 255
     if img.ndim == 2:
