@@ -225,7 +225,7 @@ def upsrpu_indices_from_screws(desc: UpsrpuDescription, X: np.ndarray) -> Singul
     return indices_from_screws(np.linalg.det(J), T, C)
 
 
-def hexa_indices(desc: Any, pose: np.ndarray, zeta: np.ndarray | None = None) -> SingularityReport:
+def hexa_indices(desc: HexaDescription, pose: np.ndarray, zeta: np.ndarray | None = None) -> SingularityReport:
     """det J_D and the fifteen Omega_ij of the Hexa at `pose` (x, y, z, alpha, beta, gamma).
 
     Transmission wrench screws: unit force along each rod through its spherical joint (DESIGN.md). The
@@ -286,7 +286,7 @@ class SingularityMonitor:
         """
         if self.robot == "upsrpu":
             return upsrpu_indices(cast("UpsrpuDescription", self.desc), pose)
-        return hexa_indices(self.desc, pose)
+        return hexa_indices(cast("HexaDescription", self.desc), pose)
 
     def near(self, report: SingularityReport) -> bool:
         """True when `report` is within the limits (Algorithm 1's test)."""

@@ -29,6 +29,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 if TYPE_CHECKING:
+    from hexa.robots.hexa_description import HexaDescription
     from numpy.typing import NDArray
 
 GRAVITY = 9.81  # as the simulator (MJCF gravity="0 0 -9.81")
@@ -119,7 +120,7 @@ class HexaDynamicParameters:
             raise DynamicsError(f"kappa must be in [0, 1], got {self.kappa}")
 
     @classmethod
-    def from_description(cls, desc: Any = None) -> HexaDynamicParameters:
+    def from_description(cls, desc: HexaDescription | None = None) -> HexaDynamicParameters:
         """Parameters from the robot description (default: `load_hexa()`); inertias are taken as given there."""
         if desc is None:
             from hexa.robots.hexa_description import load_hexa
@@ -128,7 +129,7 @@ class HexaDynamicParameters:
         return cls(**_parameters_from_description(desc))
 
 
-def _parameters_from_description(desc: Any) -> dict:
+def _parameters_from_description(desc: HexaDescription) -> dict:
     """Map the description's fields to HexaDynamicParameters keyword arguments (one place that knows its names)."""
     from hexa.dynamics._desc_adapter import dynamic_fields
 

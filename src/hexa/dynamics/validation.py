@@ -13,13 +13,16 @@ import argparse
 import json
 import sys
 from dataclasses import dataclass
-from typing import Any, Callable
+from typing import TYPE_CHECKING, Any, Callable
 
 import numpy as np
 
 from hexa.dynamics.identification import ContactForceEstimate, identify_contact_force
 from hexa.dynamics.lagrange import HexaDynamicParameters, motion_from_joint_rates
 from hexa.dynamics.observer import direct_residual_batch, momentum_residual_batch
+
+if TYPE_CHECKING:
+    from hexa.robots.hexa_description import HexaDescription
 
 R_LOW = 2.0
 
@@ -36,7 +39,7 @@ class SimRun:
     pose: np.ndarray
     force: np.ndarray
     point: np.ndarray
-    desc: Any
+    desc: HexaDescription
 
 
 def _trajectory(name: str) -> Callable[[np.ndarray], np.ndarray]:
@@ -47,7 +50,7 @@ def _trajectory(name: str) -> Callable[[np.ndarray], np.ndarray]:
 
 
 def simulate(path: Callable[[np.ndarray], np.ndarray], duration: float, contact: dict | None = None,
-             desc: Any = None) -> SimRun:
+             desc: HexaDescription | None = None) -> SimRun:
     """Drive the simulated Hexa along `path(t) -> poses (N, 6)` for `duration` s; optional contact dict
     {link, chain, fraction (along the arm/rod, or an offset (3,) in {P} for the plate), force (3,), t_on}."""
     from hexa.kinematics import hexa6rus as kin
@@ -82,7 +85,8 @@ def simulate(path: Callable[[np.ndarray], np.ndarray], duration: float, contact:
     return SimRun(a[0], a[1], a[2], a[3], a[4], a[5], a[6], a[7], desc=desc)
 
 
-def contact_point(desc: Any, zeta: np.ndarray, pose: np.ndarray, link: str, chain: int, fraction: Any) -> np.ndarray:
+def contact_point(desc: HexaDescription, zeta: np.ndarray, pose: np.ndarray, link: str, chain: int,
+                  fraction: Any) -> np.ndarray:
     """A point on the link: the plate at offset `fraction` (3,) in {P}; an arm/rod at `fraction` of its length."""
     from hexa.kinematics import hexa6rus as kin
 

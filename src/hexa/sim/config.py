@@ -6,11 +6,14 @@ They live at top level of src/hexa/robots/hexa.yaml next to the geometry (one YA
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Any, Mapping
+from typing import TYPE_CHECKING, Any, Mapping
 
 import numpy as np
 
 from hexa.robots.schema import RobotDescriptionError, require_array, require_float, require_str
+
+if TYPE_CHECKING:
+    from hexa.robots.hexa_description import HexaDescription
 
 CAMERA_NAMES = ("cam_top", "cam_side")
 
@@ -222,7 +225,7 @@ def parse_sim_config(sections: Mapping[str, Any]) -> SimConfig:
     )
 
 
-def sim_config_of(desc: Any) -> SimConfig:
+def sim_config_of(desc: HexaDescription) -> SimConfig:
     """The validated simulator configuration of a HexaDescription (its `section(name)` accessor)."""
     sections = {}
     for top in ("cameras", "markers", "appearance", "sim"):

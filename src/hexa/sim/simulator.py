@@ -19,7 +19,7 @@ import dataclasses
 import threading
 from collections import deque
 from dataclasses import dataclass, field
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -31,6 +31,9 @@ from hexa.vision.camera import CameraModel
 from hexa.sim.scenarios import ScenarioSpec, ScriptedCollision, draw_collision, load_scenario
 
 import mujoco  # noqa: E402  (after hexa.sim.camera set MUJOCO_GL)
+
+if TYPE_CHECKING:
+    from hexa.robots.hexa_description import HexaDescription
 
 LINK_CODES = {"plate": 0, "arm": 1, "rod": 2, "none": 255}   # as hexa_msgs/Contact (UNKNOWN = 255: no contact)
 
@@ -122,7 +125,7 @@ def _poses_from_qpos(pq: np.ndarray) -> np.ndarray:
     return np.column_stack([pq[:, :3], np.arctan2(r10, r00), -np.arcsin(np.clip(r20, -1, 1)), np.arctan2(r21, r22)])
 
 
-def _desc_default(desc: Any) -> Any:
+def _desc_default(desc: HexaDescription | None) -> HexaDescription:
     if desc is not None:
         return desc
     from hexa.robots.hexa_description import load_hexa
@@ -170,7 +173,7 @@ class Simulator:
             description's.
     """
 
-    def __init__(self, desc: Any = None, seed: int = 0, scenario: Any = None, cameras: bool = True,
+    def __init__(self, desc: HexaDescription | None = None, seed: int = 0, scenario: Any = None, cameras: bool = True,
                  pose: np.ndarray | None = None, drive: str | None = None, randomize: bool = False,
                  settle: float = 0.5, trajectory: str | None = None, lead_in: float = 0.0,
                  contact_model: str = "scripted", servo_frame_period: float | None = None,

@@ -24,12 +24,15 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from dataclasses import dataclass, field
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import cv2
 import numpy as np
 
 from hexa.vision.camera import CameraModel
+
+if TYPE_CHECKING:
+    from hexa.robots.hexa_description import HexaDescription
 
 LINK_PLATE, LINK_ARM, LINK_ROD, LINK_UNKNOWN = 0, 1, 2, 255
 LINK_NAMES = {LINK_PLATE: "plate", LINK_ARM: "arm", LINK_ROD: "rod", LINK_UNKNOWN: "none"}
@@ -57,7 +60,7 @@ class RobotGeometry:
     plate_half_thickness: float
 
     @classmethod
-    def from_state(cls, desc: Any, pose: np.ndarray, zeta: np.ndarray | None = None) -> RobotGeometry:
+    def from_state(cls, desc: HexaDescription, pose: np.ndarray, zeta: np.ndarray | None = None) -> RobotGeometry:
         """Geometry from the plate pose [x y z α β γ] (m, rad) and arm angles ζ (IK of the pose when None)."""
         from hexa.kinematics import hexa6rus as kin
 
@@ -95,7 +98,7 @@ class RobotGeometry:
         return loc @ self.T_plate[:3, :3].T + self.T_plate[:3, 3]
 
 
-def _appearance(desc: Any) -> dict[str, float]:
+def _appearance(desc: HexaDescription) -> dict[str, float]:
     try:
         ap = desc.section("appearance")
     except Exception:  # noqa: BLE001 - description without the simulator's section: nominal sizes
