@@ -28,7 +28,7 @@ class Peer:
     def __init__(self, node) -> None:
         from diagnostic_msgs.msg import DiagnosticArray
         from geometry_msgs.msg import PoseStamped
-        from hexa_msgs.msg import CollisionEvent, Contact, MotorCurrents, Residual
+        from hexa_msgs.msg import CollisionEvent, Contact, MotorCurrents, Residual, ZetaEstimates
         from hexa_ros import qos
         from sensor_msgs.msg import JointState
 
@@ -53,7 +53,7 @@ class Peer:
                     "plate_pose": pub(PoseStamped, f"{NS}/plate_pose", qos.RELIABLE),
                     "plate_pose_estimate": pub(PoseStamped, f"{NS}/plate_pose_estimate", qos.RELIABLE),
                     "joint_commands": pub(JointState, f"{NS}/joint_commands", qos.RELIABLE),
-                    "zeta_estimate": pub(JointState, f"{NS}/zeta_estimate", qos.STREAM),
+                    "zeta_estimates": pub(ZetaEstimates, f"{NS}/zeta_estimates", qos.STREAM),
                     "contact": pub(Contact, f"{NS}/contact", qos.EVENT)}
 
     @staticmethod
@@ -107,7 +107,8 @@ class Peer:
         m.header.stamp = self.stamp(t)
         return m
 
-    def currents(self, t: float, board_us: int, current=(0.0,) * 6):
+    def currents(self, t: float, board_us: int, current=(0.0,) * 6, setpoint=None):
+        """A motor_currents; its set-points those of the newest one received unless given."""
         from hexa_msgs.msg import MotorCurrents
 
         m = MotorCurrents()
@@ -115,6 +116,14 @@ class Peer:
         m.current = [float(v) for v in current] if len(current) == 6 else [0.0] * 6
         m.board_time_us = int(board_us) & 0xFFFFFFFF
         m.sequence = 0
+        m.setpoint = list(self.last_mc.setpoint) if setpoint is None else [float(v) for v in setpoint]
+        return m
+
+    def zetas(self, t: float, zeta):
+        from hexa_msgs.msg import ZetaEstimates
+
+        m = ZetaEstimates(time=[float(t)], zeta=[float(v) for v in zeta], zeta_dot=[0.0] * 6, tau=[0.0] * 6)
+        m.header.stamp = self.stamp(t)
         return m
 
     def pose(self, t: float, p, q):
@@ -136,7 +145,7 @@ class Peer:
         pp = [pose.pose.position.x, pose.pose.position.y, pose.pose.position.z]
         o = pose.pose.orientation
         pq = [o.x, o.y, o.z, o.w]
-        nan, inf = float("nan"), float("inf")
+        nan = float("nan")
         js, cur, ps = self.joint_state, self.currents, self.pose
         from hexa_msgs.msg import Contact
 
@@ -144,12 +153,9 @@ class Peer:
         contact.header.stamp, contact.header.frame_id = self.stamp(s), "base"
         contact.point.x = nan
         return [
-            ("states_future", "joint_states", js(s + 1e6, ZETA, (), [0.0] * 6)),
-            ("states_past", "joint_states", js(s - 1e3, ZETA, (), [0.0] * 6)),
-            ("states_nan", "joint_states", js(s + 0.0005, [nan] * 6, (), [0.0] * 6)),
-            ("states_inf_effort", "joint_states", js(s + 0.0005, ZETA, (), [inf] * 6)),
-            ("states_size", "joint_states", js(s + 0.0005, ZETA[:5], (), [0.0] * 5, NAMES[:5])),
-            ("states_range", "joint_states", js(s + 0.0005, [1e9] * 6, (), [0.0] * 6)),
+            ("setpoint_nan", "motor_currents", cur(s + 0.0005, b + 1, setpoint=[nan] * 6)),
+            ("setpoint_size", "motor_currents", cur(s + 0.0005, b + 1, setpoint=ZETA[:5])),
+            ("setpoint_range", "motor_currents", cur(s + 0.0005, b + 1, setpoint=[1e9] * 6)),
             ("currents_board_future", "motor_currents", cur(s, b + 2_000_000_000)),
             ("currents_board_past", "motor_currents", cur(s, b - 1_000_000_000)),
             ("currents_stamp_future", "motor_currents", cur(s + 1e6, b + 1)),
@@ -163,8 +169,8 @@ class Peer:
             ("pose_jump", "plate_pose", ps(sp + 0.005, [pp[0] + 0.05, pp[1], pp[2]], pq)),   # 10 m/s
             ("estimate_quaternion", "plate_pose_estimate", ps(s, pp, [0.0, 0.0, 0.0, 2.0])),
             ("estimate_far", "plate_pose_estimate", ps(s, [0.0, 0.0, 10.0], pq)),
-            ("zeta_nan", "zeta_estimate", js(s, [nan] * 6, [0.0] * 6, [0.0] * 6)),
-            ("zeta_past", "zeta_estimate", js(s - 1e3, ZETA, [0.0] * 6, [0.0] * 6)),
+            ("zeta_nan", "zeta_estimates", self.zetas(s, [nan] * 6)),
+            ("zeta_past", "zeta_estimates", self.zetas(s - 1e3, ZETA)),
             ("contact_nan", "contact", contact),
             ("command_huge", "joint_commands", js(s, [1e9] * 6)),
             ("command_nan", "joint_commands", js(s, [nan] * 6)),

@@ -53,6 +53,13 @@ def test_driver_commands_pulses_publishes_currents_and_effort_and_calibrates(tmp
         expected = tuple(s.pulse_from_angle(z) for s, z in zip(servos, zeta))
         assert wait_for(lambda: expected in got, 5.0), (expected, got[-3:])
         assert wait_for(lambda: np.allclose(probe.states[-1][1].position, zeta), 3.0)
+        # each motor_currents carries the set-points of its sample: its joint_states' position (same stamp)
+        by_stamp = {(j.header.stamp.sec, j.header.stamp.nanosec): list(j.position) for _, j in probe.states[-50:]}
+        pairs = [(list(c.setpoint), by_stamp.get((c.header.stamp.sec, c.header.stamp.nanosec)))
+                 for _, c in probe.currents[-40:]]
+        assert sum(js is not None for _, js in pairs) >= 20
+        assert all(np.allclose(sp, js, equal_nan=True) for sp, js in pairs if js is not None), pairs[-3:]
+        assert np.allclose(probe.currents[-1][1].setpoint, zeta)
 
         # NaN, inf, 1e9 rad, a wrong size: rejected (nothing sent, the last good command stays), counted by reason
         n = len(got)

@@ -141,9 +141,13 @@ def test_a_contact_arriving_after_the_end_is_backfilled_from_its_image_time_to_t
 def test_a_late_contact_of_the_collision_in_progress_is_backfilled_then_identified_now():
     tr = _tracker(rate_hz=100.0)
     _run(tr, 0.0, 0.9, {_k(0.5): lambda: tr.on_collision("START", 3, 0.5)})
-    forces = tr.on_contact(_plate_contact(3, 0.6))
+    emitted = []      # (force, identifications done when it was handed over)
+    forces = tr.on_contact(_plate_contact(3, 0.6), emit=lambda f: emitted.append((f, tr.forces)))
     assert [f.backfilled for f in forces] == [True] * 30 + [False]
     assert forces[0].time == pytest.approx(0.6) and forces[-1].time == pytest.approx(0.899)
+    # each force is handed to `emit` as soon as it is identified, in the order returned: the first one before the
+    # other 30 identifications are done
+    assert [f for f, _ in emitted] == forces and [n for _, n in emitted] == list(range(1, 32))
 
 
 def test_no_backfill_without_history_nor_beyond_it():

@@ -92,3 +92,38 @@ def test_monitor_rejects_a_bad_setting_naming_it():
         MonitorConfig(zeta_source="guess")
     with pytest.raises(ValueError, match="pose_delay"):
         MonitorConfig(pose_delay=2.0)
+
+
+def test_monitor_takes_the_set_points_a_current_sample_carries_and_falls_back_to_joint_states():
+    """motor_currents with their set-points: the same samples as paired with joint_states; joint_states is then
+    ignored (the monitoring watch expects motor_currents only); bad set-points cost only their sample, counted by
+    reason; a stream without them (an older bag) pairs with joint_states again."""
+    from hexa.dynamics.monitoring import MonitoringWatch
+
+    desc = load_hexa()
+    push = np.array([0.0, 0.0, 0.8, 0.0, 0.0, 0.0])
+    _, s0, samples = _streams(300, push)
+    runs = []
+    for carried in (False, True):
+        mon = CollisionMonitor(desc, MonitorConfig(sim_clock=True))
+        mon.observer.update_pose(0.0, s0.pose)
+        mon.estimator.update_camera(0.0, s0.pose)
+        out = []
+        for stamp, board_us, cur, cmd in samples:
+            out += mon.push_currents(stamp, board_us, cur, cmd if carried else [])
+            out += mon.push_states(stamp, cmd + (0.3 if carried else 0.0), None, None)   # ignored when carried
+        assert mon.carries_setpoint == carried and mon.sequencer.unpaired == 0
+        assert MonitoringWatch(mon).streams == (("motor_currents",) if carried else ("joint_states", "motor_currents"))
+        runs.append([(s.time, s.residual.wrench.tolist(), [e.kind for e in s.residual.events]) for s in out])
+    assert len(runs[1]) >= 280 and runs[0] == runs[1]
+    stamp, board_us, cur, cmd = samples[-1]
+    bad = [("setpoint_non_finite", [np.nan] * 6), ("setpoint_bad_shape", cmd[:5]), ("setpoint_range", cmd + 10.0)]
+    for k, (reason, sp) in enumerate(bad):
+        assert mon.push_currents(stamp + 0.005 * (k + 1), board_us + 5000 * (k + 1), cur, sp) == []
+        assert mon.counters()[f"reject_input_{reason}"] == 1
+    n = len(bad) + 1
+    assert len(mon.push_currents(stamp + 0.005 * n, board_us + 5000 * n, cur, cmd)) == 1   # the next good one
+    n += 1
+    assert mon.push_currents(stamp + 0.005 * n, board_us + 5000 * n, cur) == []    # no set-points: waits for its
+    assert not mon.carries_setpoint                                                  # joint_states
+    assert len(mon.push_states(stamp + 0.005 * n, cmd, None, None)) == 1

@@ -104,3 +104,22 @@ def test_bad_settings_are_refused_naming_them():
         SampleSequencer(mode="fast")
     with pytest.raises(EstimationError, match="pose_delay"):
         SampleSequencer(pose_delay=-1.0)
+
+
+def test_a_current_sample_carrying_its_command_is_released_at_once_with_the_paired_streams_sequence():
+    """push_sample (motor_currents with its set-points): no pairing, the same samples and poses as the two streams
+    paired; messages left waiting by a stream that carried its commands apart before are dropped as unpaired."""
+    cur, js, poses = _streams(40)
+    reference = _feed(SampleSequencer(pose_delay=0.1), poses + cur + js)
+    seq = SampleSequencer(pose_delay=0.1)
+    out = _feed(seq, poses)
+    for c, j in zip(cur, js):
+        got = seq.push_sample(c[1], c[2], c[3], j[2])
+        assert [o[0] for o in got][-1:] == ["sample"] and got[-1][1] == c[2]          # released at once
+        out += [(o[0], o[1], tuple(np.round(o[2], 9)) if o[0] == "pose" else (tuple(o[2]), tuple(o[3])))
+                for o in got]
+    assert out == reference and seq.board and seq.unpaired == 0
+    seq = SampleSequencer(pose_delay=0.1)
+    _feed(seq, [cur[0], js[1]])                       # a lone motor_currents and a lone joint_states wait
+    assert seq.push_sample(cur[2][1], cur[2][2], cur[2][3], js[2][2])[-1][1] == cur[2][2]
+    assert seq.unpaired == 2

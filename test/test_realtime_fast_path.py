@@ -16,6 +16,17 @@ def monitored():
     return stream, out, mon
 
 
+def test_set_points_carried_by_the_current_samples_give_the_paired_streams_output(monitored):
+    """motor_currents with their set-points (one input per sample) = motor_currents + joint_states paired by stamp
+    (bags recorded before the field): the same samples, residuals and events."""
+    stream, out, mon = monitored
+    ref, ref_mon = run_monitor(stream, carried=False)
+    assert mon.carries_setpoint and not ref_mon.carries_setpoint
+    assert [s.time for s in out] == [s.time for s in ref]
+    np.testing.assert_array_equal([s.residual.wrench for s in out], [s.residual.wrench for s in ref])
+    assert [e for s in out for e in s.residual.events] == [e for s in ref for e in s.residual.events]
+
+
 def test_the_benchmark_stream_is_the_plate_collision_at_1khz(monitored):
     stream, out, mon = monitored
     t = np.array([s[0] for s in stream.samples])

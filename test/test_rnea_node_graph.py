@@ -56,19 +56,19 @@ def test_a_contact_arriving_after_the_collision_ended_is_identified_over_the_who
 
 
 def test_rnea_node_turns_its_messages_into_tracker_calls_and_results_into_contact_wrench(ros_domain_id, monkeypatch):
-    """zeta_estimate with the joints in any name order, plate_pose, collision and contact reach the tracker as plain
-    values; each result leaves as a ContactWrench stamped with its sample time, and as a WrenchStamped in the `contact`
-frame that /tf puts at the point; markers only with a subscriber."""
+    """zeta_estimates (several samples per message, as bytes), plate_pose, collision and contact reach the tracker
+    as plain values in sample order; each result leaves as a ContactWrench stamped with its sample time, and as a
+    WrenchStamped in the `contact` frame that /tf puts at the point; markers only with a subscriber."""
     import numpy as np
     import rclpy
     from geometry_msgs.msg import PoseStamped
     from hexa_msgs.msg import CollisionEvent, Contact
-    from sensor_msgs.msg import JointState
 
     from hexa.dynamics.contact_force import ContactForceTracker, LocatedContact
     from hexa.kinematics import hexa6rus
     from hexa.trajectories import TRAJECTORIES
     from hexa_dynamics.rnea_node import RneaNode
+    from hexa_ros.cdr import zeta_estimates_to_cdr
     from hexa_ros.conversions import fill_pose_msg
     from hexa_ros.stamps import to_sec, to_stamp
 
@@ -94,11 +94,21 @@ frame that /tf puts at the point; markers only with a subscriber."""
         fill_pose_msg(ps.pose, hexa6rus.rotation_zyx(*pose[0, 3:]), pose[0, :3])
         node._on_pose(ps)
         ref.on_pose(to_sec(ps.header.stamp), pose[0])
-        names = [f"arm_{i}" for i in (6, 5, 4, 3, 2, 1)]
         point = pose[250, :3] + np.array([0.02, 0.01, 0.0])
-        expected = []
+        expected, batch = [], []
+
+        def send() -> None:   # the samples so far, as the observer batches them
+            if batch:
+                rows = [(T0 + t[j], zeta[j], zeta_dot[j], tau[j]) for j in batch]
+                s = to_stamp(rows[-1][0])
+                flat = (np.concatenate([r[i] for r in rows]).tolist() for i in (1, 2, 3))
+                node._on_zeta(zeta_estimates_to_cdr(s.sec, s.nanosec, [r[0] for r in rows], *flat))
+                batch.clear()
+
         for k in range(len(t)):
             stamp = to_stamp(T0 + t[k])
+            if k in (200, 250) or len(batch) == 10:
+                send()
             if k == 200:
                 ev = CollisionEvent(event=CollisionEvent.START, id=5)
                 ev.header.stamp = stamp
@@ -110,11 +120,9 @@ frame that /tf puts at the point; markers only with a subscriber."""
                 c.point.x, c.point.y, c.point.z = (float(v) for v in point)
                 node._on_contact(c)
                 expected += ref.on_contact(LocatedContact(to_sec(stamp), 5, "plate", 0, point, np.zeros(3)))
-            js = JointState(name=names)
-            js.header.stamp = stamp
-            js.position, js.velocity, js.effort = (v[k][::-1].tolist() for v in (zeta, zeta_dot, tau))
-            node._on_zeta(js)
-            expected += ref.step_state(to_sec(stamp), zeta[k], zeta_dot[k], tau[k])
+            batch.append(k)
+            expected += ref.step_state(T0 + t[k], zeta[k], zeta_dot[k], tau[k])
+        send()
         assert len(wrenches) == len(expected) >= 10 and markers == []          # nobody subscribes to markers
         for w, f in zip(wrenches, expected):
             assert to_sec(w.header.stamp) == pytest.approx(f.time, abs=1e-9) and w.collision_id == 5
@@ -129,11 +137,10 @@ frame that /tf puts at the point; markers only with a subscriber."""
             assert [cf.wrench.force.x, cf.wrench.force.y, cf.wrench.force.z] == pytest.approx(f.force.tolist())
             t3 = tr.transform.translation
             assert [t3.x, t3.y, t3.z] == pytest.approx(f.point.tolist()) and tr.transform.rotation.w == 1.0
-        js = JointState(name=names, position=[0.0] * 6, effort=[0.0] * 6)   # no velocity
-        node._on_zeta(js)
-        js = JointState(name=list("abcdef"), position=[0.0] * 6, velocity=[0.0] * 6, effort=[0.0] * 6)
-        node._on_zeta(js)
-        assert node.rejects == {"bad_joint_names": 1, "no_velocity": 1}
+        node._on_zeta(zeta_estimates_to_cdr(200, 0, [200.0], [0.0] * 6, [float("nan")] * 6, [0.0] * 6))  # no ζ̇
+        node._on_zeta(zeta_estimates_to_cdr(200, 0, [200.0, 200.001], [0.0] * 6, [0.0] * 6, [0.0] * 6))  # 1 row
+        node._on_zeta(b"\x00\x01")
+        assert node.rejects == {"bad_message": 2, "no_velocity": 1}
     finally:
         node.destroy_node()
         rclpy.shutdown()

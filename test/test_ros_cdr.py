@@ -98,8 +98,47 @@ def test_driver_streams_read_in_place_equal_rclpy():
     mc = MotorCurrents(current=[0.25 * k - 1 for k in range(6)], raw=[512 + k for k in range(6)], sequence=77,
                        board_time_us=4_000_000_123, gaps=2)
     mc.header.stamp, mc.header.frame_id = Time(sec=3, nanosec=999), "b"
-    t, cur, board = motor_currents_from_cdr(serialize_message(mc))
-    assert (t, board) == (3 + 999e-9, 4_000_000_123) and cur.tolist() == list(mc.current)
+    raw = serialize_message(mc)
+    t, cur, board, setpoint = motor_currents_from_cdr(raw)
+    assert (t, board) == (3 + 999e-9, 4_000_000_123) and cur.tolist() == list(mc.current) and setpoint.size == 0
+    # a message recorded before the set-point field existed ends after `gaps` (the 72 bytes from the currents on
+    # keep it 8-aligned: no padding): read as no set-points, and `hexa play` sends it with the empty field appended
+    end = 4 + 8 + 4 + len("b") + 1
+    end += (-(end - 4)) % 8 + 72
+    old = raw[:end]
+    assert motor_currents_from_cdr(old)[2] == board
+    assert motor_currents_from_cdr(old)[3].size == 0
+    from rclpy.serialization import deserialize_message
+
+    from hexa_ros.cdr import motor_currents_with_setpoint_field
+    assert deserialize_message(motor_currents_with_setpoint_field(old), MotorCurrents) == mc
+    assert motor_currents_with_setpoint_field(raw) is raw
+    mc.setpoint = [0.1, -0.2, 0.3, -0.4, 0.5, -0.6]
+    _t, cur, board, setpoint = motor_currents_from_cdr(serialize_message(mc))
+    assert board == 4_000_000_123 and cur.tolist() == list(mc.current) and setpoint.tolist() == list(mc.setpoint)
+
+
+@pytest.mark.parametrize("n", [0, 1, 10])
+def test_zeta_estimates_written_as_bytes_equal_rclpy_and_read_back(n):
+    from hexa_msgs.msg import ZetaEstimates
+    from rclpy.serialization import deserialize_message, serialize_message
+
+    from hexa_ros.cdr import CdrError, zeta_estimates_from_cdr, zeta_estimates_to_cdr
+
+    rng = np.random.default_rng(n)
+    times = (100.0 + 1e-3 * np.arange(n)).tolist()
+    zeta, zeta_dot, tau = (rng.normal(size=6 * n).tolist() for _ in range(3))
+    raw = zeta_estimates_to_cdr(100, 5_000, times, zeta, zeta_dot, tau)
+    m = ZetaEstimates(time=times, zeta=zeta, zeta_dot=zeta_dot, tau=tau)
+    m.header.stamp.sec, m.header.stamp.nanosec = 100, 5_000
+    assert deserialize_message(raw, ZetaEstimates) == m
+    for buf in (raw, serialize_message(m)):
+        t, z, zd, ta = zeta_estimates_from_cdr(buf)
+        assert t.tolist() == times and z.shape == zd.shape == ta.shape == (n, 6)
+        assert (z.ravel().tolist(), zd.ravel().tolist(), ta.ravel().tolist()) == (zeta, zeta_dot, tau)
+    m.tau = tau[:-1] if n else [1.0]
+    with pytest.raises(CdrError, match="6 per time"):
+        zeta_estimates_from_cdr(serialize_message(m))
 
 
 @pytest.mark.parametrize("frame_id", ["base", "", "plate_x", "abcdefgh"])

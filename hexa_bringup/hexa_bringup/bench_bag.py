@@ -110,7 +110,8 @@ def synthesize(path: Path, case: str = "plate", stream_rate_hz: int = 1000, came
             t_ns = int(round(s.time * 1e9))
             m = MotorCurrents(header=header(s.time, "base"), current=amps.astype(float),
                               raw=counts.astype(np.uint16), sequence=seq & 0xFFFFFFFF,
-                              board_time_us=int(round(s.time * 1e6)) & 0xFFFFFFFF, gaps=0)
+                              board_time_us=int(round(s.time * 1e6)) & 0xFFFFFFFF, gaps=0,
+                              setpoint=np.asarray(s.targets, float))
             js = JointState(header=header(s.time, "base"), name=names, position=np.asarray(s.targets, float),
                             velocity=np.zeros(0), effort=k_t * amps)
             bag.write(f"{p}/motor_currents", t_ns, cdr(m))

@@ -2,7 +2,8 @@
 
 An adapter: links hexa.protocol.link, conversions hexa.protocol.driver_core, command scheduling and sample/set-point
 pairing hexa.protocol.driver_scheduler. Topics (relative, run it in /hexa): sub `joint_commands`; pub `joint_states`
-(position = the set-points when the sample was measured, effort = K_t (I - I_0)), `motor_currents`, `/diagnostics`
+(position = the set-points when the sample was measured, effort = K_t (I - I_0)), `motor_currents` (with the same
+set-points, arm_1..arm_6, in `setpoint`: a consumer needs one topic), `/diagnostics`
 (the link threads publish the samples). Service `calibrate_currents`. Parameters: config/driver.yaml (docs/driver.md).
 """
 from __future__ import annotations
@@ -61,6 +62,7 @@ class DriverNode(Node):
         self.core = driver_core_from_config(cfg, desc.zeta_min, desc.zeta_max, desc.K_t,
                                             servo_calibrations_from_config(cfg["servos"], desc))
         self.sched = DriverScheduler.from_config(self.core, cfg)
+        self._graph_order = [list(self.core.joint_names).index(n) for n in JOINT_NAMES]   # MotorCurrents.setpoint
         self._gap_timer = self._calib_timer = None
         self._calib: tuple[CalibrateCurrents.Response, float] | None = None   # the request being averaged
         self._closed = False
@@ -121,10 +123,12 @@ class DriverNode(Node):
             if self._closed or not self.context.ok():   # shutting down: the link thread outlives the node briefly
                 return
             stamp = self.get_clock().now().to_msg()
+            setpoints = r.setpoints.tolist()
             m = MotorCurrents(current=r.currents.tolist(), raw=list(r.sample.counts), sequence=r.sample.sequence,
-                              board_time_us=r.sample.board_time_us, gaps=self.mega.sample_gaps & 0xFFFFFFFF)
+                              board_time_us=r.sample.board_time_us, gaps=self.mega.sample_gaps & 0xFFFFFFFF,
+                              setpoint=[setpoints[i] for i in self._graph_order])
             m.header.stamp, m.header.frame_id = stamp, self.cfg["frame_id"]
-            js = JointState(name=list(self.core.joint_names), position=r.setpoints.tolist(), effort=r.efforts.tolist())
+            js = JointState(name=list(self.core.joint_names), position=setpoints, effort=r.efforts.tolist())
             js.header.stamp, js.header.frame_id = stamp, self.cfg["frame_id"]
             self.pub_currents.publish(m)
             self.pub_states.publish(js)

@@ -10,7 +10,7 @@ from hexa_ros.node import DESCRIPTION, DESCRIPTION_PARAM, Param
 #: the parameters the observer applies on a running node (hexa.dynamics.monitor.CollisionMonitor.configure)
 RUNTIME = ("gains", "thresholds", "servo_thresholds", "release_ratio", "min_duration", "accel_sigma", "torque_sigma",
            "camera_sigma", "bias_walk", "saturation", "stall_sigma", "reseed_distance", "calibration_duration",
-           "marker_rate_hz", "marker_scale", "pose_estimate_rate_hz", "tf_rate_hz")
+           "marker_rate_hz", "marker_scale", "pose_estimate_rate_hz", "tf_rate_hz", "zeta_batch_period")
 
 
 def observer_parameters() -> dict[str, Param]:
@@ -49,6 +49,8 @@ def observer_parameters() -> dict[str, Param]:
         "pose_estimate_rate_hz": Param(100.0, "plate_pose_estimate rate (Hz of sample time)", range=(0.001, 1000.0)),
         "tf_rate_hz": Param(30.0, "/tf rate of the plate, arm and rod frames (Hz of sample time)",
                             range=(0.001, 1000.0)),
+        "zeta_batch_period": Param(0.01, "s of sample time per message on `zeta_estimates` (the rnea node's input; "
+                                   "sent at once on a collision event); 0 = one message per sample", range=(0.0, 0.1)),
         "monitoring_timeout": Param(w.timeout, "s (node clock) without a fresh residual before `monitoring` is LOST",
                                     range=(0.005, 10.0)),
         "monitoring_pose_timeout": Param(w.pose_timeout, "s without a plate pose the estimator used before LOST "

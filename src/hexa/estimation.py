@@ -439,28 +439,31 @@ class InputCheck:
         cur = _six(currents)
         if cur is None:
             self.rejected["currents_bad_shape"] += 1
-        elif not np.all(np.isfinite(cur)):
+            return None
+        values = cur.tolist()   # plain floats: numpy's per-call overhead dominates on six values at 1 kHz
+        if not all(map(math.isfinite, values)):
             self.rejected["currents_non_finite"] += 1
-        elif np.any(np.abs(cur) > self.current_max):
+        elif max(map(abs, values)) > self.current_max:
             self.rejected["currents_range"] += 1
         else:
             return cur
         return None
 
-    def states(self, position: Any, velocity: Any, effort: Any) -> bool:
+    def states(self, position: Any, velocity: Any, effort: Any, kind: str = "states") -> bool:
         """Whether a joint_states sample is usable (counted when not: states_bad_shape, states_non_finite,
-        states_range)."""
+        states_range; with kind "setpoint" the set-points a motor_currents carries: setpoint_bad_shape, ...)."""
         arrays = [_six(position)] + [_six(v) for v in (velocity, effort) if v is not None]
         if any(a is None for a in arrays):
-            self.rejected["states_bad_shape"] += 1
+            self.rejected[f"{kind}_bad_shape"] += 1
             return False
-        if not all(np.all(np.isfinite(a)) for a in arrays):
-            self.rejected["states_non_finite"] += 1
+        values = [a.tolist() for a in arrays]
+        if not all(all(map(math.isfinite, v)) for v in values):
+            self.rejected[f"{kind}_non_finite"] += 1
             return False
         lo, hi = self.zeta_range
-        if np.any(arrays[0] < lo) or np.any(arrays[0] > hi) or (
-                effort is not None and np.any(np.abs(arrays[-1]) > self.torque_max)):
-            self.rejected["states_range"] += 1
+        if min(values[0]) < lo or max(values[0]) > hi or (
+                effort is not None and max(map(abs, values[-1])) > self.torque_max):
+            self.rejected[f"{kind}_range"] += 1
             return False
         return True
 
@@ -574,6 +577,25 @@ class SampleSequencer:
             self._cur.popleft()
             self.unpaired += 1
         return self._drain()
+
+    def push_sample(self, stamp: float, t: float, tau: NDArray, commanded: NDArray, admitted: bool = False
+                    ) -> list[tuple]:
+        """A current sample that carries the command in effect when it was measured (motor_currents.setpoint, the
+        same values as its joint_states): released at once, no pairing. Messages of a stream that carried its
+        commands apart before (a driver without the field, then one with it) are dropped as unpaired."""
+        if not self.takes_currents or not (admitted or self.admit("currents", stamp)):
+            return []
+        if self._stamp_mode:
+            self._stamp_mode = False
+            self.to_board += 1
+        self.board = True
+        if self._cur or self._js:
+            self.unpaired += len(self._cur) + len(self._js)
+            self._cur.clear()
+            self._js.clear()
+        out: list[tuple] = []
+        self._sample(t, commanded, tau, None, out)
+        return out
 
     def push_states(self, stamp: float, commanded: NDArray, velocity: Any, effort: Any) -> list[tuple]:
         if not self.admit("states", stamp):

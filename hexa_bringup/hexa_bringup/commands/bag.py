@@ -158,6 +158,7 @@ def run_play(args: argparse.Namespace) -> int:
 
     from hexa_bringup.bag import BagError, bag_topics, paced, read_bag
     from hexa_bringup.msgutil import get_message_class
+    from hexa_ros.cdr import motor_currents_with_setpoint_field
 
     try:
         topics = bag_topics(args.bag)
@@ -209,6 +210,7 @@ def run_play(args: argparse.Namespace) -> int:
                   file=sys.stderr)
     sent = 0
     counts = dict.fromkeys(selected, 0)
+    currents = {t for t in selected if topics[t][0] == "hexa_msgs/msg/MotorCurrents"}   # older bags: set-point field
     clock_step = int(1e9 / args.clock_rate) if args.clock_rate > 0 else 0
     next_clock = -1
     try:
@@ -222,7 +224,7 @@ def run_play(args: argparse.Namespace) -> int:
                 next_clock = stamp + clock_step
             if log is not None:
                 log.write(f"{time.monotonic_ns()} {stamp} {topic}\n")
-            pubs[topic].publish(data)
+            pubs[topic].publish(motor_currents_with_setpoint_field(data) if topic in currents else data)
             sent += 1
             counts[topic] += 1
     except BagError as exc:

@@ -23,8 +23,9 @@ from __future__ import annotations
 
 import math
 from collections import deque
+from collections.abc import Callable
 from dataclasses import dataclass
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -274,8 +275,11 @@ class ContactForceTracker:
             self._contacts.pop(cid, None)
         return []
 
-    def on_contact(self, contact: LocatedContact) -> list[ContactForce]:
-        """A located contact: its forces now and, for the first contact of a collision, over the kept states."""
+    def on_contact(self, contact: LocatedContact, emit: Callable[[ContactForce], Any] | None = None
+                   ) -> list[ContactForce]:
+        """A located contact: its forces now and, for the first contact of a collision, over the kept states.
+        `emit`, when given, gets each force as soon as it is identified (a backfill runs tens of identifications
+        of several ms each: the caller publishes the first one at once, not after the last)."""
         point = np.asarray(contact.point, dtype=float).reshape(-1)
         if point.shape != (3,) or not np.all(np.isfinite(point)):
             self.rejects["non_finite"] += 1
@@ -290,7 +294,7 @@ class ContactForceTracker:
         if self.config.require_collision and cid != self._active:
             if cid in self._spans and cid not in self._identified:
                 self._remember_push(cid, contact.push_direction)
-                out = self._backfill(contact)
+                out = self._backfill(contact, emit)
                 if out is not None:      # a collision that ended before its contact arrived
                     return out
             if cid > self._started:      # its START is still on its way
@@ -299,7 +303,7 @@ class ContactForceTracker:
                 return []
             self.rejects["not_in_collision"] += 1
             return []
-        return self._accept(contact)
+        return self._accept(contact, emit)
 
     # ------------------------------------------------------------------ identification
     def _restart(self) -> None:
@@ -344,7 +348,8 @@ class ContactForceTracker:
             return None
         return pose if np.all(np.isfinite(pose)) else None
 
-    def _accept(self, contact: LocatedContact) -> list[ContactForce]:
+    def _accept(self, contact: LocatedContact, emit: Callable[[ContactForce], Any] | None = None
+                ) -> list[ContactForce]:
         """A contact of the collision in progress (or any, without require_collision)."""
         cid = int(contact.collision_id)
         self._remember_push(cid, contact.push_direction)
@@ -353,10 +358,12 @@ class ContactForceTracker:
             self._contacts.pop(old)
         out: list[ContactForce] = []
         if cid in self._spans and cid not in self._identified:
-            out.extend(self._backfill(contact) or [])   # the states between its image time and now
+            out.extend(self._backfill(contact, emit) or [])   # the states between its image time and now
         now = self._identify_now(contact)
         if now is not None:
             out.append(now)
+            if emit is not None:
+                emit(now)
         return out
 
     def _identify_now(self, contact: LocatedContact) -> ContactForce | None:
@@ -372,7 +379,8 @@ class ContactForceTracker:
         self._pose = pose
         return self._identify(contact, state, pose, backfilled=False)
 
-    def _backfill(self, contact: LocatedContact) -> list[ContactForce] | None:
+    def _backfill(self, contact: LocatedContact, emit: Callable[[ContactForce], Any] | None = None
+                  ) -> list[ContactForce] | None:
         """`contact` identified on the kept states from its image time (not before its collision's START, not older
         than `history`) to the END or the newest state (excluded), every min(1/rate_hz, 0.05 s); None when no
         state lies in that span."""
@@ -399,6 +407,8 @@ class ContactForceTracker:
             f = self._identify(contact, s, pose, backfilled=True)
             if f is not None:
                 out.append(f)
+                if emit is not None:
+                    emit(f)
         return out
 
     def _identify(self, contact: LocatedContact, s: ArmState, pose: NDArray, backfilled: bool

@@ -169,6 +169,7 @@ class CollisionMonitor:
         self.inputs = InputCheck(desc)
         self.pose_check = PoseCheck.for_hexa(desc)
         self.settling = 0
+        self.carries_setpoint = False   # the newest motor_currents carried its set-points
         self.log: list[str] = []   # what the owner should log (calibration results)
         self._tracking = False
         self._pose_hist: deque[tuple[float, NDArray]] = deque()   # (t, tracked plate pose) for the re-seed test
@@ -205,11 +206,18 @@ class CollisionMonitor:
         return self.sequencer.board
 
     # ------------------------------------------------------------------ inputs
-    def push_currents(self, stamp: float, board_us: int, currents: Any) -> list[MonitorSample]:
-        """A current sample (A) received at host time `stamp` with board time `board_us` (µs)."""
+    def push_currents(self, stamp: float, board_us: int, currents: Any, setpoint: Any = None) -> list[MonitorSample]:
+        """A current sample (A) received at host time `stamp` with board time `board_us` (µs); `setpoint`: the servo
+        set-points in effect when it was measured (rad), when the message carries them (None or empty: they come
+        on joint_states, paired by stamp). A stream that carries them makes joint_states unneeded
+        (`carries_setpoint`): push_states then ignores its messages."""
         cur = self.inputs.currents(currents)
         if cur is None:
             self.rejects["bad_currents"] += 1
+            return []
+        carried = setpoint is not None and len(setpoint) > 0
+        self.carries_setpoint = carried
+        if carried and not self.inputs.states(setpoint, None, None, "setpoint"):
             return []
         seq = self.sequencer
         if not seq.takes_currents or not seq.admit("currents", stamp):   # a bad stamp never moves the board clock
@@ -218,11 +226,16 @@ class CollisionMonitor:
         if t is None:
             self.rejects["board_time"] += 1
             return []
+        if carried:
+            return self._run(seq.push_sample(stamp, t, self.k_t * cur, np.asarray(setpoint, float), admitted=True))
         return self._run(seq.push_currents(stamp, t, self.k_t * cur, admitted=True))
 
     def push_states(self, stamp: float, position: NDArray | None, velocity: NDArray | None,
                     effort: NDArray | None) -> list[MonitorSample]:
-        """A joint_states sample: commanded (or measured) ζ, velocity and effort (None when absent)."""
+        """A joint_states sample: commanded (or measured) ζ, velocity and effort (None when absent); ignored while
+        the current samples carry their set-points."""
+        if self.carries_setpoint:
+            return []
         if position is None:
             self.rejects["bad_joint_names"] += 1
             return []

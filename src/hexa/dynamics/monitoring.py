@@ -116,15 +116,18 @@ class MonitoringWatch:
     @property
     def streams(self) -> tuple[str, ...]:
         """The sample streams residuals come from: joint_states, and motor_currents when the sample times come
-        from the current board's clock (time_source "board", or "auto" once board samples have been seen)."""
+        from the current board's clock (time_source "board", or "auto" once board samples have been seen); only
+        motor_currents while its messages carry their set-points."""
         tsrc = self.monitor.config.time_source
+        if self.monitor.carries_setpoint:
+            return ("motor_currents",)
         board = tsrc == "board" or (tsrc == "auto" and self.monitor.board_seen)
         return ("joint_states", "motor_currents") if board else ("joint_states",)
 
     # ------------------------------------------------------------------ inputs (counted, then to the monitor)
-    def push_currents(self, stamp: float, board_us: int, currents: Any) -> list[MonitorSample]:
+    def push_currents(self, stamp: float, board_us: int, currents: Any, setpoint: Any = None) -> list[MonitorSample]:
         self.received["motor_currents"] += 1
-        return self.monitor.push_currents(stamp, board_us, currents)
+        return self.monitor.push_currents(stamp, board_us, currents, setpoint)
 
     def push_states(self, stamp: float, position: Any, velocity: Any, effort: Any) -> list[MonitorSample]:
         self.received["joint_states"] += 1

@@ -38,6 +38,7 @@ class CdrImage:
 
 
 _U32 = {"<": struct.Struct("<I").unpack_from, ">": struct.Struct(">I").unpack_from}   # compiled once: 1 kHz streams
+_CURRENTS = {o: struct.Struct(o + "6d6H3I").unpack_from for o in "<>"}   # MotorCurrents after its frame_id
 
 
 class _Reader:
@@ -141,8 +142,9 @@ def joint_state_from_cdr(buf: bytes | memoryview) -> tuple[float, list[str], np.
     return sec + 1e-9 * nanosec, names, r.f64s(), r.f64s(), r.f64s()
 
 
-def motor_currents_from_cdr(buf: bytes | memoryview) -> tuple[float, np.ndarray, int]:
-    """(stamp s, currents A (6), board time µs) of a serialized hexa_msgs/MotorCurrents.
+def motor_currents_from_cdr(buf: bytes | memoryview) -> tuple[float, np.ndarray, int, np.ndarray]:
+    """(stamp s, currents A (6), board time µs, set-points rad) of a serialized hexa_msgs/MotorCurrents; the
+    set-points are empty when the message has none, or ends before the field (a bag recorded without it).
 
     Raises:
         CdrError: the bytes do not hold a MotorCurrents.
@@ -150,10 +152,47 @@ def motor_currents_from_cdr(buf: bytes | memoryview) -> tuple[float, np.ndarray,
     r = _Reader(buf)
     sec, nanosec = r.i32(), r.u32()
     r.string()                                  # frame_id
-    current = r.f64s(6)
-    r.skip_u16s(6)                              # raw ADC counts
-    r.u32()                                     # sequence
-    return sec + 1e-9 * nanosec, current, r.u32()
+    r._align(8)
+    if r.pos + 72 > len(r.buf):
+        raise CdrError(f"{len(r.buf)} bytes: too short for a MotorCurrents")
+    # currents, raw ADC counts, sequence, board time, gaps: one unpack (no padding between them from here)
+    fields = _CURRENTS[r.order](r.buf, r.pos)
+    r.pos += 72
+    setpoint = r.f64s() if r.pos + 4 <= len(r.buf) else np.zeros(0)
+    return sec + 1e-9 * nanosec, np.array(fields[:6]), fields[13], setpoint
+
+
+def motor_currents_with_setpoint_field(buf: bytes) -> bytes:
+    """A serialized hexa_msgs/MotorCurrents as the current definition has it: one recorded before the `setpoint`
+    field existed gets an empty sequence appended (`hexa play` sends old bags so; a message object subscriber could
+    not deserialize them otherwise). Others are returned as they are.
+
+    Raises:
+        CdrError: the bytes do not hold a MotorCurrents.
+    """
+    r = _Reader(buf)
+    r.i32(), r.u32()
+    r.string()
+    r.f64s(6)
+    r.skip_u16s(6)
+    r.u32(), r.u32(), r.u32()                   # sequence, board time, gaps
+    return bytes(buf) + b"\x00\x00\x00\x00" if r.pos + 4 > len(r.buf) else buf
+
+
+def zeta_estimates_from_cdr(buf: bytes | memoryview) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """(times (N), ζ̂, ζ̂̇, τ (N×6 each)) of a serialized hexa_msgs/ZetaEstimates.
+
+    Raises:
+        CdrError: the bytes do not hold a ZetaEstimates, or its arrays disagree in size.
+    """
+    r = _Reader(buf)
+    r.i32(), r.u32()
+    r.string()                                  # frame_id
+    t, zeta, zeta_dot, tau = r.f64s(), r.f64s(), r.f64s(), r.f64s()
+    if not zeta.size == zeta_dot.size == tau.size == 6 * t.size:
+        raise CdrError(f"ZetaEstimates with {t.size} times and {zeta.size}, {zeta_dot.size}, {tau.size} values "
+                       f"(6 per time)")
+    return t, zeta.reshape(-1, 6), zeta_dot.reshape(-1, 6), tau.reshape(-1, 6)
 
 
 # ---------------------------------------------------------------------- writing (the observer's per-sample outputs)
@@ -187,6 +226,22 @@ def residual_to_cdr(sec: int, nanosec: int, frame_id: str, r, force, torque, thr
     return bytes(out)
 
 
+def _f64_seq(out: bytearray, values) -> None:
+    _pad(out, 4)
+    out += struct.pack("<I", len(values))
+    if len(values):
+        _pad(out, 8)
+        out += struct.pack(f"<{len(values)}d", *values)
+
+
+def zeta_estimates_to_cdr(sec: int, nanosec: int, times, zeta, zeta_dot, tau) -> bytes:
+    """A serialized hexa_msgs/ZetaEstimates (frame_id empty): `times` N floats, the others N×6 flattened."""
+    out = _header_cdr(sec, nanosec, "")
+    for seq in (times, zeta, zeta_dot, tau):
+        _f64_seq(out, seq)
+    return bytes(out)
+
+
 def joint_state_to_cdr(sec: int, nanosec: int, frame_id: str, names, position, velocity, effort) -> bytes:
     """A serialized sensor_msgs/JointState (the bytes rclpy would publish for the same fields)."""
     out = _header_cdr(sec, nanosec, frame_id)
@@ -198,11 +253,7 @@ def joint_state_to_cdr(sec: int, nanosec: int, frame_id: str, names, position, v
         out += struct.pack("<I", len(b))
         out += b
     for seq in (position, velocity, effort):
-        _pad(out, 4)
-        out += struct.pack("<I", len(seq))
-        if len(seq):
-            _pad(out, 8)
-            out += struct.pack(f"<{len(seq)}d", *seq)
+        _f64_seq(out, seq)
     return bytes(out)
 
 

@@ -24,6 +24,13 @@ def to_stamp(t: float) -> Any:
     return Time(sec=ns // 1_000_000_000, nanosec=ns % 1_000_000_000)
 
 
+def stamp_parts(t: float) -> tuple[int, int]:
+    """(sec, nanosec) of `t` seconds as to_stamp rounds them, without building a message (per-sample outputs written
+    as bytes)."""
+    ns = int(round(t * 1e9))
+    return ns // 1_000_000_000, ns % 1_000_000_000
+
+
 def fill_stamp(msg_stamp: Any, t: float) -> Any:
     """Write `t` seconds into an existing stamp field and return it."""
     ns = int(round(t * 1e9))
