@@ -192,6 +192,7 @@ class ZetaEstimator:
         self._t: float | None = None
         self._t_start = -math.inf
         self._c: NDArray | None = None
+        self._us: NDArray = np.zeros(6)    # the smoothed command (command_smoothing)
         self._x = np.zeros((6, 3))
         self._P = np.zeros((6, 3, 3))
         self._corr = np.zeros(6)
@@ -325,6 +326,7 @@ class ZetaEstimator:
         self._P = np.array(Ps).reshape(6, 3, 3)
 
     def _estimate(self) -> ArmEstimate:
+        assert self._t is not None and self._c is not None   # called after a sample was taken
         return ArmEstimate(time=self._t, zeta=self._x[:, 0].copy(), zeta_dot=self._x[:, 1].copy(),
                            bias=self._x[:, 2].copy(), setpoint=self._c.copy(),
                            sigma=np.sqrt(np.maximum(self._P[:, 0, 0], 0.0)),
@@ -456,7 +458,7 @@ class InputCheck:
         if any(a is None for a in arrays):
             self.rejected[f"{kind}_bad_shape"] += 1
             return False
-        values = [a.tolist() for a in arrays]
+        values = [a.tolist() for a in arrays if a is not None]
         if not all(all(map(math.isfinite, v)) for v in values):
             self.rejected[f"{kind}_non_finite"] += 1
             return False
@@ -556,7 +558,7 @@ class SampleSequencer:
                 keep = [m for m in q if stamp - self.max_step <= m[0] and (q is not own or m[0] <= stamp)]
                 self.unpaired += len(q) - len(keep)
                 q.clear()
-                q.extend(keep)
+                q.extend(keep)   # type: ignore[arg-type]  # each queue gets back its own kind of entries
         elif verdict != "ok":
             self.rejected[f"{stream}_{verdict}"] += 1
             return False

@@ -33,7 +33,7 @@ def _gesv():
     return _GESV
 
 
-def solve6(M: list[list[float]] | np.ndarray, b: Sequence[float]) -> Vec:
+def solve6(M: list[list[float]] | np.ndarray, b: Sequence[float] | np.ndarray) -> Vec:
     """x with M x = b for a 6×6 M, nested lists or an array (LAPACK gesv: the cheapest call for one small system;
     it factorizes a copy, M is not changed)."""
     _, _, x, info = (_GESV or _gesv())(np.asarray(M, dtype=float), np.asarray(b, dtype=float))
@@ -229,8 +229,9 @@ class SampleKernel:
         mk0, mk1 = mr * k0, mr * k1
         gcx0, gcy0, gcz0 = mk1 * gx, mk1 * gy, mk1 * gz
         mg = self.mas + la * mk0
+        zdv: Sequence[float] = () if zd is None else zd
         if twist is None:
-            V = solve6(chain_jacobian_rows(geo) if jacobian is None else jacobian, zd)
+            V = solve6(chain_jacobian_rows(geo) if jacobian is None else jacobian, zdv)
         else:
             V = list(twist)
         v0, v1, v2, w0, w1, w2 = V
@@ -245,7 +246,7 @@ class SampleKernel:
             qy = w2 * rx - w0 * rz
             qz = w0 * ry - w1 * rx
             cdx, cdy, cdz = v0 + qx, v1 + qy, v2 + qz  # Ċ
-            z1 = zd[i] if twist is None else (dx * cdx + dy * cdy + dz * cdz) * iD  # ζ̇ = j·V
+            z1 = zdv[i] if twist is None else (dx * cdx + dy * cdy + dz * cdz) * iD  # ζ̇ = j·V
             lz = la * z1
             bdx, bdy, bdz = lz * vx, lz * vy, lz * vz  # Ḃ
             ex, ey, ez = cdx - bdx, cdy - bdy, cdz - bdz  # ḋ

@@ -167,9 +167,11 @@ def carry_observed_component(row: NDArray, value: float, arm_force_model: str, n
         candidates.append(("surface_normal", normal))
     row = np.asarray(row, dtype=float)
     for name, n in candidates:
-        gain = None if n is None else float(row @ n)
-        if gain is not None and abs(gain) >= ARM_NORMAL_MIN_GAIN * float(np.linalg.norm(row)):
-            return (value / gain) * n, name
+        if n is None:
+            continue
+        gain = float(row @ n)
+        if abs(gain) >= ARM_NORMAL_MIN_GAIN * float(np.linalg.norm(row)):
+            return (value / gain) * np.asarray(n, dtype=float), name
     return None, "min_norm"
 
 

@@ -305,6 +305,7 @@ class PoseFit:
         """(p, R flat, V = [ṗ, ω]) at time t."""
         h = t - self.t_last
         c = self._coef
+        assert c is not None, "evaluate() needs a fit (ready)"
         q = list(c[0])
         qd = [0.0] * 6
         hp = 1.0
@@ -503,6 +504,7 @@ class ResidualObserver:
                 self._reject("pose_tracking")
                 return None
             zd = [0.0] * 6  # not used: the twist comes from the pose fit
+        assert z is not None   # given with the sample, or from the pose fit above
         try:
             if pose_mode:
                 pass
@@ -552,8 +554,11 @@ class ResidualObserver:
             return self._output(t, s, geo)
         dt = t - prev.t
         if self.form == "momentum":
-            w_bar = np.array([(s.pi[m] - prev.pi[m]) / dt - 0.5 * (s.u[m] + prev.u[m]) for m in range(6)])
+            pi, u, pi0, u0 = s.pi, s.u, prev.pi, prev.u
+            assert pi is not None and u is not None and pi0 is not None and u0 is not None   # the momentum form's
+            w_bar = np.array([(pi[m] - pi0[m]) / dt - 0.5 * (u[m] + u0[m]) for m in range(6)])
         else:
+            assert s.Q is not None   # the direct form's
             w_bar = s.Q
         w_bar -= self._offset
         if self._calib is not None:
