@@ -57,7 +57,9 @@ def test_the_scale_widens_with_velocity_and_acceleration_and_is_the_threshold_at
     np.testing.assert_allclose(det.thresholds, ObserverConfig().thresholds)
     det.motion(0.01, np.array([0.0, 2.0, 0, 0, 0, 0]))   # ‖ζ̇‖∞ = 2 rad/s, ζ̈ = 200 rad/s² (filter τ ≪ Δt)
     assert det.uncertainty == pytest.approx(1.0 + 0.5 * 2.0 + 0.1 * 200.0)
-    np.testing.assert_allclose(det.servo_thresholds, np.array(ObserverConfig().servo_thresholds) * det.uncertainty)
+    np.testing.assert_allclose(det.scaled_thresholds()[6:],
+                               np.array(ObserverConfig().servo_thresholds) * det.uncertainty)
+    np.testing.assert_allclose(det.servo_thresholds, ObserverConfig().servo_thresholds)   # the configured ones
     # the same residual that alarms at rest does not alarm while moving that fast
     moving = feed(det, [4.0] * 20)
     assert moving == []

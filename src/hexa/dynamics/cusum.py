@@ -85,9 +85,9 @@ class CusumConfig:
 class CusumDetector(CollisionDetector):
     """CUSUM on the motion-whitened residual (module docstring); the interface of `CollisionDetector`, whose
     thresholds it takes as its scales: `update(t, r, servo)` → (twelve over-scaled-threshold flags, events),
-    `active`, `count`, `reset()`, `thresholds` and `servo_thresholds` (the scaled ones in force at the last
-    sample), `set_thresholds`, `set_servo_thresholds`; and `motion(t, zeta_dot)` before a sample to follow the
-    motion.
+    `active`, `count`, `reset()`, `thresholds` and `servo_thresholds` (the configured ones, as published on
+    `residual`; `scaled_thresholds()` gives them × the motion's factor), `set_thresholds`, `set_servo_thresholds`;
+    and `motion(t, zeta_dot)` before a sample to follow the motion.
 
     Raises (constructor, set_*): ObserverError naming a bad value.
     """
@@ -115,13 +115,9 @@ class CusumDetector(CollisionDetector):
         """The factor 1 + c_v‖ζ̇‖∞ + c_a‖ζ̈‖∞ on every threshold at the last sample."""
         return self._u
 
-    @property
-    def thresholds(self) -> NDArray:
-        return self._th * self._u
-
-    @property
-    def servo_thresholds(self) -> NDArray:
-        return self._th_servo * self._u
+    def scaled_thresholds(self) -> NDArray:
+        """The twelve thresholds (plate axes, then servos) × the uncertainty factor at the last sample."""
+        return np.concatenate([self._th, self._th_servo]) * self._u
 
     def motion(self, t: float, zeta_dot: NDArray | None) -> None:
         """ζ̇ (rad/s) at time t, before the residual sample of t: it sets the uncertainty factor."""
