@@ -37,7 +37,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Iterable
 
 import numpy as np
 
@@ -101,10 +101,20 @@ class CusumDetector(CollisionDetector):
 
     def reset(self) -> None:
         super().reset()
-        self._g = np.zeros(12)
-        self._b = np.zeros(12)   # the slow baseline of each channel (threshold units)
-        self._zero_t = np.full(12, -math.inf)   # last time each g_j was 0: the change-point estimate
+        # per-channel state as Python lists: twelve values cost less in plain floats than in numpy calls
+        self._g = [0.0] * 12
+        self._b = [0.0] * 12   # the slow baseline of each channel (threshold units)
+        self._zero_t = [-math.inf] * 12   # last time each g_j was 0: the change-point estimate
+        self._pk = [0.0] * 12
         self._t: float | None = None
+
+    def set_thresholds(self, thresholds: Iterable[float]) -> None:
+        super().set_thresholds(thresholds)
+        self._sc = self._scale.tolist()
+
+    def set_servo_thresholds(self, thresholds: Iterable[float]) -> None:
+        super().set_servo_thresholds(thresholds)
+        self._sc = self._scale.tolist()
 
     def set_cusum(self, cusum: CusumConfig) -> None:
         """New CUSUM settings at run time; the sums go on."""
@@ -121,68 +131,71 @@ class CusumDetector(CollisionDetector):
 
     def motion(self, t: float, zeta_dot: NDArray | None) -> None:
         """ζ̇ (rad/s) at time t, before the residual sample of t: it sets the uncertainty factor."""
-        if zeta_dot is None:
+        if zeta_dot is None or len(zeta_dot) != 6:
             return
-        zd = np.asarray(zeta_dot, dtype=float)
-        if zd.shape != (6,) or not np.all(np.isfinite(zd)):
+        zd = zeta_dot.tolist() if hasattr(zeta_dot, "tolist") else [float(v) for v in zeta_dot]
+        v = max(abs(x) for x in zd)
+        if not math.isfinite(v):
             return
         c = self.cusum
         prev = self._motion
         if prev is not None and t > prev[0]:
             dt = t - prev[0]
-            a = float(np.max(np.abs(zd - prev[1]))) / dt
+            a = max(abs(x - y) for x, y in zip(zd, prev[1])) / dt
             self._accel += (a - self._accel) * min(1.0, dt / c.accel_tau)
         self._motion = (t, zd)
-        self._u = 1.0 + c.velocity_gain * float(np.max(np.abs(zd))) + c.accel_gain * self._accel
+        self._u = 1.0 + c.velocity_gain * v + c.accel_gain * self._accel
 
     def update(self, t: float, r: NDArray, servo: NDArray | None = None) -> tuple[NDArray, tuple[CollisionEvent, ...]]:
         """Feed one residual sample r (plate axes) and optionally τ_r (servo torques; None or NaN: not checked);
         returns the twelve over-scaled-threshold flags (plate axes, then servos) and the events it caused."""
-        value = np.empty(12)
-        value[:6] = r
-        value[6:] = 0.0 if servo is None else servo
-        if np.isnan(value).any():   # NaN servo torques (a singular J_ζ): not checked
-            value[np.isnan(value)] = 0.0
-        mag = np.abs(value)
-        x = value * self._scale
+        value = r.tolist() + ([0.0] * 6 if servo is None else servo.tolist())
         c = self.cusum
-        if c.baseline_tau > 0:
-            x -= self._b
-        z = np.abs(x)
-        if self._u != 1.0:
-            z /= self._u
-        over = z > 1.0
+        sc, g, b, u = self._sc, self._g, self._b, 1.0 / self._u
         dt = 0.0 if self._t is None else min(max(t - self._t, 0.0), MAX_STEP)
         self._t = t
-        if not self.active:
-            g = self._g
-            g += dt * (z - c.drift)
-            np.maximum(g, 0.0, out=g)
-            if c.baseline_tau > 0:   # the baseline follows only channels without evidence of a contact
-                quiet = g == 0.0
-                self._b[quiet] += min(1.0, dt / c.baseline_tau) * x[quiet]
-            self._zero_t[g == 0.0] = t
-            j = int(np.argmax(g * (1.0 / max(self.cusum.alarm, 1e-300))))
-            if g[j] >= self.cusum.alarm:
+        follow = min(1.0, dt / c.baseline_tau) if c.baseline_tau > 0 else 0.0
+        active, drift = self.active, c.drift
+        z = [0.0] * 12
+        top_j, top_g = 0, -1.0
+        for j in range(12):
+            v = value[j]
+            if v != v:   # NaN servo torques (a singular J_ζ): not checked
+                value[j] = v = 0.0
+            x = v * sc[j] - b[j]
+            zj = z[j] = abs(x) * u
+            if active:
+                continue
+            gj = g[j] + dt * (zj - drift)
+            if gj <= 0.0:
+                gj = 0.0
+                self._zero_t[j] = t
+                b[j] += follow * x   # the baseline follows only channels without evidence of a contact
+            g[j] = gj
+            if gj > top_g:
+                top_j, top_g = j, gj
+        over = np.array(z) > 1.0
+        if not active:
+            if top_g >= c.alarm:
                 self.active = True
                 self.count += 1
-                self._onset = float(self._zero_t[j])
-                self._peak = mag.copy()
+                self._onset = self._zero_t[top_j]
+                self._pk = [abs(v) for v in value]
                 self._release_since = None
-                return over, (CollisionEvent("START", self.count, t, self._onset, j, float(value[j]),
-                                             float(mag[j]), 0.0),)
+                return over, (CollisionEvent("START", self.count, t, self._onset, top_j, value[top_j],
+                                             abs(value[top_j]), 0.0),)
             return over, ()
-        np.maximum(self._peak, mag, out=self._peak)
-        if float(z.max()) < self.config.release_ratio:
+        self._pk = [max(p, abs(v)) for p, v in zip(self._pk, value)]
+        if max(z) < self.config.release_ratio:
             if self._release_since is None:
                 self._release_since = t
             if t - self._release_since >= self.config.min_duration - 1e-12:
                 self.active = False
-                self._g[:] = 0.0
-                self._zero_t[:] = t
-                ax = int(np.argmax(self._peak * self._scale))
-                return over, (CollisionEvent("END", self.count, t, self._onset, ax, float(value[ax]),
-                                             float(self._peak[ax]), t - self._onset),)
+                self._g = [0.0] * 12
+                self._zero_t = [t] * 12
+                ax = max(range(12), key=lambda j: self._pk[j] * sc[j])
+                return over, (CollisionEvent("END", self.count, t, self._onset, ax, value[ax], self._pk[ax],
+                                             t - self._onset),)
         else:
             self._release_since = None
         return over, ()
