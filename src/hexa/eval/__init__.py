@@ -150,7 +150,7 @@ def _run_on_dask(cfg: CampaignConfig, jobs: list[tuple[str, dict[str, Any]]],
     cluster = (LocalCluster(n_workers=n, threads_per_worker=1, processes=True, dashboard_address=None)
                if n is not None else None)
     try:
-        with Client(cluster if cluster is not None else cfg.scheduler) as client:
+        with Client(cluster if cluster is not None else cfg.scheduler, timeout="10s") as client:
             # pure=False: equal jobs are still separate runs; each task holds one job's small dict
             futures = {client.submit(_run_job, kind, job, pure=False): kind for kind, job in jobs}
             for f in as_completed(list(futures)):
