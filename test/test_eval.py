@@ -37,8 +37,15 @@ def test_a_strong_plate_push_is_detected_within_100_ms_and_its_force_identified(
     assert np.isfinite(m["exceed_time"]) and 0.0 <= m["delay_ms"] <= 100.0
     rmse = np.asarray(m["force_rmse"])
     assert np.all(np.isfinite(rmse)) and np.all(rmse < 2.0)        # the identification ran on the contact
-    # the replays at scale 1 see what the live detector (the node's default, the CUSUM) saw
-    assert r["detector"] == "cusum"
+    # the replays at scale 1 see what the live detector (the node's default, the threshold detector) saw
+    assert r["detector"] == "threshold"
+    node = {row["scale"]: row for row in r["detect"]["threshold"]}
+    assert node[1.0]["detect_time"] == pytest.approx(m["detect_time"], abs=1e-9)
+    # and so does the CUSUM's replay when the CUSUM runs live
+    r = run_contact_job({"collision": plate, "sim_seed": 1, "realism": "ideal", "index": 0, "identify": False,
+                         "detector": "cusum"})
+    m = r["metrics"]
+    assert r["detector"] == "cusum" and m["false_starts"] == 0 and 0.0 <= m["delay_ms"] <= 100.0
     node = {row["scale"]: row for row in r["detect"]["cusum"]}
     assert node[1.0]["detect_time"] == pytest.approx(m["detect_time"], abs=1e-9)
 
@@ -60,7 +67,7 @@ def test_smoke_campaign_on_two_worker_processes_writes_the_report(tmp_path):
     assert s["cases"] == 6 and all(len(s["det"][n]) == len(THRESHOLD_SCALES) for n in DETECTOR_NAMES)
     assert set(s["targets"]) >= {"fa_per_10h", "det_plate_3n", "delay_median_ms", "rmse_below_paper"}
     assert s["live_false_starts_free"] == 0                    # ideal free motion raises no false alarm
-    assert sum(f["starts"]["cusum"][THRESHOLD_SCALES.index(1.0)] for f in result["free"]) == 0
+    assert sum(f["starts"]["threshold"][THRESHOLD_SCALES.index(1.0)] for f in result["free"]) == 0
     assert s["vs_paper"]["detector"] == "cusum" and "delay_vs_paper" in s["targets"]
     # a lower threshold never detects fewer contacts nor raises fewer false alarms
     for name in DETECTOR_NAMES:

@@ -35,9 +35,9 @@ def observer_parameters() -> dict[str, Param]:
         "servo_thresholds": Param(six(o.servo_thresholds), "threshold on the residual as servo torques (N*m; 0 = off)"),
         "release_ratio": Param(float(o.release_ratio), "an axis releases below release_ratio * r_low (hysteresis)"),
         "min_duration": Param(float(o.min_duration), "s over threshold before START, all released before END"),
-        "detector": Param("cusum", "collision detector: cusum (sequential test on the residual whitened by the "
-                          "thresholds, a slow baseline and the motion; docs/observer_node.md) | threshold (|r| over "
-                          "the thresholds for min_duration)", choices=DETECTORS),
+        "detector": Param("threshold", "collision detector: threshold (|r| over the thresholds for min_duration) | "
+                          "cusum (sequential test on the residual whitened by the thresholds, a slow baseline and "
+                          "the motion; docs/observer_node.md)", choices=DETECTORS),
         "cusum_drift": Param(float(c.drift), "cusum: drift nu subtracted from the whitened residual (threshold units)",
                              range=(0.0, 10.0)),
         "cusum_alarm": Param(float(c.alarm), "cusum: START when a channel's sum reaches this (threshold units * s)",

@@ -28,9 +28,9 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="run on Dask distributed instead of the local process pool: local:N starts a local cluster "
                         "of N workers, an address (tcp://host:8786) uses a running scheduler whose workers have "
                         "hexa installed")
-    p.add_argument("--detector", choices=["cusum", "threshold"], default="cusum",
-                   help="the live collision detector, as the observer node's `detector` parameter (default cusum); "
-                        "the report replays both and the paper's on every run")
+    p.add_argument("--detector", choices=["cusum", "threshold"], default="threshold",
+                   help="the live collision detector, as the observer node's `detector` parameter (default "
+                        "threshold); the report replays both and the paper's on every run")
     p.add_argument("--no-identify", action="store_true", help="skip the force identification (no RMSE)")
     p.add_argument("--no-plots", action="store_true", help="no PNG figures")
     p.add_argument("--out", default="out/eval", help="output folder (default out/eval)")

@@ -42,7 +42,7 @@ class CampaignConfig:
     identify: bool = True
     observer: dict[str, Any] = field(default_factory=dict)
     scheduler: str | None = None
-    detector: str = "cusum"
+    detector: str = "threshold"
     cusum: dict[str, Any] = field(default_factory=dict)
 
     def __post_init__(self) -> None:

@@ -119,13 +119,13 @@ class RunRecord:
 
 
 def simulate(collision: ScriptedCollision | None, trajectory: str, duration: float, realism: Any, seed: int,
-             observer_config: Any = None, identify: bool = True, desc: Any = None, detector: str = "cusum",
+             observer_config: Any = None, identify: bool = True, desc: Any = None, detector: str = "threshold",
              cusum: Any = None) -> RunRecord:
     """Run the robot `duration` s of trajectory time (after LEAD_IN) with an optional scripted contact (its onset in
     trajectory time); see the module docstring for what runs. Free motion (no contact) loops the trajectory and
     ignores STARTs (it keeps moving, to count false alarms); with a contact a START holds the trajectory, as the
     trajectory node's default policy does. `detector` and `cusum`: the monitor's detector (the node's default:
-    "cusum" with CusumConfig())."""
+    "threshold"; "cusum" with CusumConfig())."""
     from hexa.dynamics.contact_force import ContactForceConfig, ContactForceTracker, LocatedContact
     from hexa.dynamics.monitor import CollisionMonitor, MonitorConfig
     from hexa.dynamics.observer import ObserverConfig
@@ -292,7 +292,7 @@ def _detector_settings(job: dict[str, Any]) -> tuple[Any, str, Any]:
     from hexa.dynamics.cusum import CusumConfig
     from hexa.dynamics.observer import ObserverConfig
 
-    return (ObserverConfig(**job.get("observer", {})), job.get("detector", "cusum"),
+    return (ObserverConfig(**job.get("observer", {})), job.get("detector", "threshold"),
             CusumConfig(**job.get("cusum", {})))
 
 
