@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from hexa.eval import CampaignConfig, ProgressBar, jobs_of, run_campaign
-from hexa.eval.campaign import THRESHOLD_SCALES, draw_contact, run_contact_job
+from hexa.eval.campaign import DETECTOR_NAMES, THRESHOLD_SCALES, draw_contact, run_contact_job
 from hexa.eval.report import summarize, write_report
 
 pytestmark = pytest.mark.slow   # a campaign on worker processes: left out of `make check`
@@ -39,8 +39,16 @@ def test_a_strong_plate_push_is_detected_within_100_ms_and_its_force_identified(
     assert np.isfinite(m["exceed_time"]) and 0.0 <= m["delay_ms"] <= 100.0
     rmse = np.asarray(m["force_rmse"])
     assert np.all(np.isfinite(rmse)) and np.all(rmse < 2.0)        # the identification ran on the contact
-    # the replays at scale 1 see what the live detector saw
-    node = {row["scale"]: row for row in r["detect"]["node"]}
+    # the replays at scale 1 see what the live detector (the node's default, the threshold detector) saw
+    assert r["detector"] == "threshold"
+    node = {row["scale"]: row for row in r["detect"]["threshold"]}
+    assert node[1.0]["detect_time"] == pytest.approx(m["detect_time"], abs=1e-9)
+    # and so does the CUSUM's replay when the CUSUM runs live
+    r = run_contact_job({"collision": plate, "sim_seed": 1, "realism": "ideal", "index": 0, "identify": False,
+                         "detector": "cusum"})
+    m = r["metrics"]
+    assert r["detector"] == "cusum" and m["false_starts"] == 0 and 0.0 <= m["delay_ms"] <= 100.0
+    node = {row["scale"]: row for row in r["detect"]["cusum"]}
     assert node[1.0]["detect_time"] == pytest.approx(m["detect_time"], abs=1e-9)
 
 
@@ -58,12 +66,13 @@ def test_smoke_campaign_on_two_worker_processes_writes_the_report(tmp_path):
         assert (tmp_path / name).stat().st_size > 5000 and f"]({name})" in text
     data = json.loads((tmp_path / "report.json").read_text())
     s = data["summary"]["ideal"]
-    assert s["cases"] == 6 and len(s["det"]["node"]) == len(THRESHOLD_SCALES) == len(s["det"]["paper"])
+    assert s["cases"] == 6 and all(len(s["det"][n]) == len(THRESHOLD_SCALES) for n in DETECTOR_NAMES)
     assert set(s["targets"]) >= {"fa_per_10h", "det_plate_3n", "delay_median_ms", "rmse_below_paper"}
     assert s["live_false_starts_free"] == 0                    # ideal free motion raises no false alarm
-    assert sum(f["starts"]["node"][THRESHOLD_SCALES.index(1.0)] for f in result["free"]) == 0
+    assert sum(f["starts"]["threshold"][THRESHOLD_SCALES.index(1.0)] for f in result["free"]) == 0
+    assert s["vs_paper"]["detector"] == "cusum" and "delay_vs_paper" in s["targets"]
     # a lower threshold never detects fewer contacts nor raises fewer false alarms
-    for name in ("node", "paper"):
+    for name in DETECTOR_NAMES:
         rows = s["det"][name]
         det = [sum(1 for c in result["contacts"] for row in c["detect"][name]
                    if row["scale"] == r["scale"] and np.isfinite(row["detect_time"])) for r in rows]
@@ -94,6 +103,24 @@ def test_bad_campaign_settings_are_refused_with_their_name():
         CampaignConfig(cases=0, free_seconds=0.0)
     with pytest.raises(ValueError, match="workers"):
         CampaignConfig(workers=0)
+    with pytest.raises(ValueError, match="local:N"):
+        CampaignConfig(scheduler="local:0")
+    with pytest.raises(ValueError, match="detector"):
+        CampaignConfig(detector="bayes")
+    with pytest.raises(ValueError, match="alarm"):
+        CampaignConfig(cusum={"alarm": 0.0})
+
+
+def test_campaign_runs_on_a_local_dask_cluster_of_two_workers():
+    import os
+
+    cfg = CampaignConfig(cases=0, free_seconds=1.0, realisms=("ideal", "realistic"), seed=2, scheduler="local:2")
+    seen: list[float] = []
+    result = run_campaign(cfg, progress=seen.append)
+    assert result["engine"] == "dask local:2" and result["workers"] == 2
+    assert len(seen) == 2 and {f["realism"] for f in result["free"]} == {"ideal", "realistic"}
+    assert all(f["sim_seconds"] == pytest.approx(2.0) and f["pid"] != os.getpid() for f in result["free"])
+    assert set(result["free"][0]["starts"]) == set(DETECTOR_NAMES)
 
 
 def test_cli_writes_the_report_and_refuses_bad_sizes(tmp_path, capsys):

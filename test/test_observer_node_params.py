@@ -111,6 +111,21 @@ def test_runtime_parameters_reach_the_detector_and_the_estimator(rcl):
     assert node.monitor.observer.detector.servo_thresholds[2] == 0.5    # unchanged
     ro = node.set_parameters([Parameter("zeta_source", value="measured")])
     assert not ro[0].successful and node.monitor.config.zeta_source == "estimator"
+    # the threshold detector (the default) refuses the CUSUM's settings; the CUSUM detector takes them at run time,
+    # and refuses a bad one naming it
+    (no,) = node.set_parameters([Parameter("cusum_alarm", value=0.02)])
+    assert not no.successful and "cusum" in no.reason
+    node = ObserverNode(parameter_overrides=[Parameter("detector", value="cusum")])
+    rcl.append(node)
+    res = node.set_parameters([Parameter("cusum_alarm", value=0.02), Parameter("cusum_baseline_tau", value=0.5)])
+    assert all(r.successful for r in res)
+    cusum = node.monitor.observer.detector.cusum
+    assert (cusum.alarm, cusum.baseline_tau, cusum.drift) == (0.02, 0.5, 0.5)
+    bad = node.set_parameters([Parameter("cusum_accel_tau", value=0.0)])
+    assert not bad[0].successful and "accel_tau" in bad[0].reason
+    assert node.monitor.observer.detector.cusum.accel_tau == 0.02      # unchanged
+    ro = node.set_parameters([Parameter("detector", value="threshold")])
+    assert not ro[0].successful and "read-only" in ro[0].reason
 
 
 def test_reset_with_recalibrate_removes_a_rest_offset(rcl):

@@ -33,6 +33,7 @@ from rcl_interfaces.msg import SetParametersResult
 from rclpy.node import Node
 from sensor_msgs.msg import JointState
 
+from hexa.dynamics.cusum import CusumConfig
 from hexa.dynamics.monitor import ESTIMATOR_KEYS, CollisionMonitor, MonitorConfig
 from hexa.dynamics.monitoring import WatchConfig
 from hexa.dynamics.observer import ObserverConfig
@@ -44,6 +45,7 @@ from hexa_dynamics.observer_params import observer_parameters
 
 OBSERVER_KEYS = ("gains", "thresholds", "servo_thresholds", "release_ratio", "min_duration")
 OUTPUT_KEYS = ("marker_rate_hz", "marker_scale", "pose_estimate_rate_hz", "tf_rate_hz", "zeta_batch_period")
+CUSUM_KEYS = ("drift", "alarm", "velocity_gain", "accel_gain", "accel_tau", "baseline_tau")   # cusum_<key>
 
 
 class ObserverNode(Node):
@@ -58,7 +60,9 @@ class ObserverNode(Node):
                              **{k: float(v[k]) for k in ("pose_delay", "reseed_distance", "command_delay")})
         ocfg = ObserverConfig(**{k: _value(v[k]) for k in OBSERVER_KEYS}, max_gap=float(v["max_gap"]))
         ecfg = EstimatorConfig(**{k: float(v[k]) for k in ESTIMATOR_KEYS})
-        self.monitor = CollisionMonitor(desc, mcfg, ocfg, ecfg)   # raises ValueError naming a bad value
+        ccfg = CusumConfig(**{k: float(v[f"cusum_{k}"]) for k in CUSUM_KEYS})
+        self.monitor = CollisionMonitor(desc, mcfg, ocfg, ecfg, detector=str(v["detector"]),
+                                        cusum=ccfg)   # raises ValueError naming a bad value
         self.set = {k: v[k] for k in ("calibration_duration", *OUTPUT_KEYS)}
         self.frame_id = str(v["frame_id"])
         self.out = ObserverOutputs(self, desc, self.frame_id, self.set)
@@ -74,24 +78,28 @@ class ObserverNode(Node):
         self.monitoring = MonitoringPublisher(self, self.monitor, WatchConfig.from_values(v), self.frame_id,
                                               self._diagnostics)   # the inputs pass through its watch
         self.watch = self.monitoring.watch
-        self.get_logger().info(f"observer: ζ from {mcfg.zeta_source}, r_low {list(ocfg.thresholds)}, servo "
-                               f"thresholds {list(ocfg.servo_thresholds)} N·m, K {list(ocfg.gains)}")
+        self.get_logger().info(f"observer: ζ from {mcfg.zeta_source}, {v['detector']} detector, r_low "
+                               f"{list(ocfg.thresholds)}, servo thresholds {list(ocfg.servo_thresholds)} N·m, "
+                               f"K {list(ocfg.gains)}")
 
     def _subscribe_states(self) -> Any:
         return self.create_subscription(JointState, "joint_states", self._on_states, qos.STREAM, raw=True)
 
     def _on_set_parameters(self, params: list) -> SetParametersResult:
         m = self.monitor
-        ocfg, ecfg, reseed = m.observer.config, m.estimator.config, None
+        ocfg, ecfg, reseed, ccfg = m.observer.config, m.estimator.config, None, None
         try:
             for prm in params:
-                if prm.name in OBSERVER_KEYS:
+                if prm.name.startswith("cusum_") and prm.name[6:] in CUSUM_KEYS:
+                    ccfg = dataclasses.replace(ccfg or getattr(m.observer.detector, "cusum", CusumConfig()),
+                                               **{prm.name[6:]: float(prm.value)})
+                elif prm.name in OBSERVER_KEYS:
                     ocfg = dataclasses.replace(ocfg, **{prm.name: _value(prm.value)})
                 elif prm.name in ESTIMATOR_KEYS:
                     ecfg = dataclasses.replace(ecfg, **{prm.name: float(prm.value)})
                 elif prm.name == "reseed_distance":
                     reseed = float(prm.value)
-            m.configure(ocfg, ecfg, reseed)   # applied only when every value is valid
+            m.configure(ocfg, ecfg, reseed, ccfg)   # applied only when every value is valid
         except (TypeError, ValueError) as exc:
             return SetParametersResult(successful=False, reason=str(exc))
         self.set.update({prm.name: prm.value for prm in params if prm.name in self.set})

@@ -2,20 +2,23 @@
 which ones a running node takes (the rest are read-only: a set is refused with the reason)."""
 from __future__ import annotations
 
+from hexa.dynamics.cusum import DETECTORS, CusumConfig
 from hexa.dynamics.monitoring import WatchConfig
 from hexa.dynamics.observer import ObserverConfig
 from hexa.estimation import EstimatorConfig
 from hexa_ros.node import DESCRIPTION, DESCRIPTION_PARAM, Param
 
 #: the parameters the observer applies on a running node (hexa.dynamics.monitor.CollisionMonitor.configure)
-RUNTIME = ("gains", "thresholds", "servo_thresholds", "release_ratio", "min_duration", "accel_sigma", "torque_sigma",
+RUNTIME = ("gains", "thresholds", "servo_thresholds", "release_ratio", "min_duration", "cusum_drift", "cusum_alarm",
+           "cusum_velocity_gain", "cusum_accel_gain", "cusum_accel_tau", "cusum_baseline_tau", "accel_sigma",
+           "torque_sigma",
            "camera_sigma", "bias_walk", "saturation", "stall_sigma", "reseed_distance", "calibration_duration",
            "marker_rate_hz", "marker_scale", "pose_estimate_rate_hz", "tf_rate_hz", "zeta_batch_period")
 
 
 def observer_parameters() -> dict[str, Param]:
     """Name → Param of every observer parameter (hexa_bringup/config/hexa_params.yaml has the same defaults)."""
-    o, e, w = ObserverConfig(), EstimatorConfig(), WatchConfig()
+    o, e, w, c = ObserverConfig(), EstimatorConfig(), WatchConfig(), CusumConfig()
     def six(v: tuple) -> list[float]:
         return [float(x) for x in v]
 
@@ -32,6 +35,22 @@ def observer_parameters() -> dict[str, Param]:
         "servo_thresholds": Param(six(o.servo_thresholds), "threshold on the residual as servo torques (N*m; 0 = off)"),
         "release_ratio": Param(float(o.release_ratio), "an axis releases below release_ratio * r_low (hysteresis)"),
         "min_duration": Param(float(o.min_duration), "s over threshold before START, all released before END"),
+        "detector": Param("threshold", "collision detector: threshold (|r| over the thresholds for min_duration) | "
+                          "cusum (sequential test on the residual whitened by the thresholds, a slow baseline and "
+                          "the motion; docs/observer_node.md)", choices=DETECTORS),
+        "cusum_drift": Param(float(c.drift), "cusum: drift nu subtracted from the whitened residual (threshold units)",
+                             range=(0.0, 10.0)),
+        "cusum_alarm": Param(float(c.alarm), "cusum: START when a channel's sum reaches this (threshold units * s)",
+                             range=(1e-4, 10.0)),
+        "cusum_velocity_gain": Param(float(c.velocity_gain), "cusum: thresholds * (1 + this * max|zeta_dot| + ...) "
+                                     "(s/rad)", range=(0.0, 100.0)),
+        "cusum_accel_gain": Param(float(c.accel_gain), "cusum: thresholds * (1 + ... + this * max|zeta_ddot|) "
+                                  "(s^2/rad)", range=(0.0, 100.0)),
+        "cusum_accel_tau": Param(float(c.accel_tau), "cusum: time constant of zeta_ddot from zeta_dot (s)",
+                                 range=(1e-4, 10.0)),
+        "cusum_baseline_tau": Param(float(c.baseline_tau), "cusum: time constant of each channel's slow baseline "
+                                    "(model error), followed only without evidence of a contact (s; 0 = off)",
+                                    range=(0.0, 60.0)),
         "max_gap": Param(float(o.max_gap), "s; a longer joint_states spacing restarts the integration",
                          range=(1e-3, 10.0)),
         "pose_delay": Param(0.5, "s; camera poses are applied at image stamp + pose_delay", range=(0.0, 5.0)),

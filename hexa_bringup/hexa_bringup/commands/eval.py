@@ -1,5 +1,5 @@
 """`hexa eval`: randomized contacts and free motion on the simulated robot through the nodes' core classes (no ROS),
-in parallel over the local cores; a Markdown + PNG report with JSON beside it (docs/eval.md)."""
+in parallel over the local cores or on Dask distributed; a Markdown + PNG report with JSON beside it (docs/eval.md)."""
 from __future__ import annotations
 
 import argparse
@@ -24,6 +24,13 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="the simulated robot: ideal (the simulator is the model), realistic (docs/simulator.md) or "
                         "both, each on the same contacts (default both)")
     p.add_argument("--workers", type=int, default=None, help="worker processes (default: the CPU count)")
+    p.add_argument("--scheduler", metavar="local:N|ADDRESS", default=None,
+                   help="run on Dask distributed instead of the local process pool: local:N starts a local cluster "
+                        "of N workers, an address (tcp://host:8786) uses a running scheduler whose workers have "
+                        "hexa installed")
+    p.add_argument("--detector", choices=["cusum", "threshold"], default="threshold",
+                   help="the live collision detector, as the observer node's `detector` parameter (default "
+                        "threshold); the report replays both and the paper's on every run")
     p.add_argument("--no-identify", action="store_true", help="skip the force identification (no RMSE)")
     p.add_argument("--no-plots", action="store_true", help="no PNG figures")
     p.add_argument("--out", default="out/eval", help="output folder (default out/eval)")
@@ -41,13 +48,18 @@ def run(args: argparse.Namespace) -> int:
         if not math.isfinite(hours) or hours < 0:
             raise ValueError(f"free motion must be >= 0, got {hours} h")
         cfg = CampaignConfig(cases=args.cases, free_seconds=hours * 3600.0, realisms=realisms, seed=args.seed,
-                             workers=args.workers, identify=not args.no_identify)
+                             workers=args.workers, identify=not args.no_identify, scheduler=args.scheduler,
+                             detector=args.detector)
     except ValueError as exc:
         print(f"hexa eval: {exc}", file=sys.stderr)
         return 2
     jobs = jobs_of(cfg)
     bar = ProgressBar(len(jobs), sum(j.get("seconds", 8.0) for _, j in jobs))
-    result = run_campaign(cfg, progress=bar.update)
+    try:
+        result = run_campaign(cfg, progress=bar.update)
+    except (ValueError, OSError) as exc:   # Dask missing, or its scheduler unreachable
+        print(f"\nhexa eval: {exc}", file=sys.stderr)
+        return 2
     md = write_report(result, Path(args.out), plots=not args.no_plots)
     summary = summarize(result)
     if args.json:

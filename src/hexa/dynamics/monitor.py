@@ -16,6 +16,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
+from hexa.dynamics.cusum import CusumConfig, make_detector
 from hexa.dynamics.observer import ObserverConfig, ObserverError, ResidualObserver, ResidualSample
 from hexa.estimation import EstimatorConfig, InputCheck, SampleSequencer, ServoModel, ZetaEstimator
 from hexa.pose_check import PoseCheck
@@ -148,12 +149,16 @@ class CollisionMonitor:
         for s in mon.push_states(stamp, commanded, velocity, effort): ...
         for s in mon.push_pose(image_stamp, pose): ...
 
+    `detector`: "threshold" (the paper's criterion and the servo-torque one, `CollisionDetector`) or "cusum"
+    (`hexa.dynamics.cusum.CusumDetector` with `cusum`, fed ζ̂̇ before each sample).
+
     Raises (constructor, configure):
         ValueError (ObserverError, EstimationError): a setting out of range, naming it.
     """
 
     def __init__(self, desc: Any, config: MonitorConfig | None = None, observer: ObserverConfig | None = None,
-                 estimator: EstimatorConfig | None = None) -> None:
+                 estimator: EstimatorConfig | None = None, detector: str = "threshold",
+                 cusum: CusumConfig | None = None) -> None:
         from hexa.dynamics.lagrange import HexaDynamicParameters
 
         self.desc = desc
@@ -162,6 +167,8 @@ class CollisionMonitor:
         self.observer = ResidualObserver(HexaDynamicParameters.from_description(desc), observer or ObserverConfig())
         self.estimator = ZetaEstimator(desc, ServoModel.from_description(desc, command_delay=self.config.command_delay),
                                        estimator or EstimatorConfig())
+        self.observer.detector = make_detector(detector, self.observer.config, cusum)
+        self._motion = getattr(self.observer.detector, "motion", None)   # the CUSUM follows ζ̂̇
         self.clock = SampleClock(fixed_offset=0.0 if self.config.sim_clock else None)
         self.sequencer = SampleSequencer(self.config.time_source, pose_delay=self.config.pose_delay)
         self.rejects = {"bad_currents": 0, "board_time": 0, "bad_joint_names": 0, "bad_pose": 0, "estimator": 0,
@@ -178,8 +185,13 @@ class CollisionMonitor:
 
     # ------------------------------------------------------------------ settings and control
     def configure(self, observer: ObserverConfig | None = None, estimator: EstimatorConfig | None = None,
-                  reseed_distance: float | None = None) -> None:
-        """Apply new settings at run time (the detector's thresholds take effect at the next sample)."""
+                  reseed_distance: float | None = None, cusum: CusumConfig | None = None) -> None:
+        """Apply new settings at run time (the detector's thresholds take effect at the next sample; `cusum` only
+        with the CUSUM detector)."""
+        if cusum is not None:
+            if not hasattr(self.observer.detector, "set_cusum"):
+                raise ValueError("cusum settings need detector 'cusum' (the detector is chosen at start-up)")
+            self.observer.detector.set_cusum(cusum)
         if reseed_distance is not None:
             self.config = dataclasses.replace(self.config, reseed_distance=float(reseed_distance))
         if observer is not None:
@@ -298,6 +310,8 @@ class CollisionMonitor:
             zeta, zeta_dot = e.zeta, e.zeta_dot
         else:
             zeta, zeta_dot = pos, vel
+        if self._motion is not None:
+            self._motion(t, zeta_dot)
         out = self.observer.update_arm(t, zeta, tau, zeta_dot)
         self._tracking = out is not None
         if out is None:

@@ -1,5 +1,6 @@
 """`hexa eval`: a randomized campaign of contacts and free motion on the simulated robot, run through the nodes' own
-core classes without ROS, in parallel over the local cores. See docs/eval.md.
+core classes without ROS, in parallel over the local cores (a process pool) or on a Dask distributed cluster. See
+docs/eval.md.
 
     from hexa.eval import CampaignConfig, run_campaign
     from hexa.eval.report import write_report
@@ -28,7 +29,10 @@ class CampaignConfig:
     """What to run: `cases` random contacts and `free_seconds` of free motion (over the three trajectories) on each
     robot of `realisms` ("ideal", "realistic"); `seed` draws the contacts and seeds the simulators; `workers`
     processes (default: the CPU count); `identify`: run the force identification (rnea's tracker) in the contact
-    cases; `observer`: ObserverConfig fields that replace the node's defaults."""
+    cases; `observer`: ObserverConfig fields that replace the node's defaults; `detector`: the live detector
+    ("cusum" | "threshold", the node's `detector` parameter) and `cusum`: CusumConfig fields; `scheduler`: None
+    (the local process pool), "local:N" (a Dask LocalCluster of N single-threaded worker processes) or a Dask
+    scheduler's address ("tcp://host:8786"; its workers need hexa installed)."""
 
     cases: int = 6
     free_seconds: float = 20.0
@@ -37,6 +41,9 @@ class CampaignConfig:
     workers: int | None = None
     identify: bool = True
     observer: dict[str, Any] = field(default_factory=dict)
+    scheduler: str | None = None
+    detector: str = "threshold"
+    cusum: dict[str, Any] = field(default_factory=dict)
 
     def __post_init__(self) -> None:
         from hexa.sim.realism import RealismConfig
@@ -49,6 +56,36 @@ class CampaignConfig:
             raise ValueError(f"workers must be >= 1, got {self.workers}")
         for r in self.realisms:
             RealismConfig.named(r)   # raises ValueError naming the presets
+        if self.scheduler is not None:
+            local_workers(self.scheduler)   # raises ValueError naming a bad "local:N"
+        from hexa.dynamics.cusum import DETECTORS, CusumConfig
+
+        if self.detector not in DETECTORS:
+            raise ValueError(f"detector must be one of {DETECTORS}, got {self.detector!r}")
+        try:
+            CusumConfig(**self.cusum)   # raises naming a bad value
+        except TypeError as exc:
+            raise ValueError(f"cusum settings: {exc}") from exc
+
+
+def local_workers(scheduler: str) -> int | None:
+    """N of a "local:N" scheduler (a Dask LocalCluster of N workers), None for a scheduler address.
+
+    Raises:
+        ValueError: "local:" without a positive count, or an empty address.
+    """
+    s = scheduler.strip()
+    if not s:
+        raise ValueError("scheduler must be 'local:N' or a Dask scheduler address (tcp://host:port), got ''")
+    if not s.startswith("local:"):
+        return None
+    try:
+        n = int(s[len("local:"):])
+    except ValueError:
+        n = 0
+    if n < 1:
+        raise ValueError(f"scheduler 'local:N' needs N >= 1 workers, got {scheduler!r}")
+    return n
 
 
 def jobs_of(cfg: CampaignConfig) -> list[tuple[str, dict[str, Any]]]:
@@ -59,20 +96,23 @@ def jobs_of(cfg: CampaignConfig) -> list[tuple[str, dict[str, Any]]]:
     for realism in cfg.realisms:
         for i in range(cfg.cases):
             contacts.append(("contact", {"campaign_seed": cfg.seed, "index": i, "sim_seed": cfg.seed * 100003 + i,
-                                     "realism": realism, "identify": cfg.identify, "observer": cfg.observer}))
+                                     "realism": realism, "identify": cfg.identify, "observer": cfg.observer,
+                                     "detector": cfg.detector, "cusum": cfg.cusum}))
         left, k = cfg.free_seconds, 0
         while left > 1e-9:
             chunk = min(FREE_CHUNK_S, left)
             jobs.append(("free", {"trajectory": TRAJECTORIES[k % len(TRAJECTORIES)], "seconds": chunk,
                                   "sim_seed": cfg.seed * 100003 + 50000 + k, "realism": realism,
-                                  "observer": cfg.observer}))
+                                  "observer": cfg.observer, "detector": cfg.detector, "cusum": cfg.cusum}))
             left -= chunk
             k += 1
     return jobs + contacts
 
 
 def _run_job(kind: str, job: dict[str, Any]) -> dict[str, Any]:
-    return run_contact_job(job) if kind == "contact" else run_free_job(job)
+    r = run_contact_job(job) if kind == "contact" else run_free_job(job)
+    r["pid"] = os.getpid()   # the worker process that ran it
+    return r
 
 
 class ProgressBar:
@@ -97,33 +137,61 @@ class ProgressBar:
         return line
 
 
+def _run_on_dask(cfg: CampaignConfig, jobs: list[tuple[str, dict[str, Any]]],
+                 done: Callable[[str, dict[str, Any]], None]) -> int:
+    """Run `jobs` on Dask distributed (`cfg.scheduler`), calling `done(kind, result)` as each finishes; returns the
+    number of workers. A "local:N" cluster lives for this call; an address is connected to and left running."""
+    try:
+        from distributed import Client, LocalCluster, as_completed
+    except ImportError as exc:   # the set-up installs it (requirements/core.txt)
+        raise ValueError(f"scheduler {cfg.scheduler!r} needs Dask distributed (pip install 'dask[distributed]'): "
+                         f"{exc}") from exc
+    n = local_workers(cfg.scheduler or "")
+    cluster = (LocalCluster(n_workers=n, threads_per_worker=1, processes=True, dashboard_address=None)
+               if n is not None else None)
+    try:
+        with Client(cluster if cluster is not None else cfg.scheduler, timeout="10s") as client:
+            # pure=False: equal jobs are still separate runs; each task holds one job's small dict
+            futures = {client.submit(_run_job, kind, job, pure=False): kind for kind, job in jobs}
+            for f in as_completed(list(futures)):
+                done(futures[f], f.result())
+            return len(client.scheduler_info(n_workers=-1).get("workers", {})) or (n or 0)
+    finally:
+        if cluster is not None:
+            cluster.close()
+
+
 def run_campaign(cfg: CampaignConfig, progress: Callable[[float], Any] | None = None) -> dict[str, Any]:
-    """Run every job of `cfg` on a process pool (`cfg.workers`; 1 = in this process) and collect the results:
-    {"config", "contacts": [...], "free": [...], "wall_s", "sim_s", "workers"}. `progress(sim_seconds)` is called
-    after each job."""
+    """Run every job of `cfg` on a process pool (`cfg.workers`; 1 = in this process) or on Dask distributed
+    (`cfg.scheduler`) and collect the results: {"config", "contacts": [...], "free": [...], "wall_s", "sim_s",
+    "workers", "engine"}. `progress(sim_seconds)` is called after each job."""
     jobs = jobs_of(cfg)
     workers = cfg.workers or os.cpu_count() or 1
     results: list[tuple[str, dict[str, Any]]] = []
     t0 = time.monotonic()
-    if workers == 1:
+
+    def done(kind: str, r: dict[str, Any]) -> None:
+        results.append((kind, r))
+        if progress:
+            progress(r.get("sim_seconds", 0.0))
+
+    engine = "process pool" if workers > 1 else "in process"
+    if cfg.scheduler is not None:
+        engine = f"dask {cfg.scheduler}"
+        workers = _run_on_dask(cfg, jobs, done)
+    elif workers == 1:
         for kind, job in jobs:
-            r = _run_job(kind, job)
-            results.append((kind, r))
-            if progress:
-                progress(r.get("sim_seconds", 0.0))
+            done(kind, _run_job(kind, job))
     else:
         # spawn: each worker imports MuJoCo afresh (no state inherited from a parent that may hold a GL context)
         with ProcessPoolExecutor(max_workers=workers, mp_context=multiprocessing.get_context("spawn")) as pool:
             futures = {pool.submit(_run_job, kind, job): kind for kind, job in jobs}
             pending = set(futures)
             while pending:
-                done, pending = wait(pending, return_when=FIRST_COMPLETED)
-                for f in done:
-                    r = f.result()
-                    results.append((futures[f], r))
-                    if progress:
-                        progress(r.get("sim_seconds", 0.0))
+                finished, pending = wait(pending, return_when=FIRST_COMPLETED)
+                for f in finished:
+                    done(futures[f], f.result())
     contacts = sorted((r for k, r in results if k == "contact"), key=lambda r: (r["realism"], r["index"]))
     free = sorted((r for k, r in results if k == "free"), key=lambda r: (r["realism"], r["trajectory"]))
-    return {"config": asdict(cfg), "contacts": contacts, "free": free, "workers": workers,
+    return {"config": asdict(cfg), "contacts": contacts, "free": free, "workers": workers, "engine": engine,
             "wall_s": time.monotonic() - t0, "sim_s": sum(r.get("sim_seconds", 0.0) for _, r in results)}

@@ -16,8 +16,9 @@ A run drives the simulator like the live graph does and feeds the same classes t
   true link, chain and point at the START (an oracle isolation: the isolation on rendered frames is not run).
 
 The recorded arrays become a `hexa.report.collision_demo.CaseData`, and `compute_metrics` — the demo's own — gives
-delay, RMSE and false STARTs. The residual is also replayed through `CollisionDetector` at scaled thresholds (the DET
-curve) and through the paper's detector (plate axes only, r_low = 2 N / 0.2 N·m, no servo criterion).
+delay, RMSE and false STARTs. The residual is also replayed at scaled thresholds (the DET curve) through the CUSUM
+detector (`hexa.dynamics.cusum`), the threshold detector (`CollisionDetector`) and the paper's detector (plate axes
+only, r_low = 2 N / 0.2 N·m, no servo criterion).
 """
 from __future__ import annotations
 
@@ -40,6 +41,8 @@ CAMERA_PERIOD = 1.0 / 30.0
 POSE_NOISE = (0.0005, math.radians(0.1))    # m, rad: the stand-in for the pose node's error
 #: threshold scales of the DET curve (× the detector's thresholds, plate axes and servo torques together)
 THRESHOLD_SCALES = (0.5, 0.6, 0.7, 0.8, 0.9, 1.0, 1.15, 1.3, 1.5, 1.75, 2.0, 2.5)
+#: the detectors replayed on every run (`detectors`)
+DETECTOR_NAMES = ("cusum", "threshold", "paper")
 #: the paper's detector: r_low on the plate axes only (seed 000 §3.1), no servo-torque criterion
 PAPER_THRESHOLDS = (2.0, 2.0, 2.0, 0.2, 0.2, 0.2)
 R_LOW = 2.0
@@ -49,21 +52,29 @@ PLATE_EQUIVALENT_STRIDE = 5
 
 @dataclass(frozen=True)
 class DetectorSpec:
-    """A detector to replay on recorded residuals: plate-axis thresholds (N, N·m) and servo thresholds (N·m, 0 =
-    off), with the live detector's release ratio and minimum duration."""
+    """A detector to replay on recorded residuals: its kind ("threshold": `CollisionDetector`, "cusum":
+    `hexa.dynamics.cusum.CusumDetector` with `cusum`), plate-axis thresholds (N, N·m) and servo thresholds (N·m,
+    0 = off), with the live detector's release ratio and minimum duration."""
 
     name: str
     thresholds: tuple[float, ...]
     servo_thresholds: tuple[float, ...]
+    kind: str = "threshold"
+    cusum: Any = None
 
     def config(self, base: Any, scale: float = 1.0) -> Any:
         return dataclasses.replace(base, thresholds=tuple(scale * v for v in self.thresholds),
                                    servo_thresholds=tuple(scale * v for v in self.servo_thresholds))
 
 
-def detectors(observer_config: Any) -> tuple[DetectorSpec, DetectorSpec]:
-    """The node's detector (its configured thresholds) and the paper's baseline."""
-    return (DetectorSpec("node", tuple(observer_config.thresholds), tuple(observer_config.servo_thresholds)),
+def detectors(observer_config: Any, cusum: Any = None) -> tuple[DetectorSpec, ...]:
+    """The detectors replayed on every run: the CUSUM detector (`cusum`: CusumConfig, default the node's), the
+    threshold detector (both at the configured thresholds) and the paper's baseline."""
+    from hexa.dynamics.cusum import CusumConfig
+
+    th, servo = tuple(observer_config.thresholds), tuple(observer_config.servo_thresholds)
+    return (DetectorSpec("cusum", th, servo, "cusum", cusum or CusumConfig()),
+            DetectorSpec("threshold", th, servo),
             DetectorSpec("paper", PAPER_THRESHOLDS, (0.0,) * 6))
 
 
@@ -103,15 +114,18 @@ class RunRecord:
     wrench_t: np.ndarray
     wrench_force: np.ndarray
     sim_seconds: float
+    zeta_dot: np.ndarray = field(default_factory=lambda: np.zeros((0, 6)))
     counters: dict[str, Any] = field(default_factory=dict)
 
 
 def simulate(collision: ScriptedCollision | None, trajectory: str, duration: float, realism: Any, seed: int,
-             observer_config: Any = None, identify: bool = True, desc: Any = None) -> RunRecord:
+             observer_config: Any = None, identify: bool = True, desc: Any = None, detector: str = "threshold",
+             cusum: Any = None) -> RunRecord:
     """Run the robot `duration` s of trajectory time (after LEAD_IN) with an optional scripted contact (its onset in
     trajectory time); see the module docstring for what runs. Free motion (no contact) loops the trajectory and
     ignores STARTs (it keeps moving, to count false alarms); with a contact a START holds the trajectory, as the
-    trajectory node's default policy does."""
+    trajectory node's default policy does. `detector` and `cusum`: the monitor's detector (the node's default:
+    "threshold"; "cusum" with CusumConfig())."""
     from hexa.dynamics.contact_force import ContactForceConfig, ContactForceTracker, LocatedContact
     from hexa.dynamics.monitor import CollisionMonitor, MonitorConfig
     from hexa.dynamics.observer import ObserverConfig
@@ -135,7 +149,7 @@ def simulate(collision: ScriptedCollision | None, trajectory: str, duration: flo
     driver_offsets = np.asarray(driver_cfg.get("current_offsets") or np.zeros(6), dtype=float)
     offsets = board_offsets(sim, seed)
     punctual = jitter.sample_sigma <= 0 and jitter.spike_rate <= 0
-    mon = CollisionMonitor(desc, MonitorConfig(sim_clock=punctual), ocfg)
+    mon = CollisionMonitor(desc, MonitorConfig(sim_clock=punctual), ocfg, detector=detector, cusum=cusum)
     # the observer node's monitoring contract: the runner starts on its first OK and holds on LOST, as live
     watch = MonitoringWatch(mon, now=0.0)
     tracker = ContactForceTracker(desc, ContactForceConfig()) if identify else None
@@ -145,7 +159,7 @@ def simulate(collision: ScriptedCollision | None, trajectory: str, duration: flo
     command_period = 1.0 / TrajectorySettings().rate_hz
     pending: list[tuple[float, np.ndarray, int]] = []
     next_cmd, next_cam, seq = 0.0, 0.0, 0
-    rec: dict[str, list] = {k: [] for k in ("t", "res", "servo", "wt", "wf")}
+    rec: dict[str, list] = {k: [] for k in ("t", "res", "servo", "zd", "wt", "wf")}
     events: list[tuple[float, str, int, str]] = []
 
     t_end = LEAD_IN + duration
@@ -192,6 +206,7 @@ def simulate(collision: ScriptedCollision | None, trajectory: str, duration: flo
                 rec["t"].append(m.time)
                 rec["res"].append(r.wrench)
                 rec["servo"].append(r.servo_torque)
+                rec["zd"].append(m.zeta_dot if m.zeta_dot is not None else np.full(6, np.nan))
                 forces = []
                 if tracker is not None and m.zeta_dot is not None:
                     forces += tracker.step_state(m.time, m.zeta, m.zeta_dot, m.tau)
@@ -222,18 +237,23 @@ def simulate(collision: ScriptedCollision | None, trajectory: str, duration: flo
                      truth_t=log["time"], truth_force=log["force"], truth_point=log["point"],
                      truth_link=log["link"].astype(int), truth_chain=log["chain"].astype(int),
                      truth_pose=log["plate_pose"], truth_zeta=log["zeta"], wrench_t=arr("wt")[order],
-                     wrench_force=arr("wf", 3)[order], sim_seconds=t_end,
+                     wrench_force=arr("wf", 3)[order], sim_seconds=t_end, zeta_dot=arr("zd", 6),
                      counters={**mon.counters(), "monitoring_lost": watch.lost_count})
 
 
 def replay(rec: RunRecord, spec: DetectorSpec, base_config: Any, scale: float = 1.0
            ) -> list[tuple[float, str, int, str]]:
-    """The events `spec` at `scale` raises on the recorded residuals (the live CollisionDetector, replayed)."""
-    from hexa.dynamics.observer import CollisionDetector
+    """The events `spec` at `scale` raises on the recorded residuals (the live detector, replayed; the CUSUM fed the
+    recorded ζ̂̇ as in the monitor)."""
+    from hexa.dynamics.cusum import make_detector
 
-    det = CollisionDetector(spec.config(base_config, scale))
+    det = make_detector(spec.kind, spec.config(base_config, scale), spec.cusum)
+    motion = getattr(det, "motion", None)
+    zd = rec.zeta_dot if len(rec.zeta_dot) == len(rec.t) else None
     out = []
-    for t, r, s in zip(rec.t.tolist(), rec.residual, rec.servo):
+    for k, (t, r, s) in enumerate(zip(rec.t.tolist(), rec.residual, rec.servo)):
+        if motion is not None and zd is not None:
+            motion(t, zd[k])
         for e in det.update(t, r, s)[1]:
             out.append((e.time, e.kind, e.id, e.axis_name))
     return out
@@ -267,26 +287,36 @@ def plate_equivalent_every(d: Any, stride: int) -> np.ndarray:
     return np.stack([np.interp(d.truth_t, sub.truth_t, W[:, k]) for k in range(6)], axis=1)
 
 
+def _detector_settings(job: dict[str, Any]) -> tuple[Any, str, Any]:
+    """(ObserverConfig, detector kind, CusumConfig) of a job's optional observer, detector and cusum fields."""
+    from hexa.dynamics.cusum import CusumConfig
+    from hexa.dynamics.observer import ObserverConfig
+
+    return (ObserverConfig(**job.get("observer", {})), job.get("detector", "threshold"),
+            CusumConfig(**job.get("cusum", {})))
+
+
 def run_contact_job(job: dict[str, Any]) -> dict[str, Any]:
-    """Worker: one contact case → its metrics (the demo's), the node's and the paper's detection at every scale.
+    """Worker: one contact case → its metrics (the demo's) with the live detector, and the detection of every
+    replayed detector (`detectors`) at every scale.
 
     job: campaign_seed and index (the drawn contact) or collision (ScriptedCollision fields), sim_seed, realism
-    ("ideal" | "realistic"), optional identify (bool) and observer (ObserverConfig fields)."""
-    from hexa.dynamics.observer import ObserverConfig
+    ("ideal" | "realistic"), optional identify (bool), observer (ObserverConfig fields), detector ("cusum" |
+    "threshold": the live one) and cusum (CusumConfig fields)."""
     from hexa.report.collision_demo import compute_metrics
     from hexa.sim.realism import RealismConfig
 
     realism = RealismConfig.named(job["realism"])
-    ocfg = ObserverConfig(**job.get("observer", {}))
+    ocfg, kind, ccfg = _detector_settings(job)
     c = (ScriptedCollision(**job["collision"]) if "collision" in job
          else draw_contact(job["campaign_seed"], job["index"]))
     duration = c.end_time + TAIL
     rec = simulate(c, c.trajectory, duration, realism, seed=job["sim_seed"], observer_config=ocfg,
-                   identify=job.get("identify", True))
+                   identify=job.get("identify", True), detector=kind, cusum=ccfg)
     out: dict[str, Any] = {"index": job["index"], "realism": job["realism"], "link": c.link, "chain": c.chain,
                            "trajectory": c.trajectory, "peak_force": c.peak_force, "onset": c.onset + LEAD_IN,
                            "rise_time": c.rise_time, "hold_time": c.hold_time, "release_time": c.release_time,
-                           "sim_seconds": rec.sim_seconds}
+                           "sim_seconds": rec.sim_seconds, "detector": kind}
     touching = np.linalg.norm(rec.truth_force, axis=1) > 0
     if not touching.any():   # cannot happen with a scripted contact unless the run ended before it
         out["error"] = "no contact in the ground truth"
@@ -295,7 +325,7 @@ def run_contact_job(job: dict[str, Any]) -> dict[str, Any]:
     m = compute_metrics(d, r_low=R_LOW, plate_equivalent=plate_equivalent_every(d, PLATE_EQUIVALENT_STRIDE))
     out["metrics"] = m.as_dict()
     out["detect"] = {}
-    for spec in detectors(ocfg):
+    for spec in detectors(ocfg, ccfg):
         rows = []
         for scale in THRESHOLD_SCALES:
             ev = replay(rec, spec, ocfg, scale)
@@ -308,20 +338,21 @@ def run_contact_job(job: dict[str, Any]) -> dict[str, Any]:
 
 
 def run_free_job(job: dict[str, Any]) -> dict[str, Any]:
-    """Worker: `seconds` of free motion on one trajectory (looped) → STARTs of both detectors at every scale."""
-    from hexa.dynamics.observer import ObserverConfig
+    """Worker: `seconds` of free motion on one trajectory (looped) → STARTs of every replayed detector at every
+    scale (the live detector's too)."""
     from hexa.sim.realism import RealismConfig
 
     realism = RealismConfig.named(job["realism"])
-    ocfg = ObserverConfig(**job.get("observer", {}))
+    ocfg, kind, ccfg = _detector_settings(job)
     rec = simulate(None, job["trajectory"], job["seconds"], realism, seed=job["sim_seed"], observer_config=ocfg,
-                   identify=False)
+                   identify=False, detector=kind, cusum=ccfg)
     moving = rec.t >= LEAD_IN
     out: dict[str, Any] = {"trajectory": job["trajectory"], "realism": job["realism"], "seconds": job["seconds"],
                            "sim_seconds": rec.sim_seconds, "live_starts": sum(1 for e in rec.events if e[1] == "START"),
-                           "starts": {}}
-    rec_moving = dataclasses.replace(rec, t=rec.t[moving], residual=rec.residual[moving], servo=rec.servo[moving])
-    for spec in detectors(ocfg):
+                           "starts": {}, "detector": kind}
+    rec_moving = dataclasses.replace(rec, t=rec.t[moving], residual=rec.residual[moving], servo=rec.servo[moving],
+                                     zeta_dot=rec.zeta_dot[moving])
+    for spec in detectors(ocfg, ccfg):
         out["starts"][spec.name] = [sum(1 for e in replay(rec_moving, spec, ocfg, s) if e[1] == "START")
                                     for s in THRESHOLD_SCALES]
     return out
