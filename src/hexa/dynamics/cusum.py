@@ -95,7 +95,7 @@ class CusumDetector(CollisionDetector):
     def __init__(self, config: ObserverConfig, cusum: CusumConfig | None = None) -> None:
         self.cusum = cusum or CusumConfig()
         self._u = 1.0
-        self._motion: tuple[float, NDArray] | None = None   # (t, ζ̇) of the last motion sample
+        self._motion: tuple[float, list[float]] | None = None   # (t, ζ̇) of the last motion sample
         self._accel = 0.0
         super().__init__(config)   # thresholds → self._scale (1/threshold per channel, 0 = not checked), reset()
 
@@ -133,7 +133,7 @@ class CusumDetector(CollisionDetector):
         """ζ̇ (rad/s) at time t, before the residual sample of t: it sets the uncertainty factor."""
         if zeta_dot is None or len(zeta_dot) != 6:
             return
-        zd = zeta_dot.tolist() if hasattr(zeta_dot, "tolist") else [float(v) for v in zeta_dot]
+        zd: list[float] = zeta_dot.tolist() if hasattr(zeta_dot, "tolist") else [float(v) for v in zeta_dot]
         v = max(abs(x) for x in zd)
         if not math.isfinite(v):
             return

@@ -299,6 +299,7 @@ class CollisionMonitor:
         return None
 
     def _sample(self, t: float, pos: NDArray, tau: NDArray, vel: NDArray | None) -> MonitorSample | None:
+        zeta_dot: NDArray | None
         if self.config.zeta_source == "estimator":
             e = self.estimator.update(t, pos, tau)
             if e is None:
@@ -309,7 +310,7 @@ class CollisionMonitor:
                 return None
             zeta, zeta_dot = e.zeta, e.zeta_dot
         else:
-            zeta, zeta_dot = pos, vel
+            zeta, zeta_dot = pos, vel    # measured: the rate the sample carries, or None
         if self._motion is not None:
             self._motion(t, zeta_dot)
         out = self.observer.update_arm(t, zeta, tau, zeta_dot)
