@@ -13,9 +13,9 @@ linear in x = [K, c, θ_base, J, ms, f_c, f_v] (47 unknowns) but homogeneous wit
 constant and every inertial parameter together fits as well. A run carrying a known payload fixes the scale; without
 one the mean K_i is held at the description's K_t (said in the result: K_t is then only as good as that value).
 
-Motion comes from the camera's plate poses: a smoothing spline per pose coordinate gives pose, rate and acceleration,
-IK gives the true horn angles ζ (not the servo set-points), J_ζ the arm rates and accelerations; a periodic
-excitation's Fourier series over its moving window replaces the spline (Swevers: the camera noise averages out over
+Motion comes from the camera's plate poses: a zero-phase low-pass per pose coordinate gives pose, rate and
+acceleration, IK gives the true horn angles ζ (not the servo set-points), J_ζ the arm rates and accelerations; a periodic
+excitation's Fourier series over its moving window replaces the low-pass (Swevers: the camera noise averages out over
 the periods). Currents go through a zero-phase low-pass. Output-error least squares (the current is the measured
 output, so its noise biases nothing), weighted by each servo's noise from a first pass, with a prior on the zero
 offsets (`OFFSET_PRIOR`); 95 % confidence intervals from the covariance σ²(JᵀJ)⁻¹ at the solution; physical
@@ -46,8 +46,9 @@ DECIMATE = 4                # … at every DECIMATE-th of those instants (25 Hz)
 #: the prior of c_i / K_i — an arm's gravity torque changes little over its travel, so the data alone hardly
 #: separate the two
 OFFSET_PRIOR = 0.02
+POSE_CUTOFF_HZ = 2.0        # Hz: the camera poses' low-pass (motion that is not a periodic excitation)
 MOVING_SPEED = 0.005        # m/s or rad/s: the plate moves (the periodic window's edges)
-EDGE = 1.0                  # s dropped at both ends of a run (spline and filter edges)
+EDGE = 1.0                  # s dropped at both ends of a run (filter edges)
 FIXED_SYM = tuple(k for k in range(len(SYM_NAMES)) if k not in BASE_SYM)
 Z95 = 1.959963984540054
 
@@ -79,11 +80,27 @@ def _unwrap_pose(poses: NDArray) -> NDArray:
     return out
 
 
-def _lowpass(x: NDArray, rate: float) -> NDArray:
+def _lowpass(x: NDArray, rate: float, cutoff: float = 0.0) -> NDArray:
     from scipy.signal import butter, sosfiltfilt
 
-    sos = butter(4, CUTOFF_HZ / (0.5 * rate), output="sos")
+    sos = butter(4, (cutoff or CUTOFF_HZ) / (0.5 * rate), output="sos")
     return sosfiltfilt(sos, x, axis=0)
+
+
+class _LowPassMotion:
+    """Pose, rate and acceleration of camera poses: resampled at ANALYSIS_RATE_HZ, zero-phase low-passed at
+    POSE_CUTOFF_HZ, differentiated twice; evaluated at any instants by interpolation."""
+
+    def __init__(self, t: NDArray, P: NDArray) -> None:
+        self.tu = np.arange(t[0], t[-1], 1.0 / ANALYSIS_RATE_HZ)
+        Pu = np.stack([np.interp(self.tu, t, P[:, k]) for k in range(P.shape[1])], 1)
+        self.p = _lowpass(Pu, ANALYSIS_RATE_HZ, POSE_CUTOFF_HZ)
+        self.v = np.gradient(self.p, self.tu, axis=0)
+        self.a = np.gradient(self.v, self.tu, axis=0)
+
+    def __call__(self, at: NDArray) -> tuple[NDArray, NDArray, NDArray]:
+        return tuple(np.stack([np.interp(at, self.tu, x[:, k]) for k in range(x.shape[1])], 1)
+                     for x in (self.p, self.v, self.a))
 
 
 def fourier_fit(t: NDArray, y: NDArray, period: float, harmonics: int, at: NDArray
@@ -109,16 +126,15 @@ def prepare(rec: Recording, desc: Any, prm: Any = None, period: float | None = N
             harmonics: int = 15) -> Motion:
     """A recording → its analysis samples (module docstring). With the `period` (s) of a periodic excitation the
     motion is its Fourier series with `harmonics` harmonics fitted over the moving window (the camera noise averages
-    out over the periods); without, a smoothing spline.
+    out over the periods); without, the camera poses low-passed at POSE_CUTOFF_HZ.
 
     Raises:
         RecordingError: a stream is missing, short or bad.
         CalibrationError: the run is too short or leaves the workspace.
     """
-    from scipy.interpolate import make_smoothing_spline
-
     from hexa.calibration.excitation import _twist_rate
-    from hexa.dynamics.lagrange import DynamicsError, HexaDynamicParameters, motion_from_plate
+    from hexa.calibration.regressor import COULOMB_SPEED
+    from hexa.dynamics.lagrange import DynamicsError, HexaDynamicParameters, MotionState, motion_from_plate
     from hexa.kinematics import hexa6rus as kin
 
     rec.check()
@@ -129,10 +145,9 @@ def prepare(rec: Recording, desc: Any, prm: Any = None, period: float | None = N
         raise CalibrationError(f"{rec.source or 'recording'}: {t1 - t0:.1f} s where all three streams overlap "
                                "(need ≥ 5 s beside 1 s at each end)")
     P = _unwrap_pose(rec.poses)
-    # smoothing spline per coordinate (λ by generalized cross-validation): pose, rate, acceleration
-    splines = [make_smoothing_spline(rec.t_pose, P[:, k]) for k in range(6)]
+    smooth = _LowPassMotion(rec.t_pose, P)
     if period is not None:     # a periodic excitation: its Fourier series over the moving window (Swevers)
-        speed = np.abs(np.stack([s.derivative(1)(rec.t_pose) for s in splines], 1)).max(axis=1)
+        speed = np.abs(smooth(rec.t_pose)[1]).max(axis=1)
         moving = np.flatnonzero(speed > MOVING_SPEED)
         if moving.size == 0:
             raise CalibrationError(f"{rec.source or 'recording'}: the plate does not move")
@@ -141,26 +156,31 @@ def prepare(rec: Recording, desc: Any, prm: Any = None, period: float | None = N
         if t1 - t0 < period:
             raise CalibrationError(f"{rec.source or 'recording'}: {t1 - t0:.1f} s of motion, less than one "
                                    f"period ({period:g} s)")
-    t = np.arange(t0, t1, 1.0 / ANALYSIS_RATE_HZ)[::DECIMATE]
+    fine = np.arange(t0, t1, 1.0 / ANALYSIS_RATE_HZ)
+    t = fine[::DECIMATE]
     if period is not None:
         inside = (rec.t_pose >= t0 - 0.2) & (rec.t_pose <= t1 + 0.2)
-        pose, vel, acc = fourier_fit(rec.t_pose[inside], P[inside], period, harmonics, t)
+        pose, vel, acc = fourier_fit(rec.t_pose[inside], P[inside], period, harmonics, fine)
     else:
-        pose = np.stack([s(t) for s in splines], 1)
-        vel = np.stack([s.derivative(1)(t) for s in splines], 1)
-        acc = np.stack([s.derivative(2)(t) for s in splines], 1)
+        pose, vel, acc = smooth(fine)
     try:
         zeta = kin.inverse_kinematics_batch(desc, pose)
-        state = motion_from_plate(prm, zeta, pose, kin.twist_from_pose_rate(pose, vel), _twist_rate(pose, vel, acc))
+        full = motion_from_plate(prm, zeta, pose, kin.twist_from_pose_rate(pose, vel), _twist_rate(pose, vel, acc))
+        state = MotionState(zeta=zeta[::DECIMATE], zeta_dot=full.zeta_dot[::DECIMATE], p=full.p[::DECIMATE],
+                            R=full.R[::DECIMATE], V=full.V[::DECIMATE], zeta_ddot=full.zeta_ddot[::DECIMATE],
+                            V_dot=full.V_dot[::DECIMATE])
         reg = regressor(prm, state)
     except (ValueError, DynamicsError) as exc:
         raise CalibrationError(f"{rec.source or 'recording'}: the plate poses leave the model's workspace ({exc})")
-    # currents: zero-phase low-pass on their own grid (the spline smooths the motion alike), then at the instants
+    # Coulomb's column switches sign at each reversal: it gets the currents' low-pass too (parallel filtering)
+    reg.sign = _lowpass(np.tanh(full.zeta_dot / COULOMB_SPEED), ANALYSIS_RATE_HZ)[::DECIMATE]
+    zeta, pose = zeta[::DECIMATE], pose[::DECIMATE]
+    # currents: zero-phase low-pass on their own grid, then at the instants
     tc = np.arange(rec.t_current[0], rec.t_current[-1], 1.0 / ANALYSIS_RATE_HZ)
     cur_f = _lowpass(np.stack([np.interp(tc, rec.t_current, rec.currents[:, k]) for k in range(6)], 1),
                      ANALYSIS_RATE_HZ)
     cur = np.stack([np.interp(t, tc, cur_f[:, k]) for k in range(6)], 1)
-    # horn offsets at the camera instants (raw poses: no spline lag), inside the window
+    # horn offsets at the camera instants (raw poses: no filter), inside the window
     inside = (rec.t_pose >= t0) & (rec.t_pose <= t1)
     tp = rec.t_pose[inside]
     zc = kin.inverse_kinematics_batch(desc, rec.poses[inside], check=False)
@@ -364,7 +384,10 @@ def identify(motions: Sequence[Motion], desc: Any) -> Calibration:
     prob = _OutputError(I, M, tau0, servo, w, float(desc.K_t), not with_payload)
     Jm = prob.jacobian(u)
     res = prob.residual(u)
-    s2 = float(res[:I.size] @ res[:I.size]) / max(1, I.size - u.size)
+    # the low-pass makes neighbouring rows' errors correlated: (rate / DECIMATE) / (2·CUTOFF_HZ) rows per
+    # independent one, which scale the variance
+    correlated = max(1.0, ANALYSIS_RATE_HZ / DECIMATE / (2.0 * CUTOFF_HZ))
+    s2 = correlated * float(res[:I.size] @ res[:I.size]) / max(1, I.size - u.size)
     cj = np.linalg.norm(Jm, axis=0) + 1e-300
     cov = np.linalg.pinv((Jm / cj).T @ (Jm / cj)) * s2 / np.outer(cj, cj)
     ci = Z95 * np.sqrt(np.maximum(np.diag(cov), 0.0))

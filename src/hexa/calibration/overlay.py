@@ -27,8 +27,8 @@ PER_SERVO = ("k_t", "current_offset", "coulomb", "viscous", "inertia", "first_mo
 
 
 def _floats(a: Any) -> Any:
-    arr = np.asarray(a, dtype=float)
-    return float(arr) if arr.ndim == 0 else [float(v) if arr.ndim == 1 else _floats(v) for v in arr]
+    """Plain floats / nested lists of floats (what yaml.safe_dump writes) of a number or array."""
+    return np.asarray(a, dtype=float).tolist()
 
 
 def overlay_mapping(cal: "Calibration", desc: Any) -> dict[str, Any]:
@@ -43,7 +43,7 @@ def overlay_mapping(cal: "Calibration", desc: Any) -> dict[str, Any]:
     c_arm = np.asarray(desc.arm.com, dtype=float).copy()
     c_arm[0] = s_a
     I_arm = np.asarray(desc.arm.inertia, dtype=float)
-    armature = max(0.0, float(np.mean(cal.inertia)) - float(I_arm[2, 2]) - m_a * (c_arm[0] ** 2 + c_arm[1] ** 2))
+    armature = float(max(0.0, float(np.mean(cal.inertia)) - float(I_arm[2, 2]) - m_a * (c_arm[0] ** 2 + c_arm[1] ** 2)))
     return {
         "calibration_of": base,
         "inertia": {"plate": {"mass": float(cal.plate_mass), "com": _floats(cal.plate_com),
@@ -74,7 +74,8 @@ def write_overlay(path: str | Path, cal: "Calibration", desc: Any) -> Path:
     head = ("# Calibration overlay of the Hexa (hexa calibrate identify), SI units (m, kg, kg·m², N·m, A, rad, s).\n"
             "# Give it to the nodes as their robot description (`description` parameter, `hexa bringup … "
             "--description FILE`);\n# it is laid over `calibration_of` (empty: the packaged hexa.yaml).\n")
-    p.write_text(head + yaml.safe_dump(overlay_mapping(cal, desc), sort_keys=False, width=120), encoding="utf-8")
+    p.write_text(head + yaml.safe_dump(overlay_mapping(cal, desc), sort_keys=False, width=120,
+                                                  default_flow_style=None), encoding="utf-8")
     load_hexa(p)
     return p
 

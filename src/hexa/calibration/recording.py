@@ -166,6 +166,8 @@ def simulate_recording(pose_of: Callable[[float], NDArray], duration: float, see
                 progress(min(1.0, t / t_end))
                 next_report += 1.0
         truth = sim.truth
+        if progress is not None:
+            progress(1.0)
     finally:
         sim.close()
     r = Recording(t_current=np.asarray(rec["tc"]), currents=np.asarray(rec["i"]),

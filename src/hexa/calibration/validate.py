@@ -4,7 +4,7 @@ The residual of free motion is the model error the collision observer sees: in s
 (N·m), on the plate axes the wrench J_ζᵀ e in `base` (N, N·m; the observer's r of seed 000 eq 24 without the
 filter lag). "Before": the description's model, τ = K_t·I. "After": the calibrated description as the nodes use it —
 the overlay's symmetric model and `ServoTorqueModel` (per-servo K_i, offsets, friction, arm first moments).
-Motion from the camera poses (smoothing spline, IK), currents low-passed as in identification.
+Motion from the camera poses (low-pass, IK), currents low-passed as in identification.
 """
 from __future__ import annotations
 
