@@ -18,7 +18,8 @@ acceleration, IK gives the true horn angles ζ (not the servo set-points), J_ζ 
 periodic excitation's Fourier series over its moving window replaces the low-pass (Swevers: the camera noise
 averages out over the periods). Currents go through a zero-phase low-pass, and so does the Coulomb column.
 Output-error least squares (the current is the measured output, so its noise biases nothing), weighted by each
-servo's noise from a first pass, with a prior on the zero offsets (`OFFSET_PRIOR`); 95 % confidence intervals from the covariance σ²(JᵀJ)⁻¹ at the solution; physical
+servo's noise from a first pass, with a prior on the zero offsets (`OFFSET_PRIOR`); 95 % confidence intervals from
+the covariance σ²(JᵀJ)⁻¹ at the solution; physical
 consistency (positive masses, inertias and friction) by the bounds of the solver, and an eigenvalue projection of
 the plate inertia when it breaks the triangle inequality (reported as `consistency`).
 
