@@ -33,6 +33,10 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--trajectory", default=None, metavar="FILE",
                    help="sim/robot: the trajectory node plays this pose file (CSV t x y z alpha beta gamma, SI; e.g. "
                         "from `hexa calibrate excite`) instead of its configured trajectory")
+    p.add_argument("--collision-policy", choices=["hold", "retract", "ignore"], default=None,
+                   help="sim/robot: the trajectory node's reaction to a collision START (default: its parameter, "
+                        "hold); ignore for a calibration run on the uncalibrated model, whose false STARTs would "
+                        "stop the excitation")
     p.add_argument("--description", default=None, metavar="YAML",
                    help="robot description or calibration overlay (`hexa calibrate identify`) for every node but "
                         "the simulator (which stays the robot); default: the packaged description")
@@ -86,6 +90,10 @@ def mode_node_args(args: argparse.Namespace) -> dict[str, list[str]]:
         if not path.is_file():
             raise SupervisorError(f"trajectory file {args.trajectory} does not exist")
         node_args["trajectory"] = node_args.get("trajectory", []) + ["-p", "trajectory:=file", "-p", f"file:={path}"]
+    if getattr(args, "collision_policy", None):
+        if args.mode not in ("sim", "robot"):
+            raise SupervisorError(f"--collision-policy is for sim and robot modes, not {args.mode}")
+        node_args["trajectory"] = node_args.get("trajectory", []) + ["-p", f"collision_policy:={args.collision_policy}"]
     if args.mode == "upsrpu":
         node_args["singularity"] = ["-p", "robot:=upsrpu", "-p", "input:=markers"]
         node_args["srm"] = ["-p", "input:=markers"]
