@@ -175,8 +175,9 @@ def recording_from_bag(path: str, ns: str, payload: float = 0.0, point: Any = (0
     def arrays(key: str) -> tuple:
         rows = sorted(got[key], key=lambda r: r[0])
         t = np.array([r[0] for r in rows])
-        keep = np.r_[True, np.diff(t) > 0]
-        return t[keep], np.array([r[1] for r in rows])[keep]
+        x = np.array([r[1] for r in rows])
+        keep = np.r_[True, np.diff(t) > 0] & np.all(np.isfinite(x), axis=1)   # no value yet: NaN (driver)
+        return t[keep], x[keep]
 
     tc, ic = arrays("c")
     ts, ss = arrays("s")

@@ -216,7 +216,7 @@ class Estimate:
 class Calibration:
     """What `identify` found (SI): per servo `k_t` (N·m/A), `current_offset` (A), `coulomb` (N·m), `viscous`
     (N·m·s/rad), `inertia` J_i about the motor axis (kg·m², arm + rotor + the rod's share at B_i), `rotor_inertia`
-    (J_i minus the description's arm and rod share), `first_moment` (ms)_i (kg·m), `horn_offset` (rad); the plate's
+    (J_i minus the description's arm and rod share), `first_moment` (ms)_i and `first_moment_y` (ms_y)_i (kg·m, along and across the arm), `horn_offset` (rad); the plate's
     `plate_mass`, `plate_com` ({P}, m), `plate_inertia` (about the COM, {P}); the rods' `rod_K`; `ci95` of each
     (same keys, arrays); `scale`: "payload" or "nominal K_t" (what fixed the torque scale); `consistency`: "free",
     "bounded" or "projected"; `rms` per servo of the fit (N·m) and the number of `samples`."""
@@ -228,6 +228,7 @@ class Calibration:
     inertia: NDArray
     rotor_inertia: NDArray
     first_moment: NDArray
+    first_moment_y: NDArray
     horn_offset: NDArray
     plate_mass: float
     plate_com: NDArray
@@ -272,7 +273,7 @@ def _system(motions: Sequence[Motion], theta_fixed: NDArray) -> tuple[NDArray, N
         r = mo.reg
         n = r.Y_sym.shape[0]
         M = np.concatenate([r.Y_sym[..., list(BASE_SYM)], r.servo_columns()], axis=2)
-        cols.append(M.reshape(n * 6, nb + 24))
+        cols.append(M.reshape(n * 6, nb + 30))
         known.append((r.Y_sym[..., list(FIXED_SYM)] @ theta_fixed + r.Y_sym @ mo.payload_sym).reshape(-1))
         cur.append(mo.currents.reshape(-1))
         servo.append(np.tile(np.arange(6), n))
@@ -280,8 +281,8 @@ def _system(motions: Sequence[Motion], theta_fixed: NDArray) -> tuple[NDArray, N
 
 
 def _bounds(nb: int) -> tuple[NDArray, NDArray]:
-    """Bounds of u = [1/K (6), b (6), θ_base (nb), J (6), ms (6), f_c (6), f_v (6)]: physical consistency."""
-    lo = np.full(12 + nb + 24, -np.inf)
+    """Bounds of u = [1/K (6), b (6), θ_base (nb), J, ms, f_c, f_v, ms_y (6 each)]: physical consistency."""
+    lo = np.full(12 + nb + 30, -np.inf)
     hi = np.full_like(lo, np.inf)
     lo[:6] = 0.1                        # K_i < 10 N·m/A
     hi[:6] = 100.0                      # K_i > 0.01 N·m/A
@@ -289,7 +290,7 @@ def _bounds(nb: int) -> tuple[NDArray, NDArray]:
     lo[16:19] = 0.0                     # I_xx, I_yy, I_zz ≥ 0 (about P)
     lo[12 + nb - 1] = 0.0               # K_r ≥ 0
     lo[12 + nb:12 + nb + 6] = 0.0       # J_i ≥ 0
-    lo[12 + nb + 12:] = 0.0             # Coulomb and viscous friction ≥ 0
+    lo[12 + nb + 12:12 + nb + 24] = 0.0  # Coulomb and viscous friction ≥ 0
     return lo, hi
 
 
@@ -307,7 +308,7 @@ def _project_inertia(I: NDArray) -> NDArray:
 
 class _OutputError:
     """Weighted residuals r = w_i (I − g_i (M x + τ_0) − b_i) with the priors, and their Jacobian, in the unknowns
-    u = [g = 1/K (6), b (6), x (nb + 24)]; the current is the measured output (its noise is not in the regressor,
+    u = [g = 1/K (6), b (6), x (nb + 30)]; the current is the measured output (its noise is not in the regressor,
     so the estimate has no errors-in-variables bias)."""
 
     def __init__(self, I, M, tau0, servo, w, K_t: float, scale_row: bool) -> None:
@@ -403,7 +404,7 @@ def identify(motions: Sequence[Motion], desc: Any) -> Calibration:
         I_p = _project_inertia(I_p)
         consistency = "projected"
     K = 1.0 / g
-    J, ms, fc, fv = (x[nb + 6 * k:nb + 6 * (k + 1)] for k in range(4))
+    J, ms, fc, fv, ms_y = (x[nb + 6 * k:nb + 6 * (k + 1)] for k in range(5))
     rod_share = _rod_share_at_B(prm)
     J_arm = prm.J_a - float(_armature(desc))
     horn, horn_ci = horn_offsets(motions, servo_dead_band(desc))
@@ -412,7 +413,7 @@ def identify(motions: Sequence[Motion], desc: Any) -> Calibration:
     torque_res = r * K[servo]            # the fit's residual in N·m
     return Calibration(
         k_t=K, current_offset=boff, coulomb=fc, viscous=fv, inertia=J, rotor_inertia=J - J_arm - rod_share,
-        first_moment=ms, horn_offset=horn, plate_mass=float(cal_prm.m_p), plate_com=np.asarray(cal_prm.c_p),
+        first_moment=ms, first_moment_y=ms_y, horn_offset=horn, plate_mass=float(cal_prm.m_p), plate_com=np.asarray(cal_prm.c_p),
         plate_inertia=I_p, rod_K=float(theta[12]),
         ci95={"k_t": ci[:6] * K * K, "current_offset": ci[6:12], "coulomb": ci_x(2), "viscous": ci_x(3),
               "inertia": ci_x(0), "first_moment": ci_x(1), "horn_offset": horn_ci, "plate_mass": float(ci_plate[0]),

@@ -23,7 +23,8 @@ if TYPE_CHECKING:
 
     from hexa.calibration.identify import Calibration
 
-PER_SERVO = ("k_t", "current_offset", "coulomb", "viscous", "inertia", "first_moment", "horn_offset")
+PER_SERVO = ("k_t", "current_offset", "coulomb", "viscous", "inertia", "first_moment", "first_moment_y",
+             "horn_offset")
 
 
 def _floats(a: Any) -> Any:
@@ -83,9 +84,10 @@ def write_overlay(path: str | Path, cal: "Calibration", desc: Any) -> Path:
 class ServoTorqueModel:
     """Servo torques from the driver's currents with the per-servo calibration of a description (none: K_t·I).
 
-    τ_i = K_i (I_i − b_i) − f_c,i tanh(ζ̇_i/ε) − (f_v,i − f̄_v) ζ̇_i − ((ms)_i − m̄s) g cos ζ_i: the current gain and
-    offset, the friction beyond the model's mean viscous term and the arm's gravity beyond its mean first moment
-    (hexa.calibration.regressor; u'_i·g = −g cos ζ_i). Without ζ̇ only the current part applies."""
+    τ_i = K_i (I_i − b_i) − f_c,i tanh(ζ̇_i/ε) − (f_v,i − f̄_v) ζ̇_i − ((ms)_i − m̄s) g cos ζ_i + (ms_y)_i g sin ζ_i:
+    the current gain and offset, the friction beyond the model's mean viscous term and the arm's gravity beyond the
+    model's (its mean first moment along the arm; the model has none across it) (hexa.calibration.regressor;
+    u'_i·g = −g cos ζ_i, u_i·g = −g sin ζ_i). Without ζ̇ only the current part applies."""
 
     def __init__(self, desc: Any) -> None:
         from hexa.calibration.regressor import COULOMB_SPEED
@@ -105,8 +107,10 @@ class ServoTorqueModel:
         self.dfv = fv - fv.mean()
         ms = arr("first_moment", 0.0)
         self.dms_g = (ms - ms.mean()) * 9.81
+        self.msy_g = arr("first_moment_y", 0.0) * 9.81
         self.eps = COULOMB_SPEED
-        self.friction = self.calibrated and bool(np.any(self.fc) or np.any(self.dfv) or np.any(self.dms_g))
+        self.friction = self.calibrated and bool(np.any(self.fc) or np.any(self.dfv) or np.any(self.dms_g)
+                                                 or np.any(self.msy_g))
 
     def from_currents(self, currents: NDArray) -> NDArray:
         """K_i (I_i − b_i) (N·m) of six currents (A)."""
@@ -117,4 +121,5 @@ class ServoTorqueModel:
         if not self.friction or zeta_dot is None:
             return tau
         zd = np.asarray(zeta_dot, dtype=float)
-        return tau - self.fc * np.tanh(zd / self.eps) - self.dfv * zd - self.dms_g * np.cos(zeta)
+        return (tau - self.fc * np.tanh(zd / self.eps) - self.dfv * zd - self.dms_g * np.cos(zeta)
+                + self.msy_g * np.sin(zeta))

@@ -7,8 +7,9 @@ The free-motion servo torques of the model of hexa.dynamics.lagrange (seed 000 e
 — the plate's mass, first moment and inertia about its origin P in {P} (the barycentric parameters of Khalil &
 Dombre), the rods' mass, first moment about B_i over l_d, and K_r = m_r κ² + I_r / l_d² (a slender rod's second
 moment about B_i over l_d²; m_r κ² and I_r enter only in this sum because |B_i C_i| is constant) — and in the per-servo
-terms [J_i ζ̈_i, −(ms)_i u'_i·g, f_c,i s(ζ̇_i), f_v,i ζ̇_i]: the arm's (and rotor's) inertia J_i about its motor axis,
-its first moment (ms)_i along the arm, Coulomb and viscous friction. So
+terms [J_i ζ̈_i, −(ms)_i u'_i·g, f_c,i s(ζ̇_i), f_v,i ζ̇_i, (ms_y)_i u_i·g]: the arm's (and rotor's) inertia J_i about
+its motor axis, its first moment (ms)_i along the arm, Coulomb and viscous friction, and its first moment (ms_y)_i
+across the arm (a COM off the arm's line, in its plane of rotation: along u'_i). So
 
     τ = Y_sym(q, V, V̇) θ_sym + Y_servo(ζ, ζ̇, ζ̈) θ_servo        (Gautier's inverse dynamic identification model)
 
@@ -29,7 +30,7 @@ if TYPE_CHECKING:
 
 SYM_NAMES = ("m_p", "mc_px", "mc_py", "mc_pz", "I_pxx", "I_pyy", "I_pzz", "I_pxy", "I_pxz", "I_pyz",
              "m_r", "mk_r", "K_r")
-SERVO_GROUPS = ("J", "ms", "coulomb", "viscous")
+SERVO_GROUPS = ("J", "ms", "coulomb", "viscous", "ms_y")
 #: the base columns of θ_sym (Gautier's regrouping): a rod's mass at B_i acts as more first moment and inertia of
 #: arm i (the per-servo (ms)_i and J_i take it), its mass at C_i as plate mass at C_i (m_p, m_p c_p and I_P take it),
 #: so m_r and m_r κ are not identifiable beside them and stay at the description's values
@@ -81,27 +82,30 @@ def _free_torques(prm: HexaDynamicParameters, state: MotionState) -> NDArray:
 @dataclass
 class Regressor:
     """Y_sym (N, 6, 13) and the per-servo columns of a batch of motion (module docstring): `zeta_ddot`, `gravity`
-    (−u'_i·g, the column of (ms)_i), `sign` (tanh(ζ̇/COULOMB_SPEED)) and `zeta_dot`, each (N, 6)."""
+    (−u'_i·g, the column of (ms)_i), `sign` (tanh(ζ̇/COULOMB_SPEED)), `zeta_dot` and `gravity_y` (u_i·g, the column
+    of (ms_y)_i), each (N, 6)."""
 
     Y_sym: NDArray
     zeta_ddot: NDArray
     gravity: NDArray
     sign: NDArray
     zeta_dot: NDArray
+    gravity_y: NDArray
 
     def servo_columns(self) -> NDArray:
-        """(N, 6, 24): per-servo columns of [J (6) | ms (6) | coulomb (6) | viscous (6)], zero off their servo."""
+        """(N, 6, 30): per-servo columns of [J | ms | coulomb | viscous | ms_y] (6 each), zero off their servo."""
         n = self.Y_sym.shape[0]
-        out = np.zeros((n, 6, 24))
+        out = np.zeros((n, 6, 30))
         idx = np.arange(6)
-        for g, col in enumerate((self.zeta_ddot, self.gravity, self.sign, self.zeta_dot)):
+        for g, col in enumerate((self.zeta_ddot, self.gravity, self.sign, self.zeta_dot, self.gravity_y)):
             out[:, idx, 6 * g + idx] = col
         return out
 
-    def torques(self, theta_sym: NDArray, J: NDArray, ms: NDArray, coulomb: NDArray, viscous: NDArray) -> NDArray:
+    def torques(self, theta_sym: NDArray, J: NDArray, ms: NDArray, coulomb: NDArray, viscous: NDArray,
+                ms_y: NDArray | float = 0.0) -> NDArray:
         """Model servo torques (N, 6) of free motion for these parameters."""
         return (self.Y_sym @ theta_sym + J * self.zeta_ddot + ms * self.gravity + coulomb * self.sign
-                + viscous * self.zeta_dot)
+                + viscous * self.zeta_dot + ms_y * self.gravity_y)
 
 
 def regressor(prm: HexaDynamicParameters, state: MotionState) -> Regressor:
@@ -127,7 +131,8 @@ def regressor(prm: HexaDynamicParameters, state: MotionState) -> Regressor:
         cols[..., k] = (_free_torques(params_with_sym(base, th, J_a=0.0, ms_a=0.0), state) - tau0) / step
     g = _Geometry(prm, state.zeta, state.p, state.R)
     return Regressor(Y_sym=cols, zeta_ddot=np.asarray(state.zeta_ddot, dtype=float), gravity=-(g.up @ prm.gravity),
-                     sign=np.tanh(state.zeta_dot / COULOMB_SPEED), zeta_dot=np.asarray(state.zeta_dot, dtype=float))
+                     sign=np.tanh(state.zeta_dot / COULOMB_SPEED), zeta_dot=np.asarray(state.zeta_dot, dtype=float),
+                     gravity_y=g.u @ prm.gravity)
 
 
 def _with_arm_damping(prm: HexaDynamicParameters, damping: float) -> HexaDynamicParameters:
