@@ -216,8 +216,9 @@ class Estimate:
 class Calibration:
     """What `identify` found (SI): per servo `k_t` (N·m/A), `current_offset` (A), `coulomb` (N·m), `viscous`
     (N·m·s/rad), `inertia` J_i about the motor axis (kg·m², arm + rotor + the rod's share at B_i), `rotor_inertia`
-    (J_i minus the description's arm and rod share), `first_moment` (ms)_i and `first_moment_y` (ms_y)_i (kg·m, along and across the arm), `horn_offset` (rad); the plate's
-    `plate_mass`, `plate_com` ({P}, m), `plate_inertia` (about the COM, {P}); the rods' `rod_K`; `ci95` of each
+    (J_i minus the description's arm and rod share), `first_moment` (ms)_i and `first_moment_y` (ms_y)_i (kg·m,
+    along and across the arm), `horn_offset` (rad); the plate's `plate_mass`, `plate_com` ({P}, m), `plate_inertia`
+    (about the COM, {P}); the rods' `rod_K`; `ci95` of each
     (same keys, arrays); `scale`: "payload" or "nominal K_t" (what fixed the torque scale); `consistency`: "free",
     "bounded" or "projected"; `rms` per servo of the fit (N·m) and the number of `samples`."""
 
@@ -413,7 +414,8 @@ def identify(motions: Sequence[Motion], desc: Any) -> Calibration:
     torque_res = r * K[servo]            # the fit's residual in N·m
     return Calibration(
         k_t=K, current_offset=boff, coulomb=fc, viscous=fv, inertia=J, rotor_inertia=J - J_arm - rod_share,
-        first_moment=ms, first_moment_y=ms_y, horn_offset=horn, plate_mass=float(cal_prm.m_p), plate_com=np.asarray(cal_prm.c_p),
+        first_moment=ms, first_moment_y=ms_y, horn_offset=horn, plate_mass=float(cal_prm.m_p),
+        plate_com=np.asarray(cal_prm.c_p),
         plate_inertia=I_p, rod_K=float(theta[12]),
         ci95={"k_t": ci[:6] * K * K, "current_offset": ci[6:12], "coulomb": ci_x(2), "viscous": ci_x(3),
               "inertia": ci_x(0), "first_moment": ci_x(1), "horn_offset": horn_ci, "plate_mass": float(ci_plate[0]),
