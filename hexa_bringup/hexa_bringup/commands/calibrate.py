@@ -10,7 +10,7 @@ from pathlib import Path
 from typing import Any
 
 #: kg, m: the known mass of the simulated payload run (`--simulate`), at the plate's origin
-SIM_PAYLOAD = 0.25
+SIM_PAYLOAD = 0.5
 #: s of held-out motion `validate --simulate` records (two turns of the paper's circle)
 SIM_VALIDATE_SECONDS = 20.0
 

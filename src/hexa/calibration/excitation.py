@@ -201,7 +201,9 @@ def identification_matrix(reg: Any) -> NDArray:
 
     n = reg.Y_sym.shape[0]
     ones = np.broadcast_to(np.eye(6), (n, 6, 6))
-    Y = np.concatenate([reg.Y_sym[..., list(BASE_SYM)], reg.servo_columns(), ones], axis=2)
+    # the arms' first moments across their line (the last 6 servo columns) are a small correction beside the
+    # first moments along it: the design conditions the main parameters and identification adds them
+    Y = np.concatenate([reg.Y_sym[..., list(BASE_SYM)], reg.servo_columns()[..., :24], ones], axis=2)
     return Y.reshape(n * 6, -1)
 
 
