@@ -6,11 +6,12 @@ export MUJOCO_GL ?= egl
 export PYTHONDONTWRITEBYTECODE := 1
 PYTEST_ARGS ?=
 
-.PHONY: setup setup-robot test lint demo bench firmware clean help
+.PHONY: setup setup-robot test check lint demo bench firmware clean help
 
 help:
 	@echo "make demo   - set up, then run the main job on the simulated robot (hexa demo)"
 	@echo "make test   - set up, build the firmware, run the whole test suite"
+	@echo "make check  - set up, lint, run the fast tests (not marked slow: no ROS processes, simulator runs, simavr)"
 	@echo "make bench  - set up, run the benchmarks (hexa bench)"
 	@echo "make firmware - build the Arduino firmware (.hex) with Debian's AVR toolchain"
 	@echo "make setup  - only the set-up (venv, ROS 2 Jazzy wheels, hexa_msgs, toolchains)"
@@ -33,6 +34,11 @@ test: setup-robot firmware
 	@$(VENV)/bin/ruff check --quiet . || { echo "make test: ruff found problems (see above)" >&2; exit 1; }
 	@set -o pipefail; $(PY) -m pytest test/ -q -p no:cacheprovider $(PYTEST_ARGS); rc=$$?; \
 	if [ $$rc -eq 5 ]; then echo "make test: pytest collected no tests" >&2; exit 1; fi; exit $$rc
+
+# The fast part of the suite while you work (tests not marked `slow`, see test/conftest.py); CI runs everything.
+check: setup
+	@$(VENV)/bin/ruff check --quiet . || { echo "make check: ruff found problems (see above)" >&2; exit 1; }
+	@$(PY) -m pytest test/ -q -p no:cacheprovider -m "not slow" $(PYTEST_ARGS)
 
 lint: setup
 	@$(VENV)/bin/ruff check .

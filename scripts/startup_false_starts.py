@@ -4,16 +4,16 @@
     .venv/bin/python scripts/startup_false_starts.py [-n 20] [--trajectory circle] [--rtf 0.3] [--sim-seconds 4]
                                                       [--wall-limit 150] [--out DIR] [--json] [--stall-driver MS]
 
-Each run is the README's set-up for free motion: the shipped parameters with the simulator's `scenario: none` and its
-`trajectory` set to the trajectory node's (the robot starts at rest at the trajectory's start pose), at real-time
-factor `--rtf`, until `--sim-seconds` of sim time (the simulator's `duration` ends the graph). Every START the
-observer logs is false (nothing touches the robot); those with an onset before the trajectory has run for 1 s (its
-start blend) count as start-up STARTs, later ones are the loaded host's (README, Troubleshooting). Per run it prints
-the STARTs (axis, onset in sim s), the observer's `monitoring` transitions and the trajectory's states, read from the
-node logs; at the end the totals. Exit code 1 when a run had a start-up START. With `--stall-driver MS` the run's
-driver process is stopped for MS of wall time once the trajectory runs (a silent board): `monitoring` turns LOST
-naming the silent streams and the trajectory holds (it stays held: nothing calls resume).
-docs/monitoring.md has the figures.
+Each run is the set-up for free motion of docs/troubleshooting.md: the shipped parameters with the simulator's
+`scenario: none` and its `trajectory` set to the trajectory node's (the robot starts at rest at the trajectory's start
+pose), at real-time factor `--rtf`, until `--sim-seconds` of sim time (the simulator's `duration` ends the graph).
+Every START the observer logs is false (nothing touches the robot); those with an onset before the trajectory has run
+for 1 s (its start blend) count as start-up STARTs, later ones are the loaded host's (docs/troubleshooting.md). Per
+run it prints the STARTs (axis, onset in sim s), the observer's `monitoring` transitions and the trajectory's states,
+read from the node logs; at the end the totals. Exit code 1 when a run had a start-up START. With `--stall-driver MS`
+the run's driver process is stopped for MS of wall time once the trajectory runs (a silent board): `monitoring` turns
+LOST naming the silent streams and the trajectory holds (it stays held: nothing calls resume). docs/monitoring.md has
+the figures.
 """
 from __future__ import annotations
 
@@ -43,7 +43,7 @@ START_UP = 1.0
 
 
 def params_file(base: Path, out: Path, trajectory: str, rtf: float, sim_seconds: float, link_dir: str) -> Path:
-    """The shipped parameters with the free-motion start-up of the README's troubleshooting section."""
+    """The shipped parameters with the free-motion start-up of docs/troubleshooting.md."""
     p = yaml.safe_load(base.read_text())
     sim = p["/**/sim"]["ros__parameters"]
     sim.update(scenario="none", trajectory=trajectory, real_time_factor=rtf, duration=sim_seconds, link_dir=link_dir)
@@ -81,7 +81,7 @@ def one_run(k: int, args: argparse.Namespace, env: dict[str, str], root: Path) -
     starts = [{"id": int(m[0]), "axis": m[1], "value": float(m[2]), "onset": float(m[4])} for m in START.findall(obs)]
     monitoring = [(m[0], float(m[1]) if m[1] else None) for m in MONITORING.findall(obs)]
     states = [(m[0], float(m[1])) for m in STATE.findall(traj)]
-    # start-up: before the trajectory has run for START_UP s (later STARTs are the host's lag, README troubleshooting)
+    # start-up: before the trajectory has run for START_UP s (later STARTs are the host's lag, docs/troubleshooting.md)
     running = next((t for st, t in states if st == "running"), math.inf)
     return {"run": k, "rc": rc, "wall_s": round(wall, 1),
             "startup_false_starts": [s for s in starts if s["onset"] < running + START_UP],

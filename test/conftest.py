@@ -91,3 +91,14 @@ def procs() -> Iterator[ProcessGroup]:
         yield group
     finally:
         group.stop_all()
+
+
+#: fixtures that start ROS processes or hold a ROS domain: a test using one is `slow` (left out of `make check`)
+SLOW_FIXTURES = frozenset({"ros_env", "ros_domain_id", "module_ros_domain_id", "procs"})
+
+
+def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:
+    """Mark every test that starts ROS processes as `slow`; heavier ROS-free tests carry the marker themselves."""
+    for item in items:
+        if SLOW_FIXTURES & set(getattr(item, "fixturenames", ())):
+            item.add_marker(pytest.mark.slow)

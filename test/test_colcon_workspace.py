@@ -42,6 +42,8 @@ USER_PKG_MAIN = '''import sys
 from hexa_msgs.msg import CollisionEvent
 from rclpy.serialization import deserialize_message, serialize_message
 
+pytestmark = pytest.mark.slow   # colcon builds: left out of `make check`
+
 
 def main():
     m = CollisionEvent(axis_name="fz", peak=12.5)

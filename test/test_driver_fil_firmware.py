@@ -12,6 +12,8 @@ from hexa.protocol import frames as fr
 from hexa.protocol.link import CurrentLink, LinkError, ServoLink
 from hexa.protocol.simavr import SERVO_PINS, SimavrBoard, simavr_counts
 
+pytestmark = pytest.mark.slow   # the firmware in simavr: left out of `make check`
+
 
 def _wait(cond, timeout=3.0):
     t_end = time.monotonic() + timeout
@@ -103,7 +105,7 @@ def _nearest(edges, t_us):
 
 LATCH_CLOCK_TOL_US = 4.0    # micros() counts in 4 µs steps (Timer0, prescaler 64 at 16 MHz)
 LATCH_EDGE_JITTER_US = 9.0  # an edge is late by however long another ISR (Timer0 overflow, UART) holds the CPU:
-# ≤ 6 µs in most runs, 7.1 µs once (2026-12-02, two back to back); under half the test commands' 20 µs spacing
+# ≤ 6 µs in most runs, 7.1 µs at most seen (two back to back); under half the test commands' 20 µs spacing
 
 
 def test_uno_firmware_latch_report_times_each_pulse_and_names_its_command(tmp_path):

@@ -19,6 +19,8 @@ from hexa.protocol.simavr import SERVO_PINS, SimavrBoard, simavr_counts
 from hexa.robots.hexa_description import load_hexa
 from test_driver_helpers import RosProbe, driver_args, kv, wait_for
 
+pytestmark = pytest.mark.slow   # the firmware in simavr: left out of `make check`
+
 
 @pytest.fixture
 def probe(ros_env, monkeypatch):

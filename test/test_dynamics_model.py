@@ -1,5 +1,5 @@
 """Self-consistency of the Hexa Lagrange model (hexa.dynamics.lagrange): power balance, momentum vs inverse dynamics,
-agreement with H1's kinematics, θ = 0 handling and the Z-Y-Z output mapping."""
+agreement with the kinematics module, θ = 0 handling and the Z-Y-Z output mapping."""
 from __future__ import annotations
 
 import numpy as np
@@ -55,7 +55,7 @@ TAU = np.random.default_rng(0).normal(scale=0.3, size=(T.size, 6))
 def test_constraints_and_geometry_match_h1_kinematics():
     s = _motion(PRM, T)
     assert np.abs(loop_constraints(PRM, s.zeta, s.p, s.R)).max() < 1e-12
-    # arm rates from the twist agree with H1's inverse velocity kinematics
+    # arm rates from the twist agree with the inverse velocity kinematics
     for k in (0, 7, 19):
         pose = _path(T[k])[0][0]
         ref = kin.arm_rates(DESC, pose, s.zeta[k], s.V[k])

@@ -1,4 +1,4 @@
-"""Validation of the Hexa dynamics against MuJoCo (H4's simulator from the same YAML): free motion on the paper's
+"""Validation of the Hexa dynamics against MuJoCo (the simulator, built from the same YAML): free motion on the paper's
 three trajectories, known forces on the plate, rods and arms of several chains, momentum vs direct form, and the
 streaming observer with camera-rate poses."""
 from __future__ import annotations

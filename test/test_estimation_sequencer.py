@@ -1,5 +1,5 @@
 """hexa.estimation.SampleSequencer: the output order depends on stamps and contents only, not on how the three
-topics interleave on delivery (issue 8, deterministic replay)."""
+topics interleave on delivery (deterministic replay)."""
 from __future__ import annotations
 
 import numpy as np

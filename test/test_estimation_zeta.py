@@ -7,7 +7,7 @@ import pytest
 
 from hexa.estimation import EstimationError, EstimatorConfig, ServoModel, ZetaEstimator
 
-TAU_COUNT = 0.0119      # N·m per ADC count (26.4 mA · K_t 0.45 N·m/A, H3's sensor model)
+TAU_COUNT = 0.0119      # N·m per ADC count (26.4 mA · K_t 0.45 N·m/A, the ACS712 sensor model)
 
 
 def _run(duration: float, offset: float = 0.0, force: float = 0.0, seed: int = 0, config=None):

@@ -13,6 +13,8 @@ from hexa.eval import CampaignConfig, ProgressBar, jobs_of, run_campaign
 from hexa.eval.campaign import THRESHOLD_SCALES, draw_contact, run_contact_job
 from hexa.eval.report import summarize, write_report
 
+pytestmark = pytest.mark.slow   # a campaign on worker processes: left out of `make check`
+
 
 def test_contacts_are_drawn_reproducibly_within_their_ranges():
     cs = [draw_contact(3, i) for i in range(60)]

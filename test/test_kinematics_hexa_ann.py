@@ -71,6 +71,7 @@ def test_missing_weights_are_named(tmp_path):
         load_ann_fk(tmp_path / "absent.npz")
 
 
+@pytest.mark.slow
 def test_training_script_runs_and_exports_loadable_weights(tmp_path):
     pytest.importorskip("torch")
     out = tmp_path / "tiny.npz"

@@ -1,4 +1,4 @@
-"""Free motion in the live simulated graph (issue 8 target: zero false alarms in 3 × 60 s): the whole graph
+"""Free motion in the live simulated graph (target: zero false alarms in 3 × 60 s): the whole graph
 (simulator with no scenario, driver, trajectory, cameras, pose, observer, rnea, ...) runs each of the paper's three
 trajectories at real-time factor 0.3, looping (a trajectory lasts 10 s; the helix cross-fades onto its next cycle);
 the observer must publish no collision event. CI runs 3 × 16 s of trajectory (after the 1 s lead-in at rest); the

@@ -59,7 +59,7 @@ def test_observer_node_rejects_a_bad_parameter_at_start_naming_it(procs, ros_env
 @pytest.mark.parametrize("module", ["hexa_dynamics.observer_node", "hexa_dynamics.rnea_node"])
 def test_node_on_sim_time_stops_cleanly_on_sigint_with_no_clock(procs, ros_env, module):
     """With use_sim_time and no /clock (the simulator already gone) nothing wakes the executor: Ctrl-C must still
-    end the node at once with exit code 0 (it used to wait for the supervisor's 10 s kill)."""
+    end the node at once with exit code 0, not after the supervisor's 10 s kill."""
     import signal
     import time
 

@@ -1,4 +1,4 @@
-"""Deterministic replay (issue 8): a bag recorded from the simulated graph (plate case, `hexa_bringup.demo_run`),
+"""Deterministic replay: a bag recorded from the simulated graph (plate case, `hexa_bringup.demo_run`),
 played twice with `hexa play --clock` through fresh observer and rnea nodes, gives the same collision events, the
 same as the live run recorded in the bag. The nodes order their inputs by stamp (hexa.estimation.SampleSequencer), so
 DDS's delivery order of joint_states / motor_currents / plate_pose does not matter."""

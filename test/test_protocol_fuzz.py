@@ -4,6 +4,7 @@ from __future__ import annotations
 import time
 
 import numpy as np
+import pytest
 from hypothesis import given, settings, strategies as st
 
 from hexa.protocol import frames as fr
@@ -91,6 +92,7 @@ def _damaged_stream(seed: int, n_frames: int, p_damage: float) -> tuple[bytes, l
     return b"".join(pieces), good
 
 
+@pytest.mark.slow
 @given(st.integers(0, 2**32 - 1), st.floats(0.0, 0.6), st.integers(1, 600))
 @settings(max_examples=50, deadline=None, derandomize=True)
 def test_parser_fuzz_over_1e5_frames_resyncs_with_zero_crashes(seed, p_damage, max_chunk):

@@ -37,6 +37,29 @@ def test_image_read_in_place_equals_rclpy(frame_id, encoding, shape, dtype):
     assert np.shares_memory(got.data, np.frombuffer(raw, np.uint8)) or isinstance(raw, bytes)
 
 
+@pytest.mark.parametrize("frame_id, encoding, shape, dtype", [
+    ("cam_top_color_optical_frame", "rgb8", (48, 64, 3), np.uint8),
+    ("", "16UC1", (30, 40), np.uint16),
+    ("ab", "32FC1", (3, 9), np.float32),
+])
+def test_image_written_as_bytes_equals_rclpys_serialization(frame_id, encoding, shape, dtype):
+    from builtin_interfaces.msg import Time
+    from rclpy.serialization import deserialize_message, serialize_message
+    from sensor_msgs.msg import Image
+
+    from hexa.vision.images import ImageConversionError, fill_message
+    from hexa_ros.cdr import image_to_cdr
+
+    rng = np.random.default_rng(2)
+    arr = (rng.random((shape[0], shape[1] + 3, *shape[2:])) * 200).astype(dtype)[:, 2:-1]   # not contiguous
+    msg = fill_message(Image(), arr, encoding)
+    msg.header.stamp, msg.header.frame_id = Time(sec=7, nanosec=5), frame_id
+    ours, ref = image_to_cdr(7, 5, frame_id, arr, encoding), serialize_message(msg)
+    assert len(ours) == len(ref) and deserialize_message(ours, Image) == msg   # rclpy's padding bytes are arbitrary
+    with pytest.raises(ImageConversionError, match="does not fit"):
+        image_to_cdr(7, 5, frame_id, arr.astype(np.float64), encoding)
+
+
 def test_truncated_or_foreign_bytes_are_refused_naming_why():
     from rclpy.serialization import serialize_message
     from sensor_msgs.msg import Image

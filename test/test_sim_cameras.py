@@ -128,3 +128,18 @@ def test_randomize_scene_is_seeded_changes_the_image_and_restores_exactly(sim):
     np.testing.assert_array_equal(after, before)
     np.testing.assert_array_equal(depth_after, depth_before)
     assert sim.rgb_noise_sigma == sim.config.rgb_noise_sigma
+
+
+def test_a_skipped_frame_advances_the_noise_as_a_rendered_one(sim):
+    """The sim node skips rendering a camera nobody subscribes to; the frames after it stay those of the seed."""
+    gen = sim._noise["cam_top"].rng.bit_generator
+    start = gen.state
+    sim.render("cam_top")
+    rgb, depth = sim.render("cam_top")
+    gen.state = start
+    sim.skip_render("cam_top")
+    rgb_skip, depth_skip = sim.render("cam_top")
+    np.testing.assert_array_equal(rgb_skip, rgb)
+    np.testing.assert_array_equal(depth_skip, depth)
+    gen.state = start
+    assert not np.array_equal(sim.render("cam_top")[0], rgb)     # the noise does move from frame to frame

@@ -12,7 +12,7 @@ import pytest
 
 pytest.importorskip("mujoco")
 pytestmark = pytest.mark.skipif(importlib.util.find_spec("hexa.trajectories") is None,
-                                reason="hexa.trajectories (H1) not installed yet")
+                                reason="hexa.trajectories not installed")
 
 
 def _hexa(*args: str) -> subprocess.CompletedProcess:

@@ -16,7 +16,7 @@ from hexa.sim.config import SimConfigError, parse_sim_config  # noqa: E402
 from hexa.sim.scenarios import ScenarioError, draw_collision, load_scenario, parse_scenario  # noqa: E402
 
 needs_trajectories = pytest.mark.skipif(importlib.util.find_spec("hexa.trajectories") is None,
-                                        reason="hexa.trajectories (H1) not installed yet")
+                                        reason="hexa.trajectories not installed")
 
 # Free-motion tracking tolerance (documented in docs/simulator.md): position loop of a hobby servo (kp = 40 N·m/rad)
 # lags the paper's trajectories by < 1 deg at the arms, i.e. a few mm at the plate.

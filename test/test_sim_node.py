@@ -118,8 +118,8 @@ def test_sim_node_publishes_clock_cameras_and_ground_truth(procs, ros_env, tmp_p
 
 def test_sim_node_with_boards_holds_the_trajectorys_start_pose_until_the_first_command(procs, ros_env, tmp_path):
     """scenario none + trajectory circle (the README's free-motion set-up): the robot starts at rest at the circle's
-    start pose and stays there until the driver's first command (none here) — it used to follow the circle on its own
-    until then, and the first command snapped it back (a false START at start-up)."""
+    start pose and stays there until the driver's first command (none here). Following the circle on its own until
+    then, it would be snapped back by the first command (a false START at start-up)."""
     pytest.importorskip("rclpy", reason="ROS 2 Jazzy wheels not installed")
     pytest.importorskip("mujoco")
     from hexa.trajectories import TRAJECTORIES

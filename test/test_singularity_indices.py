@@ -133,7 +133,7 @@ def test_tr15_min_omega_along_the_path_is_below_the_limit():
 
 
 def test_hexa_indices_give_fifteen_pairs_and_match_rod_wrench_screws():
-    pytest.importorskip("hexa.kinematics.hexa6rus", reason="Hexa kinematics (H1) not available yet")
+    pytest.importorskip("hexa.kinematics.hexa6rus", reason="Hexa kinematics not available")
     from hexa.kinematics import hexa6rus
     from hexa.robots.hexa_description import load_hexa
 

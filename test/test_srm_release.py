@@ -12,6 +12,8 @@ from hexa.robots.upsrpu_description import load_upsrpu
 from hexa.srm.experiment import run_release_experiment
 from hexa.srm.plant import SimulatedUpsrpu, half_sine_push
 
+pytestmark = pytest.mark.slow   # seconds of simulated release per trajectory: left out of `make check`
+
 DESC = load_upsrpu()
 
 

@@ -56,6 +56,7 @@ def test_preprocess_rejects_non_rgb() -> None:
     assert x.shape == (1, 3, D.INPUT_H, D.INPUT_W) and x.dtype == np.float32
 
 
+@pytest.mark.slow
 def test_onnx_export_matches_torch(tmp_path) -> None:
     torch = pytest.importorskip("torch")
     pytest.importorskip("onnxruntime")

@@ -16,6 +16,7 @@ from hexa.vision.isolation import (
     hexagon_line_entry,
     plate_distance,
     segment_distance,
+    segment_distances,
 )
 
 HEX = np.array([[np.cos(a), np.sin(a)] for a in np.radians([0, 60, 120, 180, 240, 300])]) * 0.1
@@ -46,6 +47,31 @@ def test_plate_distance_inside_outside_above() -> None:
     pts = np.array([[0.0, 0.0, -0.55], [0.2, 0.0, -0.55], [0.0, 0.0, -0.50]])
     d = plate_distance(pts, g)
     assert d[0] == 0.0 and d[1] == pytest.approx(0.1) and d[2] == pytest.approx(0.05 - 0.004)
+
+
+def test_batched_segment_and_plate_distances_equal_the_per_segment_forms() -> None:
+    """The isolation's distances of every object point to the 12 links (one matrix product) and to the plate
+    (edges at once) against segment_distance per segment and a point-in-hexagon test per edge."""
+    g = _geometry()
+    rng = np.random.default_rng(4)
+    pts = rng.normal([0.0, 0.0, -0.45], 0.15, (3000, 3))
+    segs = np.array([seg for *_, seg, _ in g.link_segments(0.01)])
+    D, S = segment_distances(pts, segs[:, 0], segs[:, 1])
+    for k, seg in enumerate(segs):
+        d, s = segment_distance(pts, seg[0], seg[1])
+        np.testing.assert_allclose(D[k], d, rtol=0, atol=1e-12)
+        np.testing.assert_allclose(S[k], s, rtol=0, atol=1e-12)
+    q = pts - g.T_plate[:3, 3]
+    inside = np.ones(len(q), bool)
+    d_edge = np.full(len(q), np.inf)
+    for k in range(6):
+        a, b = HEX[k], HEX[(k + 1) % 6]
+        inside &= (b[0] - a[0]) * (q[:, 1] - a[1]) - (b[1] - a[1]) * (q[:, 0] - a[0]) >= 0
+        flat = np.column_stack([q[:, :2], np.zeros(len(q))])
+        d_edge = np.minimum(d_edge, segment_distance(flat, np.append(a, 0.0), np.append(b, 0.0))[0])
+    ref = np.hypot(np.where(inside, 0.0, d_edge), np.maximum(np.abs(q[:, 2]) - 0.004, 0.0))
+    assert 0 < inside.sum() < len(q)
+    np.testing.assert_allclose(plate_distance(pts, g), ref, rtol=0, atol=1e-12)
 
 
 def test_hexagon_border_point_and_line_entry() -> None:
@@ -101,6 +127,7 @@ def desc():
     return load_hexa()
 
 
+@pytest.mark.slow
 @needs_sim
 def test_isolation_accuracy_against_simulator_truth(desc) -> None:
     """24 feasible randomised contacts (8 per link, chains 1..6): median error ≤ 10 mm and link+chain ≥ 90 %.

@@ -17,6 +17,7 @@ from typing import Any
 from geometry_msgs.msg import PoseStamped, WrenchStamped
 from hexa_msgs.msg import Contact
 from hexa_ros import qos
+from hexa_ros.cdr import image_to_cdr
 from hexa_ros.conversions import JOINT_NAMES, fill_pose_msg
 from hexa_ros.node import Param, declare_parameters
 from hexa_ros.stamps import to_stamp
@@ -30,7 +31,6 @@ from hexa.sim.boards import VirtualBoards
 from hexa.sim.pacing import MAX_LAG, Pacer, SimRunner
 from hexa.sim.realism import RealismConfig
 from hexa.sim.simulator import LINK_CODES
-from hexa.vision.images import fill_message
 
 
 PARAMETERS = {
@@ -103,15 +103,19 @@ class SimNode(Node):
         self.clock_pub.publish(Clock(clock=to_stamp(self.sim.time)))
 
     def cameras(self) -> None:
+        """Each camera with a subscriber to its images: render once (colour and depth), publish serialized; a camera
+        nobody listens to is not rendered (its noise advances as if it were: the frames stay those of the seed)."""
         st = to_stamp(self.sim.time)
         for name, (pub, info, frame) in self.cam_pubs.items():
-            rgb, depth = self.sim.render(name)
-            img, dimg = fill_message(Image(), rgb, "rgb8"), fill_message(Image(), depth, "16UC1")
-            img.header.stamp = dimg.header.stamp = info.header.stamp = st
-            img.header.frame_id = dimg.header.frame_id = frame
-            pub["color/image_raw"].publish(img)
+            color, depth_pub = pub["color/image_raw"], pub["aligned_depth_to_color/image_raw"]
+            if color.get_subscription_count() + depth_pub.get_subscription_count() == 0:
+                self.sim.skip_render(name)
+            else:
+                rgb, depth = self.sim.render(name)
+                color.publish(image_to_cdr(st.sec, st.nanosec, frame, rgb, "rgb8"))
+                depth_pub.publish(image_to_cdr(st.sec, st.nanosec, frame, depth, "16UC1"))
+            info.header.stamp = st
             pub["color/camera_info"].publish(info)
-            pub["aligned_depth_to_color/image_raw"].publish(dimg)
             pub["aligned_depth_to_color/camera_info"].publish(info)
 
     def truth(self) -> None:

@@ -25,7 +25,8 @@ from hexa.vision.camera import CameraModel
 from hexa.vision.sources import BagSource, FolderSource, RealSenseSource, SourceError
 from hexa_ros import diagnostics, qos
 from hexa_ros.node import DESCRIPTION, DESCRIPTION_PARAM, Param, declare_parameters
-from hexa_vision.common import camera_info_msg, description_cameras, image_msg
+from hexa_ros.cdr import image_to_cdr
+from hexa_vision.common import camera_info_msg, description_cameras
 
 from hexa import frames
 
@@ -77,9 +78,9 @@ class CameraNode(Node):
     def _publish(self, rgb: np.ndarray, depth_mm: np.ndarray, model: CameraModel, fields: dict | None = None) -> None:
         stamp = self.get_clock().now().to_msg()
         info = camera_info_msg(model, self.frame, stamp, fields)
-        self.pub_color.publish(image_msg(rgb, "rgb8", self.frame, stamp))
-        self.pub_info.publish(info)
-        self.pub_depth.publish(image_msg(depth_mm, "16UC1", self.frame, stamp))
+        self.pub_color.publish(image_to_cdr(stamp.sec, stamp.nanosec, self.frame, rgb, "rgb8"))   # serialized:
+        self.pub_info.publish(info)                                       # one copy of the pixels
+        self.pub_depth.publish(image_to_cdr(stamp.sec, stamp.nanosec, self.frame, depth_mm, "16UC1"))
         self.pub_depth_info.publish(info)
         self.published += 1
 
@@ -93,12 +94,12 @@ class CameraNode(Node):
             self._publish(*pair, self._folder.model)
 
     def _run_bag(self) -> None:
-        from rclpy.serialization import deserialize_message
-
         try:
             for key, msgtype, cdr in self._bag.messages():
-                cls = Image if msgtype.endswith("/Image") else CameraInfo
-                self._bag_pubs[key].publish(deserialize_message(cdr, cls))
+                want = "sensor_msgs/msg/Image" if key.endswith("image_raw") else "sensor_msgs/msg/CameraInfo"
+                if msgtype != want:
+                    raise SourceError(f"{key} holds {msgtype} in the bag, not {want}")
+                self._bag_pubs[key].publish(bytes(cdr))       # the recorded bytes as they are
                 self.published += 1
         except Exception as exc:  # noqa: BLE001 - an unreadable bag, or the publishers gone at shutdown
             if not self._bag.stopped:

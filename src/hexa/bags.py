@@ -36,8 +36,8 @@ def read_bag(path: str | Path, topics: list[str] | None = None) -> Iterator[tupl
 def paced(messages: Iterator[tuple[str, str, int, bytes]], rate: float,
           sleep: Callable[[float], None] = time.sleep) -> Iterator[tuple[str, str, int, bytes]]:
     """Re-yield `messages` at `rate` times their recorded pace (rate <= 0: as fast as possible)."""
-    t_wall0 = None
-    t_bag0 = None
+    t_wall0: float | None = None
+    t_bag0 = 0
     for item in messages:
         stamp = item[2]
         if rate > 0:

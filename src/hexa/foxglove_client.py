@@ -38,9 +38,11 @@ class FoxgloveClient:
 
     def __init__(self, url: str, timeout: float = 10.0) -> None:
         from websockets.sync.client import connect
+        from websockets.typing import Subprotocol
 
         try:
-            self._cm = connect(url, subprotocols=list(SUBPROTOCOLS), open_timeout=timeout, max_size=None)
+            self._cm = connect(url, subprotocols=[Subprotocol(p) for p in SUBPROTOCOLS], open_timeout=timeout,
+                               max_size=None)
             self._ws = self._cm.__enter__()
         except (OSError, TimeoutError) as exc:
             raise FoxgloveClientError(f"no Foxglove server at {url}: {exc}") from exc

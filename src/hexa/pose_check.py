@@ -19,12 +19,15 @@ from __future__ import annotations
 import math
 from collections import Counter
 from dataclasses import dataclass
-from typing import Any, Callable
+from typing import TYPE_CHECKING, Any, Callable
 
 import numpy as np
 
 from hexa.rotations import matrix_from_quaternion, transform_from_pose6
 from hexa.stream_gate import ACCEPTED, StreamGate, time_step_rule
+
+if TYPE_CHECKING:
+    from hexa.robots.hexa_description import HexaDescription
 
 
 @dataclass(frozen=True)
@@ -49,7 +52,7 @@ class PoseLimits:
             raise ValueError(f"pose check adopt_after must be >= 1, got {self.adopt_after!r}")
 
     @classmethod
-    def for_hexa(cls, desc: Any) -> "PoseLimits":
+    def for_hexa(cls, desc: HexaDescription) -> "PoseLimits":
         """Speeds from the Hexa's servos: the plate moves no faster than twice an arm tip at full servo speed
         (2·l_a·ω_max, 2.5 m/s for the default description), and turns no faster than that over the plate radius."""
         v = 2.0 * float(desc.l_a) * float(desc.speed_max)
@@ -62,7 +65,7 @@ def rotation_angle(Ra: np.ndarray, Rb: np.ndarray) -> float:
     return math.acos(min(1.0, max(-1.0, c)))
 
 
-def hexa_reachable(desc: Any) -> Callable[[np.ndarray], bool]:
+def hexa_reachable(desc: HexaDescription) -> Callable[[np.ndarray], bool]:
     """Whether the Hexa reaches a plate transform (4x4): its inverse kinematics has a solution within the limits."""
     from hexa.kinematics.hexa6rus import UnreachablePoseError, inverse_kinematics
     from hexa.rotations import pose6_from_transform
@@ -96,7 +99,7 @@ class PoseCheck:
         self.gate: StreamGate[tuple[float, np.ndarray]] = StreamGate(self._follows, self.limits.adopt_after)
 
     @classmethod
-    def for_hexa(cls, desc: Any) -> "PoseCheck":
+    def for_hexa(cls, desc: HexaDescription) -> "PoseCheck":
         """The Hexa's check: its speed bounds and inverse kinematics."""
         return cls(PoseLimits.for_hexa(desc), hexa_reachable(desc))
 

@@ -20,11 +20,12 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 from itertools import combinations
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, cast
 
 import numpy as np
 
 if TYPE_CHECKING:
+    from hexa.robots.hexa_description import HexaDescription
     from hexa.robots.upsrpu_description import UpsrpuDescription
 
 __all__ = [
@@ -224,7 +225,7 @@ def upsrpu_indices_from_screws(desc: UpsrpuDescription, X: np.ndarray) -> Singul
     return indices_from_screws(np.linalg.det(J), T, C)
 
 
-def hexa_indices(desc: Any, pose: np.ndarray, zeta: np.ndarray | None = None) -> SingularityReport:
+def hexa_indices(desc: HexaDescription, pose: np.ndarray, zeta: np.ndarray | None = None) -> SingularityReport:
     """det J_D and the fifteen Omega_ij of the Hexa at `pose` (x, y, z, alpha, beta, gamma).
 
     Transmission wrench screws: unit force along each rod through its spherical joint (DESIGN.md). The
@@ -266,7 +267,7 @@ class SingularityMonitor:
         if robot == "upsrpu":
             from hexa.robots.upsrpu_description import load_upsrpu
 
-            self.desc = load_upsrpu(description)
+            self.desc: UpsrpuDescription | HexaDescription = load_upsrpu(description)
             self.det_jd_limit, self.omega_limit = float(self.desc.det_jd_limit), float(self.desc.omega_limit)
         elif robot == "hexa":
             from hexa.robots.hexa_description import load_hexa
@@ -283,7 +284,9 @@ class SingularityMonitor:
         Raises:
             ValueError: the pose is unreachable (Hexa) or the indices are undefined there.
         """
-        return upsrpu_indices(self.desc, pose) if self.robot == "upsrpu" else hexa_indices(self.desc, pose)
+        if self.robot == "upsrpu":
+            return upsrpu_indices(cast("UpsrpuDescription", self.desc), pose)
+        return hexa_indices(cast("HexaDescription", self.desc), pose)
 
     def near(self, report: SingularityReport) -> bool:
         """True when `report` is within the limits (Algorithm 1's test)."""

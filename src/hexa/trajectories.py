@@ -88,7 +88,7 @@ def load_pose_file(path: str | Path) -> tuple[Trajectory, float]:
     poses = data[:, 1:]
     rates = np.gradient(poses, t, axis=0) if len(t) > 1 else np.zeros_like(poses)
 
-    def traj(tt: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    def traj(tt: float | np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         pose = np.array([np.interp(tt, t, poses[:, k]) for k in range(6)])
         rate = np.array([np.interp(tt, t, rates[:, k]) for k in range(6)])
         return pose, rate, np.zeros(6)

@@ -196,7 +196,9 @@ class TrajectoryPlayer:
 
     def _approach_pose(self, tt: float) -> tuple[np.ndarray, np.ndarray]:
         u = (tt + self.approach_time) / self.approach_time
-        return (self._approach_from + _smoothstep(u) * self._approach_delta,
+        start = self._approach_from
+        assert start is not None, "an approach is planned before its poses are asked for"
+        return (start + _smoothstep(u) * self._approach_delta,
                 _smoothstep_rate(u, self.approach_time) * self._approach_delta)
 
     def command(self, t: float) -> Command:

@@ -173,8 +173,11 @@ class TrajectoryRunner:
         return now - self._t0
 
     def _plan_approach(self, now: float) -> bool:
+        pose = self._pose
+        if pose is None:    # _fresh() holds only with a pose
+            return False
         try:
-            T = self.player.approach_from(self._pose, self.approach_speed, self.approach_tolerance)
+            T = self.player.approach_from(pose, self.approach_speed, self.approach_tolerance)
         except ValueError as exc:  # unreachable measured pose: wait for the next one
             self.bad_poses += 1
             self._pose = None
@@ -182,7 +185,7 @@ class TrajectoryRunner:
             return False
         self.approach_pending = False
         self._t0 = now
-        p = self._pose
+        p = pose
         self._log("info", f"approach from plate pose ({p[0]:.3f}, {p[1]:.3f}, {p[2]:.3f}) m: {T:.2f} s"
                   if T > 0 else "at the start pose: no approach needed")
         return True

@@ -15,7 +15,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--seed", type=int, default=0, help="scenario seed (timings/positions drawn from it)")
     p.add_argument("--rtf", type=float, default=None,
                    help="simulator real-time factor asked for (default 0.5; on 2 cores the whole graph with both "
-                        "cameras reaches about 0.35-0.4, `hexa bench graph --sim`)")
+                        "cameras reaches about 0.55-0.6 when asked for 1, `hexa bench graph --sim`)")
     p.add_argument("--record-images", action="store_true", help="also record the camera topics (large bags)")
     p.add_argument("--contact-model", choices=["scripted", "physical"], default="scripted",
                    help="scripted: the scenario's force applied exactly along the object's axis (default); physical: "

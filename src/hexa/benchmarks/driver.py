@@ -101,7 +101,10 @@ def _bench_link_latency(quick: bool) -> list[BenchRow]:
     rows = []
     with tempfile.TemporaryDirectory() as tmp:
         got: dict[tuple, float] = {}
-        with UnoEmulator(on_targets=lambda p: got.setdefault(p, time.perf_counter()), link=Path(tmp) / "uno") as uno:
+        def on_pulses(p: tuple[int, ...]) -> None:
+            got.setdefault(p, time.perf_counter())
+
+        with UnoEmulator(on_targets=on_pulses, link=Path(tmp) / "uno") as uno:
             with ServoLink(uno.port, ping_period=0.2) as link:
                 link.wait_connected(3.0)
                 lat = []
@@ -130,14 +133,14 @@ def _bench_link_latency(quick: bool) -> list[BenchRow]:
         with MegaEmulator(link=Path(tmp) / "mega", tx_filter=stamp) as mega:
             with CurrentLink(mega.port, rate_hz=1000,
                              on_sample=lambda s, t, g: recv.append(time.perf_counter() - sent.get(s.sequence,
-                                                                                                  np.nan))) as link:
-                link.wait_connected(3.0)
+                                                                                                  np.nan))) as clink:
+                clink.wait_connected(3.0)
                 time.sleep(1.0 if quick else 3.0)
-                rate = link.samples / (1.0 if quick else 3.0)
-                gaps = link.sample_gaps
-        lat = np.asarray(recv[10:])
-        lat = lat[np.isfinite(lat)]
-        med = float(np.median(lat)) * 1e3
+                rate = clink.samples / (1.0 if quick else 3.0)
+                gaps = clink.sample_gaps
+        tele_lat = np.asarray(recv[10:])
+        tele_lat = tele_lat[np.isfinite(tele_lat)]
+        med = float(np.median(tele_lat)) * 1e3
         rows.append(BenchRow("telemetry latency, Mega emulator->CurrentLink callback (median)", med, "ms", "<= 2 ms",
                              med <= 2.0, f"p95 {np.percentile(lat, 95) * 1e3:.2f} ms at 1 kHz"))
         rows.append(BenchRow("Mega stream rate through the link (commanded 1 kHz)", rate, "Hz", ">= 990 Hz",
@@ -207,8 +210,10 @@ def _bench_node_latency(quick: bool) -> list[BenchRow]:
     tele: list[float] = []
     rows: list[BenchRow] = []
     with tempfile.TemporaryDirectory() as tmp:
-        uno = UnoEmulator(on_targets=lambda p: cmd_got.setdefault(tuple(p), time.monotonic()),
-                          link=Path(tmp) / "uno")
+        def on_pulses(p: tuple[int, ...]) -> None:
+            cmd_got.setdefault(tuple(p), time.monotonic())
+
+        uno = UnoEmulator(on_targets=on_pulses, link=Path(tmp) / "uno")
         mega = MegaEmulator(link=Path(tmp) / "mega", tx_filter=stamp)
         with uno, mega:
             exe = str(Path(sys.executable).with_name("hexa-driver"))
@@ -228,9 +233,11 @@ def _bench_node_latency(quick: bool) -> list[BenchRow]:
                 ex = SingleThreadedExecutor(context=ctx)
                 ex.add_node(node)
                 stop = threading.Event()
-                th = threading.Thread(target=lambda: [ex.spin_once(timeout_sec=0.05) for _ in iter(stop.is_set,
-                                                                                                   True)],
-                                      daemon=True)
+                def spin() -> None:
+                    while not stop.is_set():
+                        ex.spin_once(timeout_sec=0.05)
+
+                th = threading.Thread(target=spin, daemon=True)
                 th.start()
                 t_end = time.monotonic() + 30
                 while len(tele) < 50 and time.monotonic() < t_end:

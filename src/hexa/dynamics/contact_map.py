@@ -47,7 +47,8 @@ def _perturbed_pose(pose: NDArray, k: int, h: float) -> NDArray:
         return out
     w = [0.0, 0.0, 0.0]
     w[k - 3] = h
-    R = np.array(exp_rotate(*w, hexa6rus.rotation_zyx(*pose[3:]).ravel().tolist())).reshape(3, 3)   # exp([w]×)·R
+    R0 = hexa6rus.rotation_zyx(*pose[3:]).ravel().tolist()
+    R = np.array(exp_rotate(w[0], w[1], w[2], R0)).reshape(3, 3)   # exp([w]×)·R
     out[3:] = np.array(hexa6rus.rotation_to_zyx(R), dtype=float)
     return out
 

@@ -29,6 +29,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 if TYPE_CHECKING:
+    from hexa.robots.hexa_description import HexaDescription
     from numpy.typing import NDArray
 
 GRAVITY = 9.81  # as the simulator (MJCF gravity="0 0 -9.81")
@@ -119,7 +120,7 @@ class HexaDynamicParameters:
             raise DynamicsError(f"kappa must be in [0, 1], got {self.kappa}")
 
     @classmethod
-    def from_description(cls, desc: Any = None) -> HexaDynamicParameters:
+    def from_description(cls, desc: HexaDescription | None = None) -> HexaDynamicParameters:
         """Parameters from the robot description (default: `load_hexa()`); inertias are taken as given there."""
         if desc is None:
             from hexa.robots.hexa_description import load_hexa
@@ -128,7 +129,7 @@ class HexaDynamicParameters:
         return cls(**_parameters_from_description(desc))
 
 
-def _parameters_from_description(desc: Any) -> dict:
+def _parameters_from_description(desc: HexaDescription) -> dict:
     """Map the description's fields to HexaDynamicParameters keyword arguments (one place that knows its names)."""
     from hexa.dynamics._desc_adapter import dynamic_fields
 
@@ -334,6 +335,8 @@ class _Velocity:
     """Velocity-level quantities given the twist V (N, 6): ζ̇, Ċ_i, Ḃ_i, ḋ_i, j̇_i, rod and plate velocities."""
 
     __slots__ = ("zd", "Cd", "Bd", "ddot", "jdot", "w", "wxr", "rho", "v_p", "v_r", "om_r")
+    rho: NDArray    # plate terms: set only when R is given (the arm-only callers never read them)
+    v_p: NDArray
 
     def __init__(self, prm: HexaDynamicParameters, g: _Geometry, V: NDArray, R: NDArray | None = None) -> None:
         v, w = V[:, :3], V[:, 3:]
@@ -350,8 +353,6 @@ class _Velocity:
         self.jdot = (jd - g.j * Ddot[..., None]) / g.D[..., None]
         self.v_r = (1.0 - prm.kappa) * self.Bd + prm.kappa * self.Cd
         self.om_r = _cross(g.d, self.ddot) / g.dd[..., None]
-        self.rho = None
-        self.v_p = None
         if R is not None:
             self.rho = R @ prm.c_p
             self.v_p = v + _cross(w, self.rho)
@@ -507,6 +508,19 @@ class _Accelerations:
 
     __slots__ = ("zdd", "Cdd", "Bdd", "a_r", "alpha_r", "a_p", "plate_gen", "rod_fc", "rod_fb", "rod_F", "rod_M",
                  "plate_F", "plate_M")
+    zdd: NDArray
+    Cdd: NDArray
+    Bdd: NDArray
+    a_r: NDArray
+    alpha_r: NDArray
+    a_p: NDArray
+    plate_gen: NDArray
+    rod_fc: NDArray
+    rod_fb: NDArray
+    rod_F: NDArray
+    rod_M: NDArray
+    plate_F: NDArray
+    plate_M: NDArray
 
 
 def _accelerations(prm, g: _Geometry, vel: _Velocity, V: NDArray, Vd: NDArray, R: NDArray) -> _Accelerations:

@@ -183,7 +183,7 @@ class MonitoringWatch:
         confirmed = lost is not None and self._suspect is not None and wall - self._suspect >= CONFIRM_GAP
         if lost is None or self._suspect is None:
             self._suspect = None if lost is None else wall
-        if confirmed or (lost is not None and self._phase == "lost"):
+        if lost is not None and (confirmed or self._phase == "lost"):
             if self._phase != "lost":
                 self._phase = "lost"
                 self.lost_count += 1

@@ -85,7 +85,7 @@ class ObserverConfig:
     # simulated graph delivers commands on time, free-motion residual peaks reach r_low only in runs of a few samples,
     # and the plate is detected 35 ms sooner than at 25 1/s; min_duration 0.02 s, 5 consecutive samples at 200 Hz —
     # free motion has had runs of up to 3 samples over a threshold (the plate axes in 3 × 60 s before the board-clock
-    # driver; the servo torques once, at a trajectory's start, 2026-12-02: 0.015 s was tried and reverted;
+    # driver; the servo torques once, at a trajectory's start; 0.015 s raises false STARTs;
     # docs/observer_node.md, "Command timing", "Free motion that moves for 60 s", "Detection in servo coordinates")
     gains: tuple[float, ...] = (100.0, 100.0, 100.0, 100.0, 100.0, 100.0)
     thresholds: tuple[float, ...] = (2.0, 2.0, 2.0, 0.2, 0.2, 0.2)

@@ -13,13 +13,16 @@ import argparse
 import json
 import sys
 from dataclasses import dataclass
-from typing import Any, Callable
+from typing import TYPE_CHECKING, Any, Callable
 
 import numpy as np
 
 from hexa.dynamics.identification import ContactForceEstimate, identify_contact_force
 from hexa.dynamics.lagrange import HexaDynamicParameters, motion_from_joint_rates
 from hexa.dynamics.observer import direct_residual_batch, momentum_residual_batch
+
+if TYPE_CHECKING:
+    from hexa.robots.hexa_description import HexaDescription
 
 R_LOW = 2.0
 
@@ -36,7 +39,7 @@ class SimRun:
     pose: np.ndarray
     force: np.ndarray
     point: np.ndarray
-    desc: Any
+    desc: HexaDescription
 
 
 def _trajectory(name: str) -> Callable[[np.ndarray], np.ndarray]:
@@ -47,7 +50,7 @@ def _trajectory(name: str) -> Callable[[np.ndarray], np.ndarray]:
 
 
 def simulate(path: Callable[[np.ndarray], np.ndarray], duration: float, contact: dict | None = None,
-             desc: Any = None) -> SimRun:
+             desc: HexaDescription | None = None) -> SimRun:
     """Drive the simulated Hexa along `path(t) -> poses (N, 6)` for `duration` s; optional contact dict
     {link, chain, fraction (along the arm/rod, or an offset (3,) in {P} for the plate), force (3,), t_on}."""
     from hexa.kinematics import hexa6rus as kin
@@ -78,11 +81,12 @@ def simulate(path: Callable[[np.ndarray], np.ndarray], duration: float, contact:
         rows.append((s.time, s.zeta, s.zeta_dot, s.zeta_ddot, s.tau, s.pose, g.force, g.point))
     sim.close()
     cols = list(zip(*rows))
-    arr = [np.asarray(c, dtype=float) for c in cols]
-    return SimRun(*arr, desc=desc)
+    a = [np.asarray(c, dtype=float) for c in cols]
+    return SimRun(a[0], a[1], a[2], a[3], a[4], a[5], a[6], a[7], desc=desc)
 
 
-def contact_point(desc: Any, zeta: np.ndarray, pose: np.ndarray, link: str, chain: int, fraction: Any) -> np.ndarray:
+def contact_point(desc: HexaDescription, zeta: np.ndarray, pose: np.ndarray, link: str, chain: int,
+                  fraction: Any) -> np.ndarray:
     """A point on the link: the plate at offset `fraction` (3,) in {P}; an arm/rod at `fraction` of its length."""
     from hexa.kinematics import hexa6rus as kin
 
@@ -135,7 +139,7 @@ def pose_driven_residual(run: SimRun, params: HexaDynamicParameters, pose_noise:
     obs = ResidualObserver(params, ObserverConfig(kinematics="pose", gains=(25.0,) * 6, min_duration=0.01))
     rng = np.random.default_rng(seed)
     out = np.full((run.t.size, 6), np.nan)
-    events = []
+    events: list[Any] = []
     for k, t in enumerate(run.t):
         if k % camera_every == 0:
             noise = np.concatenate([rng.normal(scale=pose_noise[0], size=3), rng.normal(scale=pose_noise[1], size=3)])
@@ -173,7 +177,7 @@ def contact_figures(run: SimRun, params: HexaDynamicParameters, link: str, chain
 
 
 FREE_TRAJECTORIES = ("circle", "helix", "ellipse")
-CONTACT_CASES = (
+CONTACT_CASES: tuple[dict[str, Any], ...] = (
     {"link": "plate", "chain": 0, "fraction": (0.06, 0.03, 0.0), "force": (1.5, -2.0, 3.0)},
     {"link": "plate", "chain": 0, "fraction": (-0.05, 0.05, 0.0), "force": (-3.0, 1.0, -2.0)},
     {"link": "rod", "chain": 1, "fraction": 0.5, "force": (2.0, 1.0, -1.5)},

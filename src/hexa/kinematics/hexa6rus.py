@@ -543,7 +543,7 @@ def _fk_residual(chains: tuple, Bl: list, l_d: float, p: list) -> tuple[list, li
     r20, r21, r22 = -sb, cb * sg, cb * cg
     inv2l, l2 = 0.5 / l_d, l_d * l_d
     phi = [0.0] * 6
-    geo = [None] * 6
+    geo: list[tuple[float, ...]] = [()] * 6
     f = 0.0
     for i in range(6):
         px, py, pz = chains[i][3], chains[i][4], chains[i][5]

@@ -11,7 +11,7 @@ from __future__ import annotations
 import json
 from dataclasses import dataclass
 from pathlib import Path
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -102,7 +102,7 @@ def save_ann_fk(path: str | Path, weights: list[np.ndarray], biases: list[np.nda
                 x_std: np.ndarray, y_mean: np.ndarray, y_std: np.ndarray, fingerprint: np.ndarray,
                 meta: dict) -> None:
     """Write the network as a compressed .npz (float32 weights, layer k as W{k}/b{k}, metadata as JSON)."""
-    arrays = {f"W{k}": np.asarray(W, np.float32) for k, W in enumerate(weights)}
+    arrays: dict[str, Any] = {f"W{k}": np.asarray(W, np.float32) for k, W in enumerate(weights)}
     arrays.update({f"b{k}": np.asarray(b, np.float32) for k, b in enumerate(biases)})
     np.savez_compressed(path, x_mean=x_mean, x_std=x_std, y_mean=y_mean, y_std=y_std, fingerprint=fingerprint,
                         meta=np.array(json.dumps(meta)), **arrays)

@@ -2,9 +2,9 @@
 
 The current board (Mega) stamps each sample with its own microsecond clock; the host knows only when the sample
 *arrived*, and samples arrive in bursts — a USB-serial latency timer, a busy host, a driver thread that waited for the
-GIL. The driver used to pair each sample with the command it had sent by the time it *handled* the sample, so a burst
-of samples measured before a command went out was paired with that command: the arm-angle estimator then placed the
-set-point step up to a burst early, and the collision observer's residual spiked (docs/driver.md, "Which command a
+GIL. Pairing each sample with the command sent by the time the driver *handles* the sample would pair a burst of
+samples measured before a command went out with that command: the arm-angle estimator would place the set-point
+step up to a burst early, and the collision observer's residual would spike (docs/driver.md, "Which command a
 sample carries").
 
 Here the host keeps a map from its clock to the board's, built from the samples themselves. A sample with board time

@@ -17,7 +17,7 @@ import threading
 import time
 import tty
 from pathlib import Path
-from typing import Callable, Sequence
+from typing import Callable, Self, Sequence
 
 import numpy as np
 
@@ -78,7 +78,7 @@ class _BoardEmulator:
     def rx_crc_errors(self) -> int:
         return self._parser.stats.crc_errors
 
-    def start(self) -> "_BoardEmulator":
+    def start(self) -> Self:
         """Open the pty and start the board thread (idempotent)."""
         if self._thread is not None:
             return self
@@ -96,7 +96,7 @@ class _BoardEmulator:
             self._thread = None
         self._close_pty()
 
-    def __enter__(self) -> "_BoardEmulator":
+    def __enter__(self) -> Self:
         return self.start()
 
     def __exit__(self, *exc: object) -> None:
@@ -474,7 +474,8 @@ class MegaEmulator(_BoardEmulator):
 
     kind = fr.BOARD_CURRENT
 
-    def __init__(self, current_source: Callable[[float], Sequence[float]] | None = None, units: str = "amps",
+    def __init__(self, current_source: Callable[[float], Sequence[float] | np.ndarray] | None = None,
+                 units: str = "amps",
                  sensor: CurrentSensorModel = DEFAULT_SENSOR, noise_counts: float = 0.0, seed: int = 0,
                  link: str | os.PathLike | None = None, tx_filter: Callable[[bytes], bytes] | None = None,
                  clock: Callable[[], float] = time.monotonic) -> None:

@@ -424,7 +424,7 @@ def pack_sample(sequence: int, board_time_us: int, counts: Sequence[int]) -> byt
 def unpack_sample(payload: bytes) -> Sample:
     _expect(payload, _SAMPLE.size, SAMPLE)
     v = _SAMPLE.unpack(payload)
-    return Sample(v[0], v[1], v[2:])  # type: ignore[arg-type]
+    return Sample(v[0], v[1], tuple(v[2:]))
 
 
 def pack_servo_status(s: ServoStatus) -> bytes:
@@ -437,7 +437,7 @@ def unpack_servo_status(payload: bytes) -> ServoStatus:
     _expect(payload, _STATUS_COMMON.size + _STATUS_SERVO.size, STATUS)
     c = _STATUS_COMMON.unpack_from(payload, 0)
     s = _STATUS_SERVO.unpack_from(payload, _STATUS_COMMON.size)
-    return ServoStatus(*c, pulses_us=tuple(s[:6]), ms_since_command=s[6])
+    return ServoStatus(c[0], c[1], c[2], c[3], c[4], pulses_us=tuple(s[:6]), ms_since_command=s[6])
 
 
 def pack_current_status(s: CurrentStatus) -> bytes:

@@ -16,7 +16,7 @@ import select
 import threading
 import time
 from dataclasses import dataclass, field
-from typing import Callable, Sequence
+from typing import Callable, Self, Sequence
 
 import serial
 
@@ -122,7 +122,7 @@ class BoardLink:
         self._token = 0
 
     # --------------------------------------------------------------------------------------------- lifecycle
-    def start(self) -> "BoardLink":
+    def start(self) -> Self:
         if self._thread is None:
             self._stop.clear()
             self._thread = threading.Thread(target=self._run, name=f"{type(self).__name__}({self.port})",
@@ -138,7 +138,7 @@ class BoardLink:
         self._close(count=False)
         self._set_state(DISCONNECTED)
 
-    def __enter__(self) -> "BoardLink":
+    def __enter__(self) -> Self:
         return self.start()
 
     def __exit__(self, *exc: object) -> None:
@@ -506,7 +506,7 @@ class ServoLink(BoardLink):
             self._restore_targets()
 
     def _restore_targets(self) -> None:
-        if self.send(fr.SET_TARGETS, fr.pack_targets(self.last_targets)) is not None:
+        if self.last_targets is not None and self.send(fr.SET_TARGETS, fr.pack_targets(self.last_targets)) is not None:
             self.restored += 1
             self._targets_since = self._targets_tx = time.monotonic()
 
@@ -595,7 +595,7 @@ class CurrentLink(BoardLink):
         self.send(fr.START_STREAM, fr.pack_start_stream(self.rate_hz))
 
     def end_of_read(self, t_read: float, t_rx: float) -> None:
-        if self._batch:
+        if self._batch and self.on_samples is not None:
             batch, self._batch = self._batch, []
             try:
                 self.on_samples(batch, t_read, t_rx)

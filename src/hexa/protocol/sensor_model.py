@@ -10,7 +10,7 @@ The driver reads the same parameters from hexa_driver/config/driver.yaml, so boa
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Sequence
+from typing import Any, Sequence
 
 import numpy as np
 
@@ -45,7 +45,8 @@ class CurrentSensorModel:
         bad = set(d) - known
         if bad:
             raise SensorModelError(f"unknown sensor-model key(s) {sorted(bad)}; known: {sorted(known)}")
-        return cls(**{k: (int(v) if k == "bits" else float(v)) for k, v in d.items()})
+        values: dict[str, Any] = {k: (int(v) if k == "bits" else float(v)) for k, v in d.items()}
+        return cls(**values)
 
     @property
     def full_scale(self) -> int:

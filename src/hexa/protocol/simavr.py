@@ -79,11 +79,13 @@ class SimavrBoard:
         args.append(str(self.elf))
         self.proc = subprocess.Popen(args, stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
                                      text=True, bufsize=1)
+        out, err_pipe = self.proc.stdout, self.proc.stderr
+        assert out is not None and err_pipe is not None   # both PIPE above
         t_end = time.monotonic() + timeout
         while time.monotonic() < t_end:
-            line = self.proc.stdout.readline()
+            line = out.readline()
             if not line:
-                err = self.proc.stderr.read()
+                err = err_pipe.read()
                 raise RuntimeError(f"hexa_simavr exited before opening its pty: {err.strip()}")
             if line.startswith("PTY "):
                 self.pty = line.split(None, 1)[1].strip()
@@ -101,8 +103,10 @@ class SimavrBoard:
         try:
             if self.proc.poll() is None:
                 try:
-                    self.proc.stdin.write("QUIT\n")
-                    self.proc.stdin.flush()
+                    stdin = self.proc.stdin
+                    assert stdin is not None   # PIPE in start()
+                    stdin.write("QUIT\n")
+                    stdin.flush()
                 except (BrokenPipeError, OSError, ValueError):
                     pass
                 try:

@@ -105,7 +105,7 @@ def plate_equivalent_truth(d: CaseData, desc=None) -> np.ndarray:
         desc = load_hexa()
     W = np.zeros((len(d.truth_t), 6))
     for k in np.nonzero(np.linalg.norm(d.truth_force, axis=1) > 0.0)[0]:
-        link = LINK_CODES.get(int(d.truth_link[k]))
+        link = LINK_CODES.get(int(d.truth_link[k]), "")   # "" (unknown code): ValueError below
         try:
             W[k] = plate_equivalent_wrench(desc, d.truth_pose[k], link, int(d.truth_chain[k]) or 1,
                                            d.truth_point[k], d.truth_force[k])
@@ -193,7 +193,7 @@ def compute_metrics(d: CaseData, r_low: float = 2.0, desc=None, plate_equivalent
         found_link, found_chain = LINK_NAMES.get(int(best[0]), "unknown"), int(best[1])
         idx = _nearest_index(d.truth_t, d.contact_t[in_contact_c])
         errs = np.linalg.norm(d.contact_point[in_contact_c] - d.truth_point[idx], axis=1) * 1e3
-    rmse = (float("nan"),) * 3
+    rmse: tuple[float, ...] = (float("nan"),) * 3
     n_w = 0
     if len(d.wrench_t):
         last = float(d.truth_t[np.nonzero(touching)[0][-1]])
@@ -209,7 +209,7 @@ def compute_metrics(d: CaseData, r_low: float = 2.0, desc=None, plate_equivalent
         found_chain=found_chain,
         point_error_median_mm=float(np.median(errs)) if errs.size else float("nan"),
         point_error_p90_mm=float(np.percentile(errs, 90)) if errs.size else float("nan"),
-        force_rmse=rmse, paper_rmse=PAPER_RMSE.get(true_link, (float("nan"),) * 3),
+        force_rmse=(rmse[0], rmse[1], rmse[2]), paper_rmse=PAPER_RMSE.get(true_link, (float("nan"),) * 3),
         n_contacts=int(in_contact_c.sum()), n_wrenches=n_w)
 
 

@@ -6,11 +6,14 @@ They live at top level of src/hexa/robots/hexa.yaml next to the geometry (one YA
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Any, Mapping
+from typing import TYPE_CHECKING, Any, Mapping
 
 import numpy as np
 
 from hexa.robots.schema import RobotDescriptionError, require_array, require_float, require_str
+
+if TYPE_CHECKING:
+    from hexa.robots.hexa_description import HexaDescription
 
 CAMERA_NAMES = ("cam_top", "cam_side")
 
@@ -144,7 +147,7 @@ def _camera(name: str, d: Mapping[str, Any]) -> CameraConfig:
     fwd = cam.look_at - cam.position
     if np.linalg.norm(fwd) < 1e-6:
         raise SimConfigError(f"cameras.{name}: look_at {cam.look_at.tolist()} equals position")
-    if np.linalg.norm(np.cross(fwd, cam.up)) < 1e-6 * np.linalg.norm(fwd) * max(np.linalg.norm(cam.up), 1e-12):
+    if np.linalg.norm(np.cross(fwd, cam.up)) < 1e-6 * np.linalg.norm(fwd) * max(float(np.linalg.norm(cam.up)), 1e-12):
         raise SimConfigError(f"cameras.{name}.up {cam.up.tolist()} is parallel to the viewing direction")
     if cam.depth_max <= cam.depth_min:
         raise SimConfigError(f"cameras.{name}.depth_max {cam.depth_max} must exceed depth_min {cam.depth_min}")
@@ -222,7 +225,7 @@ def parse_sim_config(sections: Mapping[str, Any]) -> SimConfig:
     )
 
 
-def sim_config_of(desc: Any) -> SimConfig:
+def sim_config_of(desc: HexaDescription) -> SimConfig:
     """The validated simulator configuration of a HexaDescription (its `section(name)` accessor)."""
     sections = {}
     for top in ("cameras", "markers", "appearance", "sim"):

@@ -9,13 +9,16 @@ applied by the simulator as a slew limit on the target. Nothing collides (contyp
 """
 from __future__ import annotations
 
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
 from hexa.kinematics import hexa6rus as kin
 from hexa.sim.camera import mjcf_camera
 from hexa.sim.config import SimConfig, sim_config_of
+
+if TYPE_CHECKING:
+    from hexa.robots.hexa_description import HexaDescription
 
 HOME_POSE = np.array([0.0, 0.0, -0.55, 0.0, 0.0, 0.0])
 PARK_POS = (0.0, 0.0, 5.0)      # where unused mocap bodies (object, occluders) wait: outside every view
@@ -54,7 +57,7 @@ def _quat(R: np.ndarray) -> np.ndarray:
     return q
 
 
-def motor_axes(desc: Any) -> np.ndarray:
+def motor_axes(desc: HexaDescription) -> np.ndarray:
     """Unit motor axes Z_1i in base (6,3): R_Oi(α_i)·(0, 1, 0) (seed 000 eqs 4, 6); ζ_i is positive about them."""
     a = np.asarray(desc.alpha, dtype=float)
     return np.column_stack([-np.sin(a), np.cos(a), np.zeros(6)])
@@ -71,7 +74,7 @@ def _inertial(mass: float, com: np.ndarray, inertia: np.ndarray) -> str:
     return f'<inertial pos="{_f(com)}" mass="{mass:.9g}" fullinertia="{_f(full)}"/>'
 
 
-def build_mjcf(desc: Any, pose: np.ndarray | None = None, config: SimConfig | None = None,
+def build_mjcf(desc: HexaDescription, pose: np.ndarray | None = None, config: SimConfig | None = None,
                physical_contact: bool = False, truth: Any = None, motor_servos: bool = False) -> str:
     """MJCF text of the Hexa of `desc`, assembled at plate `pose` [x y z α β γ] (m, rad; Z-Y-X, eq 38).
 
@@ -139,7 +142,10 @@ def build_mjcf(desc: Any, pose: np.ndarray | None = None, config: SimConfig | No
       'diffuse="0.45 0.45 0.45" specular="0.05 0.05 0.05"/>')
     # plain background: floor, four walls and a ceiling
     h, fz = ap["room_half_size"], ap["floor_z"]
-    w(f'<geom name="floor" type="plane" size="{h:.6g} {h:.6g} 0.01" pos="0 0 {fz:.6g}" material="background"/>')
+    # a plane's third size is its rendering grid spacing: one cell, not MuJoCo's up to 200x200 quads (≈ 3 ms of
+    # software rendering per camera frame); the floor's colour moves by at most one level (lighting interpolated
+    # over one quad instead of many), its depth by < 2 µm
+    w(f'<geom name="floor" type="plane" size="{h:.6g} {h:.6g} {2 * h:.6g}" pos="0 0 {fz:.6g}" material="background"/>')
     w(f'<geom name="ceiling" type="box" size="{h:.6g} {h:.6g} 0.01" pos="0 0 0.6" material="background"/>')
     for name, pos, size in (("wall_px", (h, 0, 0), (0.01, h, 1)), ("wall_nx", (-h, 0, 0), (0.01, h, 1)),
                             ("wall_py", (0, h, 0), (h, 0.01, 1)), ("wall_ny", (0, -h, 0), (h, 0.01, 1))):
@@ -235,14 +241,14 @@ def build_mjcf(desc: Any, pose: np.ndarray | None = None, config: SimConfig | No
     return "\n".join(out)
 
 
-def _plate_outline(desc: Any) -> np.ndarray:
+def _plate_outline(desc: HexaDescription) -> np.ndarray:
     """Hexagon through the plate joints C_i in {P} (x, y), ordered by angle."""
     C = np.asarray(desc.C, dtype=float)[:, :2]
     order = np.argsort(np.arctan2(C[:, 1], C[:, 0]))
     return C[order]
 
 
-def desc_mass_properties(desc: Any) -> dict[str, dict[str, Any]]:
+def desc_mass_properties(desc: HexaDescription) -> dict[str, dict[str, Any]]:
     """Mass (kg), COM (m) and inertia (kg·m², about the COM, in the link frame) of plate, arm and rod from `desc`.
 
     Link frames: arm — x from A_i to B_i, z the motor axis; rod — x from B_i to C_i; plate — {P}.

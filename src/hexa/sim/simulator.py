@@ -19,7 +19,7 @@ import dataclasses
 import threading
 from collections import deque
 from dataclasses import dataclass, field
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -31,6 +31,9 @@ from hexa.vision.camera import CameraModel
 from hexa.sim.scenarios import ScenarioSpec, ScriptedCollision, draw_collision, load_scenario
 
 import mujoco  # noqa: E402  (after hexa.sim.camera set MUJOCO_GL)
+
+if TYPE_CHECKING:
+    from hexa.robots.hexa_description import HexaDescription
 
 LINK_CODES = {"plate": 0, "arm": 1, "rod": 2, "none": 255}   # as hexa_msgs/Contact (UNKNOWN = 255: no contact)
 
@@ -122,7 +125,7 @@ def _poses_from_qpos(pq: np.ndarray) -> np.ndarray:
     return np.column_stack([pq[:, :3], np.arctan2(r10, r00), -np.arcsin(np.clip(r20, -1, 1)), np.arctan2(r21, r22)])
 
 
-def _desc_default(desc: Any) -> Any:
+def _desc_default(desc: HexaDescription | None) -> HexaDescription:
     if desc is not None:
         return desc
     from hexa.robots.hexa_description import load_hexa
@@ -170,7 +173,7 @@ class Simulator:
             description's.
     """
 
-    def __init__(self, desc: Any = None, seed: int = 0, scenario: Any = None, cameras: bool = True,
+    def __init__(self, desc: HexaDescription | None = None, seed: int = 0, scenario: Any = None, cameras: bool = True,
                  pose: np.ndarray | None = None, drive: str | None = None, randomize: bool = False,
                  settle: float = 0.5, trajectory: str | None = None, lead_in: float = 0.0,
                  contact_model: str = "scripted", servo_frame_period: float | None = None,
@@ -296,6 +299,8 @@ class Simulator:
         self._step_count = 0
         self._tau_hist_t = np.full(4096, -np.inf)
         self._tau_hist = np.zeros((4096, 6))
+        #: the last consistent sample: t, qpos, qvel, qacc, tau, targets, contact (set by every step)
+        self._sample: tuple[Any, ...] = ()
 
         # settle under gravity at the start targets, then restart the clock at t = 0
         mujoco.mj_forward(m, self.data)
@@ -309,7 +314,6 @@ class Simulator:
         self._step_count = 0
         self._latch_at = None                 # the pulse frames start with the clock
         self._tau_hist_t[:] = -np.inf
-        self._sample = None
         self._step_once(use_schedule=True, advance=False)
 
         self._renderer: RGBDRenderer | None = None
@@ -641,9 +645,9 @@ class Simulator:
     # ------------------------------------------------------------------ reading
     def _plate_pose_of(self, qpos: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         a = self._plate_qpos
-        R = np.zeros(9)
-        mujoco.mju_quat2Mat(R, qpos[a + 3:a + 7])
-        R = R.reshape(3, 3)
+        r9 = np.zeros(9)
+        mujoco.mju_quat2Mat(r9, qpos[a + 3:a + 7])
+        R = r9.reshape(3, 3)
         return np.concatenate([qpos[a:a + 3], zyx_from_matrix(R)]), R
 
     def _truth_of(self, sample: tuple) -> GroundTruth:
@@ -743,6 +747,24 @@ class Simulator:
         bank = self._noise.get(camera) if noise else None
         return (noisy_rgb(rgb, self.rgb_noise_sigma, bank),
                 depth_image_mm(depth, cfg, self.depth_noise_rel, bank))
+
+    def skip_render(self, camera: str) -> None:
+        """Advance `camera`'s image noise as `render` would, without rendering (a frame nobody wants): the frames
+        rendered after it are those of a run that rendered every frame.
+
+        Raises:
+            SimulatorError: unknown camera.
+        """
+        if camera not in self._cam_ids:
+            raise SimulatorError(f"unknown camera {camera!r}; cameras: {list(self._cam_ids)}")
+        bank = self._noise.get(camera)
+        if bank is None:
+            return
+        cfg = self.config.cameras[camera]
+        if self.rgb_noise_sigma > 0:                      # the draws of noisy_rgb and depth_image_mm, in order
+            bank.draw(cfg.width * cfg.height * 3)
+        if self.depth_noise_rel > 0:
+            bank.draw(cfg.width * cfg.height)
 
     def render_raw(self, camera: str) -> tuple[np.ndarray, np.ndarray]:
         """Noise-free colour and metric depth (float32 m, inf = nothing hit) of `camera`."""

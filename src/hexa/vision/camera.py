@@ -154,7 +154,8 @@ class CameraModel:
                    np.eye(4) if T is None else np.asarray(T, dtype=float), name, frame)
 
 
-def look_at(eye: np.ndarray, target: np.ndarray, up: np.ndarray = (0.0, 0.0, 1.0)) -> np.ndarray:
+def look_at(eye: np.ndarray, target: np.ndarray, up: np.ndarray | tuple[float, float, float] = (0.0, 0.0, 1.0)
+            ) -> np.ndarray:
     """T_base_camera of an optical frame at `eye` looking at `target` (z forward, y down, x right)."""
     eye = np.asarray(eye, dtype=float)
     z = np.asarray(target, dtype=float) - eye

@@ -61,9 +61,11 @@ def build_model():
             self.features = nn.Sequential(block(3, 16, 2), block(16, 32, 2), block(32, 48, 2), block(48, 64, 1, 2),
                                           block(64, 64, 1, 4), block(64, 64, 1, 1))
             self.head = nn.Conv2d(64, 5, 1)
+            bias = self.head.bias
+            assert bias is not None   # Conv2d's default bias=True
             with torch.no_grad():
-                self.head.bias.zero_()
-                self.head.bias[0] = -4.0
+                bias.zero_()
+                bias[0] = -4.0
 
         def forward(self, x: torch.Tensor) -> torch.Tensor:
             return self.head(self.features(x))
@@ -180,7 +182,7 @@ def export_onnx(model, path: Path | str = ONNX_PATH) -> Path:
 
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", DeprecationWarning)
-        torch.onnx.export(model, dummy, str(path), input_names=["image"], output_names=["grid"],
+        torch.onnx.export(model, (dummy,), str(path), input_names=["image"], output_names=["grid"],
                           opset_version=17, dynamo=False)
     return path
 

@@ -13,7 +13,7 @@ import sys
 import time
 from collections.abc import Iterator
 from dataclasses import dataclass, field
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -30,6 +30,9 @@ from hexa.vision.isolation import (
     IsolationConfig,
     RobotGeometry,
 )
+
+if TYPE_CHECKING:
+    from hexa.robots.hexa_description import HexaDescription
 
 LINK_CODE = {"plate": LINK_PLATE, "arm": LINK_ARM, "rod": LINK_ROD, "none": LINK_UNKNOWN}
 TRAJECTORIES = ("circle", "helix", "ellipse")
@@ -81,8 +84,8 @@ def draw_contacts(n: int, seed: int = 0, links: tuple[str, ...] = ("plate", "arm
 OBJECT_RADIUS, OBJECT_LENGTH = 0.015, 0.25   # the simulator's pushing capsule (hexa.sim.mjcf)
 
 
-def object_clearance(desc: Any, pose: np.ndarray, zeta: np.ndarray, link: str, chain: int, point: np.ndarray,
-                     direction: np.ndarray) -> float:
+def object_clearance(desc: HexaDescription, pose: np.ndarray, zeta: np.ndarray, link: str, chain: int,
+                     point: np.ndarray, direction: np.ndarray) -> float:
     """Smallest gap (m) between the simulator's pushing capsule (touching `point`, pushing along `direction`) and
     every link other than the touched one (and the plate itself beyond the capsule's tip, for plate contacts);
     negative when the capsule would pass through a link."""
@@ -106,8 +109,8 @@ def object_clearance(desc: Any, pose: np.ndarray, zeta: np.ndarray, link: str, c
     return gap
 
 
-def render_contact(collision: Any, seed: int = 0, desc: Any = None, min_clearance: float | None = None
-                   ) -> ContactSample | None:
+def render_contact(collision: Any, seed: int = 0, desc: HexaDescription | None = None,
+                   min_clearance: float | None = None) -> ContactSample | None:
     """Simulate one scripted contact; background frames at t = 0 (object parked), contact frames at the peak.
 
     With `min_clearance` (m), returns None when the pushing capsule would pass through another link (a contact no
@@ -140,7 +143,7 @@ def render_contact(collision: Any, seed: int = 0, desc: Any = None, min_clearanc
         sim.close()
 
 
-def marker_pose(sample: ContactSample, desc: Any) -> np.ndarray | None:
+def marker_pose(sample: ContactSample, desc: HexaDescription) -> np.ndarray | None:
     """Plate pose [x y z α β γ] from the sample's top-camera markers, or None when the fit fails."""
     from hexa.vision.markers import MarkerDetector, MarkerLayout, pose_from_transform
 
@@ -149,8 +152,9 @@ def marker_pose(sample: ContactSample, desc: Any) -> np.ndarray | None:
     return pose_from_transform(fit.T) if fit.ok else None
 
 
-def isolate_sample(sample: ContactSample, desc: Any, config: IsolationConfig | None = None, debug: bool = False,
-                   pose_from_markers: bool = False) -> tuple[ContactEstimate, RobotGeometry, CollisionIsolator]:
+def isolate_sample(sample: ContactSample, desc: HexaDescription, config: IsolationConfig | None = None,
+                   debug: bool = False, pose_from_markers: bool = False
+                   ) -> tuple[ContactEstimate, RobotGeometry, CollisionIsolator]:
     """Run the isolation on one sample: robot geometry from the sample's pose and ζ, or (`pose_from_markers`)
     from the plate pose the markers give and the inverse kinematics (the simulator's pose when the fit fails;
     `sample.meta["pose_source"]` says which)."""
@@ -197,7 +201,7 @@ def _label(link: str | int, chain: int) -> str:
     return "plate" if name == "plate" else ("none" if name == "none" else f"{name} {chain}")
 
 
-def contact_samples(n: int, seed: int = 0, min_clearance: float = 0.003, desc: Any = None,
+def contact_samples(n: int, seed: int = 0, min_clearance: float = 0.003, desc: HexaDescription | None = None,
                     stats: dict[str, int] | None = None) -> Iterator[ContactSample]:
     """n feasible contact samples (see draw_contacts, render_contact); infeasible draws are replaced and counted
     in `stats` ("drawn <link>", "infeasible <link>")."""
@@ -227,7 +231,7 @@ def push_direction_error(estimate: np.ndarray, force_truth: Any) -> float:
     return float(np.degrees(np.arccos(np.clip(c, -1.0, 1.0))))
 
 
-def evaluate_isolation(samples: Iterator[ContactSample] | list[ContactSample], desc: Any,
+def evaluate_isolation(samples: Iterator[ContactSample] | list[ContactSample], desc: HexaDescription,
                        config: IsolationConfig | None = None, pose_from_markers: bool = False) -> IsolationReport:
     """Isolation accuracy over samples (see IsolationReport and `isolate_sample`)."""
     labels = ["plate"] + [f"arm {i}" for i in range(1, 7)] + [f"rod {i}" for i in range(1, 7)] + ["none"]
@@ -315,7 +319,7 @@ def evaluate_markers(n: int, seed: int = 0) -> MarkerReport:
                         float(np.percentile(p, 90)) if p.size else nan, float(np.percentile(r, 90)) if r.size else nan)
 
 
-def write_debug_images(desc: Any, folder: str, seed: int = 0) -> list[str]:
+def write_debug_images(desc: HexaDescription, folder: str, seed: int = 0) -> list[str]:
     """One debug mosaic (Figs. 12/17/22 style) per link, from the first correctly isolated sample of each."""
     import os
 
@@ -342,7 +346,7 @@ def write_debug_images(desc: Any, folder: str, seed: int = 0) -> list[str]:
                 box = dets[0].box if dets else None
             except Exception:  # noqa: BLE001 - no weights: no box in the mosaic
                 box = None
-        img = debug_image(est.per_camera[est.camera], iso, geom, box=box)
+        img = debug_image(est.per_camera[est.camera], iso, geom, box=None if box is None else box.tolist())
         path = os.path.join(folder, f"vision_{s.link}.png")
         cv2.imwrite(path, cv2.cvtColor(img, cv2.COLOR_RGB2BGR))
         done.append(s.link)

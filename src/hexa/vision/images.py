@@ -80,18 +80,12 @@ def image_to_numpy(height: int, width: int, encoding: str, is_bigendian: int | b
     return arr
 
 
-def numpy_to_image(array: np.ndarray, encoding: str, step: int | None = None, bigendian: bool = False
-                   ) -> ImageFields:
-    """sensor_msgs/Image fields (little-endian unless asked) for an (H, W) or (H, W, C) array.
-
-    Args:
-        array: the pixels; dtype must match the encoding (uint8, uint16 or float32).
-        encoding: one of ENCODINGS.
-        step: row length in bytes (≥ width·bytes per pixel; rows are zero-padded); default no padding.
-        bigendian: write multi-byte pixels big-endian.
+def check_image_array(array: np.ndarray, encoding: str, bigendian: bool = False) -> np.ndarray:
+    """The array as (H, W, C) of the encoding's dtype in the byte order asked (little-endian by default; a view when
+    it already is).
 
     Raises:
-        ImageConversionError: unknown encoding, wrong dtype or channel count, empty array, step too short.
+        ImageConversionError: unknown encoding, wrong dtype or channel count, empty array.
     """
     if encoding not in ENCODINGS:
         raise ImageConversionError(f"unsupported encoding {encoding!r}; supported: {sorted(ENCODINGS)}")
@@ -108,12 +102,31 @@ def numpy_to_image(array: np.ndarray, encoding: str, step: int | None = None, bi
     if h == 0 or w == 0:
         raise ImageConversionError(f"empty image {w}x{h}")
     itemsize = np.dtype(kind).itemsize
+    dt = np.dtype((">" if bigendian else "<") + kind) if itemsize > 1 else np.dtype(kind)
+    return a.astype(dt, copy=False)
+
+
+def numpy_to_image(array: np.ndarray, encoding: str, step: int | None = None, bigendian: bool = False
+                   ) -> ImageFields:
+    """sensor_msgs/Image fields (little-endian unless asked) for an (H, W) or (H, W, C) array.
+
+    Args:
+        array: the pixels; dtype must match the encoding (uint8, uint16 or float32).
+        encoding: one of ENCODINGS.
+        step: row length in bytes (≥ width·bytes per pixel; rows are zero-padded); default no padding.
+        bigendian: write multi-byte pixels big-endian.
+
+    Raises:
+        ImageConversionError: unknown encoding, wrong dtype or channel count, empty array, step too short.
+    """
+    a = check_image_array(array, encoding, bigendian)
+    h, w, channels = a.shape
+    itemsize = a.dtype.itemsize
     row_bytes = w * channels * itemsize
     step = row_bytes if step is None else int(step)
     if step < row_bytes:
         raise ImageConversionError(f"step {step} is shorter than one row ({row_bytes} B)")
-    dt = np.dtype((">" if bigendian else "<") + kind) if itemsize > 1 else np.dtype(kind)
-    raw = np.ascontiguousarray(a.astype(dt, copy=False)).view(np.uint8).reshape(h, row_bytes)
+    raw = np.ascontiguousarray(a).view(np.uint8).reshape(h, row_bytes)
     if step > row_bytes:
         raw = np.concatenate([raw, np.zeros((h, step - row_bytes), np.uint8)], axis=1)
     return ImageFields(h, w, encoding, int(bool(bigendian) and itemsize > 1), step, raw.tobytes())

@@ -6,6 +6,7 @@ as uint16 millimetres (0 = invalid), with the camera's intrinsics.
 from __future__ import annotations
 
 import threading
+from typing import Any
 from collections.abc import Callable, Iterator
 from pathlib import Path
 
@@ -186,7 +187,7 @@ class RealSenseSource:
         self.name, self.serial, self.playback, self.loop = name, str(serial), str(playback), bool(loop)
         self.size, self.fps, self.retry_period = (int(width), int(height)), int(fps), float(retry_period)
         self._clock = clock or time.monotonic
-        self._pipe = None
+        self._pipe: Any = None    # rs.pipeline while streaming
         self._next_try = 0.0
         self.model: CameraModel | None = None
         self.info_fields: dict | None = None
@@ -201,7 +202,7 @@ class RealSenseSource:
 
     def _open(self) -> None:
         try:
-            import pyrealsense2 as rs  # type: ignore[import-not-found]
+            import pyrealsense2 as rs
         except ImportError as exc:
             raise SourceError(f"RealSense {self.serial or '(first device)'}: source 'realsense' needs the optional "
                               "pyrealsense2 package (make setup-robot, or pip install -r requirements/robot.txt)"

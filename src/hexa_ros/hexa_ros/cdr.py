@@ -204,3 +204,27 @@ def joint_state_to_cdr(sec: int, nanosec: int, frame_id: str, names, position, v
             _pad(out, 8)
             out += struct.pack(f"<{len(seq)}d", *seq)
     return bytes(out)
+
+
+def image_to_cdr(sec: int, nanosec: int, frame_id: str, array: np.ndarray, encoding: str) -> bytes:
+    """A serialized sensor_msgs/Image of an (H, W) or (H, W, C) array (little-endian, no row padding): the bytes
+    rclpy publishes for `hexa.vision.images.fill_message`'s message, with one copy of the pixels where the message
+    object takes three (array → bytes → array.array → C struct) before rclpy serializes it. `publish(bytes)` sends
+    them as they are.
+
+    Raises:
+        hexa.vision.images.ImageConversionError: the array does not fit the encoding.
+    """
+    from hexa.vision.images import check_image_array
+
+    a = np.ascontiguousarray(check_image_array(array, encoding))
+    h, w, channels = a.shape
+    enc = encoding.encode("ascii") + b"\x00"
+    out = _header_cdr(sec, nanosec, frame_id)
+    _pad(out, 4)
+    out += struct.pack("<III", h, w, len(enc))
+    out += enc
+    out += b"\x00"                               # is_bigendian
+    _pad(out, 4)
+    out += struct.pack("<II", w * channels * a.itemsize, a.nbytes)
+    return b"".join((out, memoryview(a.reshape(-1).view(np.uint8))))

@@ -12,12 +12,21 @@ RMW = "rmw_fastrtps_cpp"
 
 
 def defaults() -> dict[str, str]:
-    """The variables hexa sets when they are unset: RMW implementation and the Fast DDS profile file."""
+    """The variables hexa sets when they are unset: RMW implementation, the Fast DDS profile file, and one thread
+    for numpy's BLAS and OpenCV's loops.
+
+    A node shares two cores with the rest of the graph: a BLAS or OpenCV thread pool per process spins on cores
+    the other nodes need (the isolation of a frame pair took ≈ 120 ms of CPU with OpenBLAS's threads, ≈ 55 ms
+    with one, on this 2-core machine). Both libraries read these at load: set before numpy / cv2 are imported
+    (`hexa_ros.start` does, and every child started with `ros_env()`).
+    """
     return {
         "RMW_IMPLEMENTATION": RMW,
         "FASTRTPS_DEFAULT_PROFILES_FILE": str(PROFILE),
         "FASTDDS_DEFAULT_PROFILES_FILE": str(PROFILE),
         "RCUTILS_COLORIZED_OUTPUT": "0",
+        "OPENBLAS_NUM_THREADS": "1",
+        "OPENCV_FOR_THREADS_NUM": "1",
     }
 
 

@@ -10,7 +10,11 @@ from __future__ import annotations
 import importlib
 import sys
 
-from hexa_ros import node
+from hexa_ros.env import apply_defaults
+
+apply_defaults()            # before numpy and cv2 load: their thread pools read it (hexa_ros.env.defaults)
+
+from hexa_ros import node  # noqa: E402
 
 
 def main(argv: list[str] | None = None) -> int:
