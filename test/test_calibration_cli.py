@@ -82,3 +82,32 @@ def test_user_mistakes_end_in_one_line(argv, message, capsys, tmp_path, monkeypa
     assert main(argv) == 2
     err = capsys.readouterr().err
     assert message in err and "Traceback" not in err and err.count("\n") == 1
+
+
+def test_bringup_plays_a_pose_file_and_gives_every_node_but_the_simulator_the_overlay(tmp_path):
+    import argparse
+
+    from hexa_bringup.commands.bringup import description_args, mode_node_args
+    from hexa_bringup.graphs import DEFAULT_PARAMS, build_graph
+    from hexa_bringup.supervisor import SupervisorError
+
+    e = design_excitation(settings=ExcitationSettings(period=4.0, harmonics=2, cycles=1, iterations=0, seed=1))
+    f = e.write(tmp_path / "excitation.csv")
+    args = argparse.Namespace(mode="sim", approach_speed=None, realism=None, trajectory=str(f),
+                              collision_policy="ignore", uno=None, mega=None, cameras=[])
+    na = mode_node_args(args)
+    assert na["trajectory"] == ["-p", "trajectory:=file", "-p", f"file:={f.resolve()}", "-p",
+                                "collision_policy:=ignore"]
+    with pytest.raises(SupervisorError, match="does not exist"):
+        mode_node_args(argparse.Namespace(**{**vars(args), "trajectory": str(tmp_path / "none.csv")}))
+    with pytest.raises(SupervisorError, match="sim and robot"):
+        mode_node_args(argparse.Namespace(**{**vars(args), "mode": "replay"}))
+    overlay = tmp_path / "calibration.yaml"
+    overlay.write_text("calibration_of: ''\nactuators: {K_t: 0.5}\ncalibration: {horn_offset: [0, 0, 0, 0, 0, 0]}\n",
+                       encoding="utf-8")
+    out = description_args(str(overlay), build_graph("sim", "/hexa", DEFAULT_PARAMS, na), na)
+    assert "sim" not in out or f"description:={overlay}" not in out["sim"]
+    for name in ("driver", "observer", "trajectory"):
+        assert out[name][-2:] == ["-p", f"description:={overlay.resolve()}"]
+    with pytest.raises(SupervisorError, match="nowhere"):
+        description_args(str(tmp_path / "nowhere.yaml"), [], {})
