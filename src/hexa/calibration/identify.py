@@ -3,14 +3,14 @@
 Per servo i, at every analysis instant (Khalil & Dombre's inverse dynamic identification model, Gautier's base
 parameters; regressor of hexa.calibration.regressor):
 
-    K_i I_i − c_i = Y_base,i θ_base + J_i ζ̈_i − (ms)_i u'_i·g + f_c,i tanh(ζ̇_i/ε) + f_v,i ζ̇_i
+    K_i I_i − c_i = Y_base,i θ_base + J_i ζ̈_i − (ms)_i u'_i·g + f_c,i tanh(ζ̇_i/ε) + f_v,i ζ̇_i + (ms_y)_i u_i·g
                     + Y_fixed,i θ_fixed + Y_i θ_payload
 
 with I_i the driver's current, K_i the torque constant at the horn (N·m/A, sensor gain included), c_i = K_i b_i the
 torque of its zero offset b_i, θ_base the plate's 10 barycentric parameters and the rods' K_r, θ_fixed the rods'
 m_r, m_r κ (regrouped, kept at the description's values), θ_payload a known point mass on the plate. The equation is
-linear in x = [K, c, θ_base, J, ms, f_c, f_v] (47 unknowns) but homogeneous without a known mass: scaling every torque
-constant and every inertial parameter together fits as well. A run carrying a known payload fixes the scale; without
+linear in x = [K, c, θ_base, J, ms, f_c, f_v, ms_y] (53 unknowns; solved in 1/K_i, below) but homogeneous without a
+known mass: scaling every torque constant and every inertial parameter together fits as well. A run carrying a known payload fixes the scale; without
 one the mean K_i is held at the description's K_t (said in the result: K_t is then only as good as that value).
 
 Motion comes from the camera's plate poses: a zero-phase low-pass per pose coordinate gives pose, rate and

@@ -4,7 +4,8 @@ An overlay is a YAML file with `calibration_of: BASE` (hexa.robots.hexa_descript
 - `inertia.plate` (mass, COM, inertia about the COM) and `inertia.arm.com` (the mean first moment along the arm),
 - `actuators.K_t` (the mean torque constant), `sim.servo.armature` (the mean inertia about the motor axis beyond the
   arm's own: the rotor's) and `sim.servo.damping` (the mean viscous friction) — the nodes' symmetric model;
-- `calibration`: the per-servo values (k_t, current_offset, coulomb, viscous, inertia, first_moment, horn_offset),
+- `calibration`: the per-servo values (k_t, current_offset, coulomb, viscous, inertia, first_moment, first_moment_y,
+  horn_offset),
   their 95 % confidence half-widths, the runs used and how the torque scale was fixed.
 `ServoTorqueModel` applies the per-servo part to the currents (the observer's torques), the driver applies
 `horn_offset` to its angle ↔ pulse map.
