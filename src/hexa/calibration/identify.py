@@ -11,7 +11,8 @@ torque of its zero offset b_i, θ_base the plate's 10 barycentric parameters and
 m_r, m_r κ (regrouped, kept at the description's values), θ_payload a known point mass on the plate. The equation is
 linear in x = [K, c, θ_base, J, ms, f_c, f_v, ms_y] (53 unknowns; solved in 1/K_i, below) but homogeneous without a
 known mass: scaling every torque constant and every inertial parameter together fits as well. A run carrying a
-known payload fixes the scale; without one the mean K_i is held at the description's K_t (said in the result: K_t is then only as good as that value).
+known payload fixes the scale; without one the mean K_i is held at the description's K_t (said in the result: K_t
+is then only as good as that value).
 
 Motion comes from the camera's plate poses: a zero-phase low-pass per pose coordinate gives pose, rate and
 acceleration, IK gives the true horn angles ζ (not the servo set-points), J_ζ the arm rates and accelerations; a
