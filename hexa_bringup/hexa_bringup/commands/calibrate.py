@@ -239,13 +239,18 @@ def run_identify(args: argparse.Namespace) -> int:
     except (RecordingError, CalibrationError) as err:
         raise SystemExit(str(err)) from None
     path = write_overlay(args.out, cal, desc)
-    out = {"overlay": str(path), "calibration": cal.as_dict()}
+    out = {"overlay": str(path), "calibration": cal.as_dict(),
+           "periodic": {mo.source: mo.periodic for mo in motions}}
     if truth is not None:
         out["truth_errors"] = truth_errors(cal, truth)
     if args.json:
         print(json.dumps(out, indent=1, default=float))
         return 0
     print(_identify_table(cal, out.get("truth_errors")))
+    for mo in motions:
+        if not mo.periodic:
+            print(f"note: {mo.source} is not the periodic excitation (its poses miss the period's Fourier series: "
+                  "paused or late); its motion is low-passed camera poses instead, less accurate")
     if cal.scale != "payload":
         print("note: no run with a known payload — the torque scale (every K_t and mass) rests on the "
               "description's K_t; record a second run with a known mass (--payload-bag, --payload)")

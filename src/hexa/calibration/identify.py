@@ -50,6 +50,7 @@ DECIMATE = 4                # … at every DECIMATE-th of those instants (25 Hz)
 OFFSET_PRIOR = 0.02
 POSE_CUTOFF_HZ = 2.0        # Hz: the camera poses' low-pass (motion that is not a periodic excitation)
 MOVING_SPEED = 0.005        # m/s or rad/s: the plate moves (the periodic window's edges)
+PERIODIC_MISS = 0.002       # m RMS: a run whose poses miss the periodic fit by more was not periodic (low-pass motion)
 EDGE = 1.0                  # s dropped at both ends of a run (filter edges)
 FIXED_SYM = tuple(k for k in range(len(SYM_NAMES)) if k not in BASE_SYM)
 Z95 = 1.959963984540054
@@ -73,6 +74,7 @@ class Motion:
     poses: NDArray
     payload_sym: NDArray
     source: str
+    periodic: bool
     horn: tuple[NDArray, NDArray, NDArray, NDArray]   # IK angle − set-point, currents, ζ̇ at the camera instants
 
 
@@ -160,10 +162,16 @@ def prepare(rec: Recording, desc: Any, prm: Any = None, period: float | None = N
                                    f"period ({period:g} s)")
     fine = np.arange(t0, t1, 1.0 / ANALYSIS_RATE_HZ)
     t = fine[::DECIMATE]
-    if period is not None:
+    periodic = period is not None
+    if periodic:
         inside = (rec.t_pose >= t0 - 0.2) & (rec.t_pose <= t1 + 0.2)
         pose, vel, acc = fourier_fit(rec.t_pose[inside], P[inside], period, harmonics, fine)
-    else:
+        # a run that paused or stretched in time (a late trajectory node holds instead of jumping) is not the
+        # periodic motion: its Fourier series misses the poses by far more than the camera's noise
+        miss = np.sqrt(np.mean((fourier_fit(rec.t_pose[inside], P[inside], period, harmonics, rec.t_pose[inside])[0]
+                                - P[inside])[:, :3] ** 2))
+        periodic = bool(miss <= PERIODIC_MISS)
+    if not periodic:
         pose, vel, acc = smooth(fine)
     try:
         zeta = kin.inverse_kinematics_batch(desc, pose)
@@ -195,7 +203,8 @@ def prepare(rec: Recording, desc: Any, prm: Any = None, period: float | None = N
     payload_sym = np.array([m, *(m * c), I_pl[0, 0], I_pl[1, 1], I_pl[2, 2], I_pl[0, 1], I_pl[0, 2], I_pl[1, 2],
                             0.0, 0.0, 0.0])
     return Motion(t=t, currents=cur, reg=reg, zeta=zeta, zeta_dot=state.zeta_dot, zeta_ddot=state.zeta_ddot,
-                  poses=pose, payload_sym=payload_sym, source=rec.source, horn=(_wrap(zc - sp), ic, zd, sp))
+                  poses=pose, payload_sym=payload_sym, source=rec.source, periodic=periodic,
+                  horn=(_wrap(zc - sp), ic, zd, sp))
 
 
 def _wrap(a: NDArray) -> NDArray:
