@@ -44,6 +44,7 @@ CHEAP: dict[tuple[str, ...], str] = {
     ("bench",): "benchmarks take minutes (`make bench`)",
     ("srm", "--all"): "five trajectories x two variants take minutes (test_srm_*.py cover the algorithm)",
     ("eval",): "a randomized campaign takes minutes to hours",
+    ("calibrate",): "the excitation design and the identification take minutes (test_calibration*.py cover them)",
     ("bringup", "robot"): "needs the robot's serial ports and RealSense cameras",
     ("bringup", "sim"): "a second simulated graph beside the module's own `hexa bringup sim`",
 }

@@ -29,7 +29,7 @@ from hexa.protocol.driver_core import (SCALAR_KEYS, CommandRejected, default_dri
                                        servo_calibrations_from_config)
 from hexa.protocol.driver_scheduler import CalibrationRefused, DriverScheduler, driver_reports
 from hexa.protocol.link import CONNECTED
-from hexa.robots.hexa_description import load_hexa
+from hexa.robots.hexa_description import calibration_summary, load_hexa
 from hexa_ros import diagnostics, qos
 from hexa_ros.conversions import JOINT_NAMES
 from hexa_ros.node import DESCRIPTION, DESCRIPTION_PARAM, descriptor
@@ -57,6 +57,7 @@ class DriverNode(Node):
             desc = load_hexa(self.declare_parameter(DESCRIPTION, "", descriptor(DESCRIPTION_PARAM)).value or None)
         except ParameterException as exc:
             raise ValueError(str(exc)) from exc
+        self.get_logger().info(calibration_summary(desc))   # the overlay's horn offsets shift the pulse map
         if sorted(cfg["joint_names"]) != sorted(JOINT_NAMES):
             raise ValueError(f"joint_names {cfg['joint_names']} must name the graph's joints {list(JOINT_NAMES)}")
         self.core = driver_core_from_config(cfg, desc.zeta_min, desc.zeta_max, desc.K_t,

@@ -38,7 +38,7 @@ from hexa.dynamics.monitor import ESTIMATOR_KEYS, CollisionMonitor, MonitorConfi
 from hexa.dynamics.monitoring import WatchConfig
 from hexa.dynamics.observer import ObserverConfig
 from hexa.estimation import EstimatorConfig
-from hexa.robots.hexa_description import load_hexa
+from hexa.robots.hexa_description import calibration_summary, load_hexa
 from hexa_dynamics.monitoring_publisher import MonitoringPublisher
 from hexa_dynamics.observer_outputs import ObserverOutputs
 from hexa_dynamics.observer_params import observer_parameters
@@ -55,6 +55,7 @@ class ObserverNode(Node):
         super().__init__("observer", **kwargs)
         v = declare_parameters(self, observer_parameters())
         desc = load_hexa(str(v[DESCRIPTION]) or None)
+        self.get_logger().info(calibration_summary(desc))   # per-servo K_t, offsets, friction of an overlay
         sim = MonitorConfig.sim_clock_of(str(v["board_clock"]), bool(self.get_parameter("use_sim_time").value))
         mcfg = MonitorConfig(zeta_source=str(v["zeta_source"]), time_source=str(v["time_source"]), sim_clock=sim,
                              **{k: float(v[k]) for k in ("pose_delay", "reseed_distance", "command_delay")})

@@ -30,6 +30,16 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--realism", choices=["ideal", "realistic"], default=None,
                    help="sim mode: the simulated robot, ideal or realistic (docs/simulator.md); default: the sim "
                         "node's parameter (ideal)")
+    p.add_argument("--trajectory", default=None, metavar="FILE",
+                   help="sim/robot: the trajectory node plays this pose file (CSV t x y z alpha beta gamma, SI; e.g. "
+                        "from `hexa calibrate excite`) instead of its configured trajectory")
+    p.add_argument("--collision-policy", choices=["hold", "retract", "ignore"], default=None,
+                   help="sim/robot: the trajectory node's reaction to a collision START (default: its parameter, "
+                        "hold); ignore for a calibration run on the uncalibrated model, whose false STARTs would "
+                        "stop the excitation")
+    p.add_argument("--description", default=None, metavar="YAML",
+                   help="robot description or calibration overlay (`hexa calibrate identify`) for every node but "
+                        "the simulator (which stays the robot); default: the packaged description")
     p.add_argument("--compose", action="store_true",
                    help="run pose + isolation in one process and observer + rnea + singularity in another "
                         "(hexa_ros.compose; fewer processes, one interpreter per group)")
@@ -73,10 +83,43 @@ def mode_node_args(args: argparse.Namespace) -> dict[str, list[str]]:
         if args.mode != "sim":
             raise SupervisorError(f"--realism is for sim mode only, not {args.mode}")
         node_args["sim"] = ["-p", f"realism:={args.realism}"]
+    if getattr(args, "trajectory", None):
+        if args.mode not in ("sim", "robot"):
+            raise SupervisorError(f"--trajectory is for sim and robot modes, not {args.mode}")
+        path = Path(args.trajectory).resolve()
+        if not path.is_file():
+            raise SupervisorError(f"trajectory file {args.trajectory} does not exist")
+        node_args["trajectory"] = node_args.get("trajectory", []) + ["-p", "trajectory:=file", "-p", f"file:={path}"]
+    if getattr(args, "collision_policy", None):
+        if args.mode not in ("sim", "robot"):
+            raise SupervisorError(f"--collision-policy is for sim and robot modes, not {args.mode}")
+        node_args["trajectory"] = node_args.get("trajectory", []) + ["-p", f"collision_policy:={args.collision_policy}"]
     if args.mode == "upsrpu":
         node_args["singularity"] = ["-p", "robot:=upsrpu", "-p", "input:=markers"]
         node_args["srm"] = ["-p", "input:=markers"]
     return node_args
+
+
+def description_args(description: str, specs: list, node_args: dict[str, list[str]]) -> dict[str, list[str]]:
+    """`node_args` with `description:=PATH` for every node of `specs` but the simulator (the robot itself).
+
+    Raises:
+        hexa_bringup.supervisor.SupervisorError: the file is missing or not a valid description / overlay.
+    """
+    from hexa.robots.hexa_description import calibration_summary, load_hexa
+    from hexa.robots.schema import RobotDescriptionError
+    from hexa_bringup.supervisor import SupervisorError
+
+    path = Path(description).resolve()
+    try:
+        print(f"hexa bringup: {calibration_summary(load_hexa(path))}", flush=True)
+    except RobotDescriptionError as exc:
+        raise SupervisorError(str(exc)) from exc
+    out = {k: list(v) for k, v in node_args.items()}
+    for spec in specs:
+        if spec.name not in ("sim", "play"):
+            out[spec.name] = out.get(spec.name, []) + ["-p", f"description:={path}"]
+    return out
 
 
 def _bag_topics(bag: str) -> list[str]:
@@ -108,6 +151,9 @@ def run(args: argparse.Namespace) -> int:
             node_args = mode_node_args(args)
             params = Path(args.params) if args.params else DEFAULT_PARAMS
             ns = args.ns or ("/upsrpu" if args.mode == "upsrpu" else "/hexa")
+            if getattr(args, "description", None):
+                node_args = description_args(args.description, build_graph(args.mode, ns, params, node_args),
+                                             node_args)
             specs = build_graph(args.mode, ns, params, node_args, compose=args.compose)
             if args.mode == "replay":
                 if not args.bag:

@@ -163,7 +163,10 @@ class CollisionMonitor:
 
         self.desc = desc
         self.config = config or MonitorConfig()
+        from hexa.calibration.overlay import ServoTorqueModel
+
         self.k_t = float(desc.K_t)
+        self.torque = ServoTorqueModel(desc)   # per-servo K_t, current offset, friction of a calibration overlay
         self.observer = ResidualObserver(HexaDynamicParameters.from_description(desc), observer or ObserverConfig())
         self.estimator = ZetaEstimator(desc, ServoModel.from_description(desc, command_delay=self.config.command_delay),
                                        estimator or EstimatorConfig())
@@ -238,9 +241,10 @@ class CollisionMonitor:
         if t is None:
             self.rejects["board_time"] += 1
             return []
+        tau = self.torque.from_currents(cur)
         if carried:
-            return self._run(seq.push_sample(stamp, t, self.k_t * cur, np.asarray(setpoint, float), admitted=True))
-        return self._run(seq.push_currents(stamp, t, self.k_t * cur, admitted=True))
+            return self._run(seq.push_sample(stamp, t, tau, np.asarray(setpoint, float), admitted=True))
+        return self._run(seq.push_currents(stamp, t, tau, admitted=True))
 
     def push_states(self, stamp: float, position: NDArray | None, velocity: NDArray | None,
                     effort: NDArray | None) -> list[MonitorSample]:
@@ -313,6 +317,7 @@ class CollisionMonitor:
             zeta, zeta_dot = pos, vel    # measured: the rate the sample carries, or None
         if self._motion is not None:
             self._motion(t, zeta_dot)
+        tau = self.torque.correct(tau, zeta, zeta_dot)
         out = self.observer.update_arm(t, zeta, tau, zeta_dot)
         self._tracking = out is not None
         if out is None:

@@ -297,6 +297,11 @@ def servo_calibrations_from_description(desc) -> list[ServoCalibration]:
         values[name] = getattr(desc, name)
     zeta_ref = 0.5 * (np.asarray(desc.zeta_min, float) + np.asarray(desc.zeta_max, float))
     zeta_ref = np.broadcast_to(zeta_ref, (N_JOINTS,))
+    # a calibration overlay's horn offsets: the horn sits at the nominal angle of its pulse plus the offset
+    horn = (desc.section("calibration").get("horn_offset") if hasattr(desc, "sections")
+            and "calibration" in desc.sections() else None)
+    if horn is not None:
+        zeta_ref = zeta_ref + np.asarray(horn, dtype=float).reshape(N_JOINTS)
     direction = np.broadcast_to(np.asarray(values["servo_direction"], float), (N_JOINTS,))
     return [ServoCalibration(zero_us=float(values["pulse_center_us"]),
                              us_per_rad=float(values["us_per_rad"]) * float(direction[i]),

@@ -225,11 +225,58 @@ def parse_hexa(data: dict[str, Any], path: str | Path = "<memory>") -> HexaDescr
         servo_direction=direction, _sections=sections)
 
 
+#: the key that makes a YAML file a calibration overlay: the robot description it refines ("" = the packaged one;
+#: a relative path is relative to the overlay's directory)
+OVERLAY_KEY = "calibration_of"
+
+
+def _merge(base: dict[str, Any], over: dict[str, Any]) -> dict[str, Any]:
+    """`base` with `over` laid on it: mappings merge key by key, any other value replaces."""
+    out = copy.deepcopy(base)
+    for k, v in over.items():
+        out[k] = _merge(out[k], v) if isinstance(v, dict) and isinstance(out.get(k), dict) else copy.deepcopy(v)
+    return out
+
+
+def overlay_base(path: str | Path, data: dict[str, Any]) -> Path:
+    """The description an overlay at `path` (its mapping `data`) refines."""
+    ref = str(data.get(OVERLAY_KEY) or "")
+    if not ref:
+        return DEFAULT_PATH
+    q = Path(ref).expanduser()
+    return q if q.is_absolute() else Path(path).resolve().parent / q
+
+
 def load_hexa(path: str | Path | None = None) -> HexaDescription:
     """Load and validate the Hexa description at `path` (default src/hexa/robots/hexa.yaml).
+
+    `path` may also be a calibration overlay (`hexa calibrate identify`): a YAML file with `calibration_of: BASE`
+    whose sections are laid over the description BASE; the result's `path` is the overlay and its
+    `section("calibration")` holds the per-servo values (`calibration_summary` says which overlay is in use).
 
     Raises:
         RobotDescriptionError: the file is missing or a key is missing / out of range (named).
     """
     p = Path(path) if path is not None else DEFAULT_PATH
-    return parse_hexa(load_yaml(p), p)
+    data = load_yaml(p)
+    if OVERLAY_KEY in data:
+        base = overlay_base(p, data)
+        if base.resolve() == p.resolve():
+            raise RobotDescriptionError(f"calibration overlay {p} names itself as its base")
+        base_data = load_yaml(base)
+        if OVERLAY_KEY in base_data:
+            raise RobotDescriptionError(f"calibration overlay {p}: its base {base} is an overlay too (one level only)")
+        over = {k: v for k, v in data.items() if k != OVERLAY_KEY}
+        merged = _merge(base_data, over)
+        merged.setdefault("calibration", {})["base"] = str(base)
+        return parse_hexa(merged, p)
+    return parse_hexa(data, p)
+
+
+def calibration_summary(desc: HexaDescription) -> str:
+    """One line for a node's log: the description in use and the calibration overlay on it, if any."""
+    if "calibration" not in desc.sections():
+        return f"robot description {desc.path} (no calibration overlay)"
+    cal = desc.section("calibration")
+    return (f"robot description {cal.get('base', '?')} with calibration overlay {desc.path} "
+            f"({cal.get('created', 'undated')}; scale from {cal.get('scale', '?')})")

@@ -41,7 +41,10 @@ class Tolerances:
     torque (lo, hi); viscous: viscous friction at the no-load speed as a fraction of the stall torque (lo, hi);
     current_offset_sigma: per-channel zero offset left after the zero-current calibration (A, 1 σ, Gaussian);
     rotor_inertia: reflected rotor inertia at the horn (kg·m², lo, hi); backlash: total gear play (rad, lo, hi);
-    deadband: the servo amplifier's dead band (rad, total width; MG996R datasheet: 5 µs of pulse = 5/636.6 rad)."""
+    deadband: the servo amplifier's dead band (rad, total width; MG996R datasheet: 5 µs of pulse = 5/636.6 rad);
+    horn_offset: where each horn sits on its servo's spline (rad, ±, uniform): the servo turns the horn to its
+    set-point plus this offset (a 25-tooth spline leaves up to ±7.2° before the angle ↔ pulse calibration; 0 keeps
+    the description's angle ↔ pulse exact)."""
 
     mass: float = 0.20
     com: float = 0.005
@@ -53,6 +56,7 @@ class Tolerances:
     rotor_inertia: tuple[float, float] = (1.0e-3, 3.0e-3)
     backlash: tuple[float, float] = (math.radians(0.3), math.radians(1.0))
     deadband: float = 5.0 / 636.6197723675814
+    horn_offset: float = 0.0
 
 
 @dataclass(frozen=True, eq=False)
@@ -74,7 +78,7 @@ class RobotTruth:
 
     k_t (6): N·m/A at the horn; coulomb (6): N·m; viscous (6): N·m·s/rad; rotor_inertia (6): kg·m²; backlash (6),
     deadband (6): rad; sensor_gain (6): true sensitivity / the driver's (ACS712 180–190 mV/A for 185);
-    current_offset (6): A."""
+    current_offset (6): A; horn_offset (6): rad, the horn's angle minus the servo's set-point at rest."""
 
     seed: int
     plate: LinkTruth
@@ -88,6 +92,7 @@ class RobotTruth:
     deadband: np.ndarray
     sensor_gain: np.ndarray
     current_offset: np.ndarray
+    horn_offset: np.ndarray = field(default_factory=lambda: np.zeros(6))
 
     def currents(self, tau: np.ndarray) -> np.ndarray:
         """What the Mega's sensors read (A, the driver's sensitivity) for motor torques `tau` (N·m): (τ/K_t)·gain +
@@ -98,7 +103,7 @@ class RobotTruth:
         out: dict[str, Any] = {"seed": self.seed, "plate": self.plate.as_dict(),
                                "arms": [a.as_dict() for a in self.arms], "rods": [r.as_dict() for r in self.rods]}
         for k in ("k_t", "coulomb", "viscous", "rotor_inertia", "backlash", "deadband", "sensor_gain",
-                  "current_offset"):
+                  "current_offset", "horn_offset"):
             out[k] = getattr(self, k).tolist()
         return out
 
@@ -152,7 +157,9 @@ def draw_truth(desc: Any, seed: int, tolerances: Tolerances | None = None) -> Ro
         backlash=rng.uniform(*tol.backlash, 6),
         deadband=np.full(6, tol.deadband),
         sensor_gain=rng.uniform(s["sensitivity_min"], s["sensitivity_max"], 6) / s["sensitivity_typ"],
-        current_offset=rng.normal(0.0, tol.current_offset_sigma, 6))
+        current_offset=rng.normal(0.0, tol.current_offset_sigma, 6),
+        # its own stream: the draws above stay those of the seed whatever this tolerance is
+        horn_offset=np.random.default_rng([int(seed), 21]).uniform(-tol.horn_offset, tol.horn_offset, 6))
 
 
 @dataclass(frozen=True)

@@ -440,10 +440,11 @@ class Simulator:
         step = self._omega_max * self._dt
         self._cmd = self._cmd + np.minimum(np.maximum(self._servo_setpoints(t) - self._cmd, -step), step)
         tau_motor = None
+        aim = self._cmd if self.truth is None else self._cmd + self.truth.horn_offset   # the horn on its spline
         if self._mech is None:
-            d.ctrl[:6] = self._cmd
+            d.ctrl[:6] = aim
         else:   # the servo law outside MuJoCo: dead band, stall clamp, gear play (ζ̈ of the previous step)
-            tau_motor = self._mech.motor_torque(self._cmd, d.qpos[self._arm_qpos], d.qvel[self._arm_dof])
+            tau_motor = self._mech.motor_torque(aim, d.qpos[self._arm_qpos], d.qvel[self._arm_dof])
             d.ctrl[:6] = self._mech.step(tau_motor, d.qacc[self._arm_dof], self._dt)
         if use_schedule and self.collision is not None:
             self._update_scripted(t)
