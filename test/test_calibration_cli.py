@@ -32,7 +32,7 @@ def _write_bag(path, rec: Recording) -> None:
             if kind == "c":
                 m = T["hexa_msgs/msg/MotorCurrents"](header=hdr(t), current=rec.currents[k].astype(float),
                                                      raw=np.zeros(6, dtype=np.uint16), sequence=k,
-                                                     board_time_us=int(t * 1e6), gaps=0)
+                                                     board_time_us=int(t * 1e6), gaps=0, setpoint=np.zeros(0))
                 bag.write("/hexa/motor_currents", ns, bytes(store.serialize_cdr(m, "hexa_msgs/msg/MotorCurrents")))
             elif kind == "s":
                 m = T["sensor_msgs/msg/JointState"](header=hdr(t), name=names, position=rec.setpoints[k].astype(float),
