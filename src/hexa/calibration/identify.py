@@ -103,8 +103,9 @@ class _LowPassMotion:
         self.a = np.gradient(self.v, self.tu, axis=0)
 
     def __call__(self, at: NDArray) -> tuple[NDArray, NDArray, NDArray]:
-        return tuple(np.stack([np.interp(at, self.tu, x[:, k]) for k in range(x.shape[1])], 1)
-                     for x in (self.p, self.v, self.a))
+        p, v, a = (np.stack([np.interp(at, self.tu, x[:, k]) for k in range(x.shape[1])], 1)
+                   for x in (self.p, self.v, self.a))
+        return p, v, a
 
 
 def fourier_fit(t: NDArray, y: NDArray, period: float, harmonics: int, at: NDArray
@@ -163,7 +164,7 @@ def prepare(rec: Recording, desc: Any, prm: Any = None, period: float | None = N
     fine = np.arange(t0, t1, 1.0 / ANALYSIS_RATE_HZ)
     t = fine[::DECIMATE]
     periodic = period is not None
-    if periodic:
+    if period is not None:
         inside = (rec.t_pose >= t0 - 0.2) & (rec.t_pose <= t1 + 0.2)
         pose, vel, acc = fourier_fit(rec.t_pose[inside], P[inside], period, harmonics, fine)
         # a run that paused or stretched in time (a late trajectory node holds instead of jumping) is not the
@@ -176,6 +177,7 @@ def prepare(rec: Recording, desc: Any, prm: Any = None, period: float | None = N
     try:
         zeta = kin.inverse_kinematics_batch(desc, pose)
         full = motion_from_plate(prm, zeta, pose, kin.twist_from_pose_rate(pose, vel), _twist_rate(pose, vel, acc))
+        assert full.zeta_ddot is not None and full.V_dot is not None   # given V̇, motion_from_plate sets both
         state = MotionState(zeta=zeta[::DECIMATE], zeta_dot=full.zeta_dot[::DECIMATE], p=full.p[::DECIMATE],
                             R=full.R[::DECIMATE], V=full.V[::DECIMATE], zeta_ddot=full.zeta_ddot[::DECIMATE],
                             V_dot=full.V_dot[::DECIMATE])
@@ -202,6 +204,7 @@ def prepare(rec: Recording, desc: Any, prm: Any = None, period: float | None = N
     I_pl = m * (float(c @ c) * np.eye(3) - np.outer(c, c))
     payload_sym = np.array([m, *(m * c), I_pl[0, 0], I_pl[1, 1], I_pl[2, 2], I_pl[0, 1], I_pl[0, 2], I_pl[1, 2],
                             0.0, 0.0, 0.0])
+    assert state.zeta_ddot is not None   # set from full.zeta_ddot above
     return Motion(t=t, currents=cur, reg=reg, zeta=zeta, zeta_dot=state.zeta_dot, zeta_ddot=state.zeta_ddot,
                   poses=pose, payload_sym=payload_sym, source=rec.source, periodic=periodic,
                   horn=(_wrap(zc - sp), ic, zd, sp))
@@ -332,7 +335,7 @@ class _OutputError:
         g, b, x = u[:6], u[6:12], u[12:]
         tau = self.M @ x + self.tau0
         r = self.w * (self.I - g[self.servo] * tau - b[self.servo])
-        extra = [b / OFFSET_PRIOR]
+        extra: list[Any] = [b / OFFSET_PRIOR]
         if self.scale_row:
             extra.append([self.big * (float(np.mean(1.0 / g)) / self.K_t - 1.0)])
         return np.concatenate([r, *map(np.atleast_1d, extra)])

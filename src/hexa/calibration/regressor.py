@@ -19,7 +19,7 @@ difference gives its column exactly): one regressor, one model, never a second c
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -63,7 +63,7 @@ def params_with_sym(prm: HexaDynamicParameters, theta: NDArray, J_a: float | Non
     m_p, c_p, I_p = plate_inertia_about_com(theta)
     m_r, mk, K_r = (float(v) for v in theta[10:13])
     kappa = mk / m_r
-    changes = dict(m_p=m_p, c_p=c_p, I_p=I_p, m_r=m_r, kappa=min(max(kappa, 0.0), 1.0),
+    changes: dict[str, Any] = dict(m_p=m_p, c_p=c_p, I_p=I_p, m_r=m_r, kappa=min(max(kappa, 0.0), 1.0),
                    I_r=prm.l_d ** 2 * (K_r - mk * mk / m_r))
     if J_a is not None:
         changes["J_a"] = float(J_a)

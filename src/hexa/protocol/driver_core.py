@@ -12,7 +12,7 @@ import sys
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Sequence
+from typing import Any, Sequence
 
 import numpy as np
 import yaml
@@ -83,8 +83,8 @@ def servo_calibrations_from_config(items: Sequence[dict] | None, desc=None) -> l
     out = []
     for i, d in enumerate(items):
         try:
-            out.append(ServoCalibration(**{k: (int(v) if k in ("min_us", "max_us") else float(v))
-                                           for k, v in d.items()}))
+            values: dict[str, Any] = {k: (int(v) if k in ("min_us", "max_us") else float(v)) for k, v in d.items()}
+            out.append(ServoCalibration(**values))
         except TypeError as exc:
             raise DriverConfigError(f"servos[{i}]: {exc}") from exc
     return out
@@ -344,7 +344,7 @@ def driver_links_from_config(cfg: dict, core: DriverCore, on_samples, on_latch=N
     """
     from hexa.protocol.link import CurrentLink, ServoLink
 
-    common = dict(baud=int(cfg["baud"]), stale_timeout=float(cfg["stale_timeout"]),
+    common: dict[str, Any] = dict(baud=int(cfg["baud"]), stale_timeout=float(cfg["stale_timeout"]),
                   drop_after=float(cfg["drop_after"]), reconnect_period=float(cfg["reconnect_period"]),
                   hello_timeout=float(cfg["hello_timeout"]), boot_delay=float(cfg["boot_delay"]),
                   stream_rerequest_period=float(cfg["stream_rerequest_period"]),

@@ -20,7 +20,7 @@ import numpy as np
 
 #: The current sensor of the realistic robot: Allegro ACS712ELCTR-05B-T datasheet figures (Vcc = 5 V, 25 °C,
 #: C_F = 47 nF on the filter pin, 2 kHz bandwidth) read by the Mega's 10-bit ADC (V_ref = 5 V, 4.88 mV/count).
-ACS712_05B = {
+ACS712_05B: dict[str, Any] = {
     "name": "ACS712ELCTR-05B-T",
     "sensitivity_typ": 0.185,        # V/A
     "sensitivity_min": 0.180,        # V/A (datasheet min/max over the part population)
