@@ -98,8 +98,9 @@ class IsolationNode(Node):
     def close(self) -> None:
         self.images.close()
 
-    def _take_images(self) -> None:
-        """Take the images waiting in the readers into the scheduler, in stamp order (colour and depth pair up)."""
+    def _take_images(self) -> int:
+        """Take the images waiting in the readers into the scheduler, in stamp order (colour and depth pair up);
+        how many."""
         images = []
         for cam, color, sub in self.image_subs:
             for data in self.images.take(sub):
@@ -113,6 +114,7 @@ class IsolationNode(Node):
         now = time.monotonic()
         for _stamp, cam, depth, raw in sorted(images, key=lambda i: i[:3]):
             self.sched.add_image(cam, raw, not depth, now)
+        return len(images)
 
     def _on_pose(self, msg: PoseStamped) -> None:
         T = self.pose_checks["plate_pose"].check(stamps.to_sec(msg.header.stamp), *pose_fields(msg.pose))
@@ -132,9 +134,11 @@ class IsolationNode(Node):
 
     def _on_collision(self, msg: CollisionEvent) -> None:
         if msg.event == CollisionEvent.START:
-            self._take_images()          # the frames around the onset
+            t0 = time.monotonic()
+            taken = self._take_images()  # the frames around the onset
             self.sched.collision_start(msg.id, stamps.to_sec(msg.onset), time.monotonic())
-            self.get_logger().info(f"collision {msg.id} START, onset {stamps.to_sec(msg.onset):.3f} s, "
+            self.get_logger().info(f"collision {msg.id} START, onset {stamps.to_sec(msg.onset):.3f} s, {taken} "
+                                   f"images taken in {1e3 * (time.monotonic() - t0):.0f} ms, "
                                    f"{len(self.sched.pending)} pair(s) queued")
             self._run()
         elif msg.event == CollisionEvent.END:
