@@ -66,7 +66,7 @@ class IsolationNode(Node):
             eval_period=p("eval_period", 0.1, "s of frame time between evaluated pairs during a collision"),
             onset_pose_wait=p("onset_pose_wait", 0.0, "wall s the onset pair waits for the camera pose of its stamp"),
             onset_pose_age=p("onset_pose_age", 0.05, "s; oldest camera pose the onset pair takes, no estimate"))
-        history = int(p("frame_history", 10, "images of each topic waiting in the reader between takes"))
+        history = int(p("frame_history", 6, "images of each topic waiting in the reader between takes"))
         if history < 1:
             raise ValueError(f"frame_history must be at least 1, got {history}")
         coarse = p("coarse_margin", 0.008, "m around the drawn robot when the pose is carried forward")
