@@ -247,3 +247,19 @@ def test_frames_are_wanted_until_the_backgrounds_and_during_collisions_only() ->
     assert not s.wants_frames
     s.capture_background()
     assert s.wants_frames
+
+
+def test_a_batch_of_images_taken_per_topic_pairs_into_every_frame() -> None:
+    """Ten colour images, then ten depth images of each camera (as the readers hand them over): every frame pairs
+    (the pairer alone keeps five unpaired images), and a collision queues pairs of both cameras."""
+    def raw(stamp: float) -> RawImage:
+        return RawImage(stamp, 2, 2, "rgb8", 0, 6, b"\0" * 12)
+
+    s = _sched(eval_period=0.1, max_pending=50)
+    s.collision_start(1, onset=10.0, now=0.0)             # nothing buffered yet: no onset pair
+    stamps = [round(10.0 + k / 30, 6) for k in range(10)]
+    batch = [(c, raw(t), color) for c in CAMS for color in (True, False) for t in stamps]
+    s.add_images(batch, now=0.0)
+    assert all(s.counters[f"{c}: frames paired"] == 10 for c in CAMS)
+    assert [f.stamp for f in s.frames["cam_side"]] == stamps
+    assert s.pending and all(set(p.frames) == set(CAMS) for p in s.pending)

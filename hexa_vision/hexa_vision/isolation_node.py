@@ -99,8 +99,7 @@ class IsolationNode(Node):
         self.images.close()
 
     def _take_images(self) -> int:
-        """Take the images waiting in the readers into the scheduler, in stamp order (colour and depth pair up);
-        how many."""
+        """Take the images waiting in the readers into the scheduler; how many."""
         images = []
         for cam, color, sub in self.image_subs:
             for data in self.images.take(sub):
@@ -109,11 +108,9 @@ class IsolationNode(Node):
                 except CdrError:
                     self.sched.counters["reject: malformed image"] += 1
                     continue
-                images.append((m.stamp, cam, not color,
-                               RawImage(m.stamp, m.height, m.width, m.encoding, m.is_bigendian, m.step, m.data)))
-        now = time.monotonic()
-        for _stamp, cam, depth, raw in sorted(images, key=lambda i: i[:3]):
-            self.sched.add_image(cam, raw, not depth, now)
+                images.append((cam, RawImage(m.stamp, m.height, m.width, m.encoding, m.is_bigendian, m.step, m.data),
+                               color))
+        self.sched.add_images(images, time.monotonic())
         return len(images)
 
     def _on_pose(self, msg: PoseStamped) -> None:

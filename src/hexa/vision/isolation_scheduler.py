@@ -135,6 +135,12 @@ class IsolationScheduler:
             self.counters[f"{cam}: frames paired"] += 1
             self.add_frame(cam, frame, now)
 
+    def add_images(self, images: Sequence[tuple[str, RawImage, bool]], now: float) -> None:
+        """Images taken in a batch, (camera, image, colour?) in any order: added in stamp order, colour before depth,
+        so that each camera's colour and depth pair up and the cameras' frames pair up."""
+        for cam, image, color in sorted(images, key=lambda i: (i[1].stamp, i[0], not i[2])):
+            self.add_image(cam, image, color, now)
+
     def add_frame(self, cam: str, frame: Any, now: float) -> None:
         """Buffer a frame of `cam` (anything with `stamp`); during a collision, queue the pair it completes."""
         self.frames[cam].append(frame)
