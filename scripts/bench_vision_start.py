@@ -2,12 +2,13 @@
 """The vision path at 1×, without the observer: collision START → first `contact` of the isolation node.
 
     .venv/bin/python scripts/bench_vision_start.py [BAG] [--rate 1.0] [--onset 4.584] [--start 4.604] [--end 5.049]
+        [-p NAME:=VALUE ...]
 
-Plays the bag's camera topics (both cameras, with /clock) at `--rate` into the pose and isolation nodes as
-`hexa bringup replay` starts them, and publishes a collision START (onset `--onset` s) when /clock reaches `--start`
-s and its END at `--end` s, as the observer did on the slow replay of `hexa bench graph`'s default bag (its
-figures are the defaults). Prints, as JSON: wall s from publishing the START to the first `contact` of that id, the
-contacts (stamp, link, chain), the plate poses received per top frame, the frame → plate_pose latency, and CPU
+Plays the bag's camera topics (both cameras, with /clock) at `--rate` into the pose and isolation nodes as `hexa
+bringup replay` starts them, and publishes a collision START (onset `--onset` s) when /clock reaches `--start` s and
+its END at `--end` s, as the observer did on the slow replay of `hexa bench graph`'s default bag (its figures are
+the defaults). Prints, as JSON: wall s from publishing the START to the first `contact` of that id, the contacts
+(stamp, link, chain, point in mm), the plate poses received per top frame, the frame → plate_pose latency, and CPU
 per node. The observer's own START latency is not in these figures (`hexa bench graph` has it); this isolates the
 part of START → contact that the vision nodes own.
 """
@@ -30,6 +31,8 @@ def main() -> int:
     ap.add_argument("--onset", type=float, default=4.584)
     ap.add_argument("--start", type=float, default=4.604)
     ap.add_argument("--end", type=float, default=5.049)
+    ap.add_argument("-p", "--isolation-param", action="append", default=[], metavar="NAME:=VALUE",
+                    help="a parameter of the isolation node (e.g. onset_pose_wait:=0.5)")
     args = ap.parse_args()
     if not args.bag.exists():
         print(f"no bag {args.bag}: run `hexa bench graph` once (it records it)", file=sys.stderr)
@@ -58,6 +61,9 @@ def main() -> int:
 
         os.environ.update({"ROS_DOMAIN_ID": str(domain), "ROS_AUTOMATIC_DISCOVERY_RANGE": "LOCALHOST"})
         specs = [s for s in graph_specs("replay", ns, params) if s.name in ("pose", "isolation")]
+        for s in specs:
+            if s.name == "isolation":
+                s.cmd.extend(a for p in args.isolation_param for a in ("-p", p))
         rclpy.init()
         node = rclpy.create_node("bench_vision_start")
         seen: dict = {"clock": 0.0, "contacts": [], "poses": [], "start_wall": None}
@@ -68,7 +74,7 @@ def main() -> int:
 
         def on_contact(m: Contact) -> None:
             seen["contacts"].append((time.monotonic(), to_sec(m.header.stamp), int(m.collision_id), int(m.link),
-                                     int(m.chain)))
+                                     int(m.chain), [round(1e3 * v, 1) for v in (m.point.x, m.point.y, m.point.z)]))
 
         def on_pose(m: PoseStamped) -> None:
             seen["poses"].append((time.monotonic(), to_sec(m.header.stamp)))
@@ -127,12 +133,13 @@ def main() -> int:
                "start_published_unix_s": seen.get("start_time"),
                "start_to_first_contact_s": None if first is None or seen["start_wall"] is None
                else first[0] - seen["start_wall"],
-               "contacts": [{"stamp": round(c[1], 3), "link": c[3], "chain": c[4],
+               "contacts": [{"stamp": round(c[1], 3), "link": c[3], "chain": c[4], "point_mm": c[5],
                              "after_start_s": round(c[0] - seen["start_wall"], 3)} for c in seen["contacts"]],
                "top_frames": len(frames), "plate_poses": len(seen["poses"]),
                "frame_to_pose_s": {"p50": float(np.percentile(lat, 50)), "p95": float(np.percentile(lat, 95)),
                                    "max": float(np.max(lat))} if lat else None,
-               "cpu_percent": {n: round(cpu.percent(n, t0, t1), 1) for n in pids}}
+               "cpu_percent": {n: round(cpu.percent(n, t0, t1), 1) for n in pids},
+               "isolation_params": args.isolation_param}
         print(json.dumps(out, indent=1))
         node.destroy_node()
         rclpy.try_shutdown()

@@ -64,3 +64,48 @@ def test_compose_with_an_unknown_class_exits_2_in_one_line(procs, ros_env):
     p = procs.start([PY, "-m", "hexa_ros.compose", "x=hexa_dynamics.observer_node:NoSuchNode"], ros_env)
     _out, err = p.communicate(timeout=60)
     assert p.returncode == 2 and "NoSuchNode" in err and "Traceback" not in err, err
+
+
+def test_polled_subscriptions_keep_the_last_depth_messages_until_taken(ros_env, monkeypatch):
+    """hexa_ros.polled: no executor spins the polled node; `take` returns the reader's last `depth` messages (raw
+    bytes, oldest first), then nothing until new ones arrive."""
+    import time
+
+    for k, v in ros_env.items():
+        monkeypatch.setenv(k, v)
+    import rclpy
+    from rclpy.qos import QoSProfile, ReliabilityPolicy
+    from rclpy.serialization import deserialize_message
+    from std_msgs.msg import UInt32
+
+    from hexa_ros.polled import PolledSubscriptions
+
+    ctx = rclpy.Context()
+    rclpy.init(context=ctx)
+    owner = rclpy.create_node("polled_owner", namespace="/t", context=ctx)
+    polled = PolledSubscriptions(owner, "images")
+    try:
+        assert (polled.node.get_name(), polled.node.get_namespace()) == ("polled_owner_images", "/t")
+        sub = polled.subscribe(UInt32, "numbers", QoSProfile(depth=3, reliability=ReliabilityPolicy.BEST_EFFORT))
+        pub = owner.create_publisher(UInt32, "numbers", 10)
+        deadline = time.monotonic() + 20.0
+        while (pub.get_subscription_count() < 1 or polled.node.count_publishers("/t/numbers") < 1) \
+                and time.monotonic() < deadline:       # publisher and reader have matched
+            time.sleep(0.05)
+        assert pub.get_subscription_count() == 1, "the polled subscription was not discovered"
+        taken: list[int] = []
+        n = 0
+        while len(taken) < 3 and time.monotonic() < deadline:
+            for _ in range(5):                     # five new messages between takes: the reader keeps three
+                pub.publish(UInt32(data=n))
+                n += 1
+            time.sleep(0.1)
+            batch = polled.take(sub)
+            assert len(batch) <= 3 and all(isinstance(b, bytes) for b in batch)
+            taken += [deserialize_message(b, UInt32).data for b in batch]
+        assert len(taken) >= 3 and taken == sorted(set(taken)), taken     # oldest first, each once
+        assert polled.take(sub) == []
+    finally:
+        polled.close()
+        owner.destroy_node()
+        rclpy.shutdown(context=ctx)

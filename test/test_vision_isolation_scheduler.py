@@ -122,7 +122,7 @@ def test_after_pose_wait_the_nearest_camera_pose_within_max_pose_age_is_used() -
 
 
 def test_the_last_camera_pose_is_carried_forward_by_the_estimate_difference() -> None:
-    s = _sched(pose_wait=0.5)
+    s = _sched(pose_wait=0.5, onset_pose_wait=1.0)        # the onset pair waits like the others
     _frames(s, 10.0, 3)
     T0 = transform_from_pose6(np.array([0.01, -0.02, -0.55, 0.05, 0.1, -0.02]))
     s.add_pose(9.8, T0)                                    # markers hidden from then on
@@ -138,6 +138,42 @@ def test_the_last_camera_pose_is_carried_forward_by_the_estimate_difference() ->
     expected = pose6_from_transform(T0) + est(10.0) - est(9.8)
     assert np.allclose(pose6_from_transform(w.pose), expected, atol=1e-6)
     assert s.counters["pose carried forward"] == 1
+
+
+def test_the_onset_pair_takes_a_recent_camera_pose_at_once_and_later_pairs_wait() -> None:
+    s = _sched(pose_wait=0.5, onset_pose_age=0.05, eval_period=0.1)
+    _frames(s, 10.0, 10)                                   # 10.0 … 10.3 s
+    s.add_pose(10.0, _pose(0.01))                          # the pose node is one frame behind
+    s.add_pose(10.0 + 1 / 30, _pose(0.012))
+    s.collision_start(2, onset=10.07, now=0.0)             # onset pair at 10.067 s, queued pairs after it
+    work = s.due(0.0)
+    assert len(work) == 1 and len(s.pending) >= 2          # the onset pair only: the later ones wait for poses
+    (w,) = work
+    assert w.debug and w.coarse and w.collision_id == 2
+    assert w.stamp == pytest.approx(10.0 + 2 / 30, abs=1e-6)
+    assert w.pose[0, 3] == pytest.approx(0.012)            # the nearest pose received, not extrapolated
+    assert s.counters["onset pair: pose already received"] == 1
+    assert s.due(0.4) == []
+
+
+def test_the_onset_pair_takes_the_estimate_carried_pose_at_once_and_waits_for_a_stale_one() -> None:
+    s = _sched(onset_pose_age=0.05)
+    _frames(s, 10.0, 3)
+    s.add_pose(9.8, _pose(0.0))                            # 0.2 s before the onset: too old on its own
+    s.collision_start(1, onset=10.0, now=0.0)
+    assert s.due(0.0) == []                                # no estimate: waits for a camera pose of its stamp
+    for t in np.arange(9.7, 10.05, 0.01):
+        s.add_pose_estimate(float(t), _pose(0.1 * (t - 9.8)))
+    (w,) = s.due(0.01)
+    assert w.debug and w.coarse and w.pose[0, 3] == pytest.approx(0.02, abs=1e-6)
+    # with onset_pose_wait the onset pair first waits for the camera pose of its stamp
+    s = _sched(onset_pose_wait=0.03)
+    _frames(s, 10.0, 3)
+    s.add_pose(10.0 - 1 / 30, _pose(0.0))
+    s.collision_start(1, onset=10.0, now=0.0)
+    assert s.due(0.02) == []
+    (w,) = s.due(0.04)
+    assert w.coarse
 
 
 def test_a_carried_pose_waits_for_the_estimate_of_the_stamp() -> None:
@@ -195,3 +231,35 @@ def test_image_pairer_pairs_raw_images_by_stamp_and_the_assembler_decodes_them_o
     assert bad is None
     assert fa.assemble(pr.add(raw(3.0, rgb, "rgb8"), color=True)) is None
     assert fa.rejects["colour/depth size mismatch"] == 1
+
+
+def test_frames_are_wanted_until_the_backgrounds_and_during_collisions_only() -> None:
+    s = IsolationScheduler(CAMS, background_delay=0.1)
+    assert s.wants_frames
+    _frames(s, 1.0, 6)                                     # 0.17 s: both backgrounds offered
+    for w in s.due(0.0):
+        assert w.kind == BACKGROUND
+        s.background_taken(next(iter(w.frames)))
+    assert not s.wants_frames
+    s.collision_start(1, onset=1.1, now=0.0)
+    assert s.wants_frames
+    s.collision_end(1, 1.2)
+    assert not s.wants_frames
+    s.capture_background()
+    assert s.wants_frames
+
+
+def test_a_batch_of_images_taken_per_topic_pairs_into_every_frame() -> None:
+    """Ten colour images, then ten depth images of each camera (as the readers hand them over): every frame pairs
+    (the pairer alone keeps five unpaired images), and a collision queues pairs of both cameras."""
+    def raw(stamp: float) -> RawImage:
+        return RawImage(stamp, 2, 2, "rgb8", 0, 6, b"\0" * 12)
+
+    s = _sched(eval_period=0.1, max_pending=50)
+    s.collision_start(1, onset=10.0, now=0.0)             # nothing buffered yet: no onset pair
+    stamps = [round(10.0 + k / 30, 6) for k in range(10)]
+    batch = [(c, raw(t), color) for c in CAMS for color in (True, False) for t in stamps]
+    s.add_images(batch, now=0.0)
+    assert all(s.counters[f"{c}: frames paired"] == 10 for c in CAMS)
+    assert [f.stamp for f in s.frames["cam_side"]] == stamps
+    assert s.pending and all(set(p.frames) == set(CAMS) for p in s.pending)

@@ -137,6 +137,7 @@ def _record_bag(path, seed: int = 0, position_deg: float = -100.0) -> dict:
 
 @pytest.mark.skipif(not os.environ.get("MUJOCO_GL"), reason="needs a headless MuJoCo renderer (MUJOCO_GL=egl)")
 def test_live_replay_isolates_the_plate_corner_contact(tmp_path) -> None:
+    import dataclasses
     import math
 
     from scipy.spatial.transform import Rotation
@@ -179,7 +180,7 @@ def test_live_replay_isolates_the_plate_corner_contact(tmp_path) -> None:
                 if locator.take_background(work):
                     sched.background_taken(next(iter(work.frames)))
             elif not results:
-                assert work.debug and not work.coarse      # the onset pair, with a camera pose of its stamp
+                assert work.debug                          # the onset pair
                 results.append(locator.locate(work))
     assert stale_pose_at_event is not None and results and results[0] is not None, \
         f"the replay never isolated the onset pair: {dict(sched.counters)} {dict(locator.all_counters())}"
@@ -192,6 +193,12 @@ def test_live_replay_isolates_the_plate_corner_contact(tmp_path) -> None:
     assert in_contact and link == "plate"
     assert est.link == LINK_PLATE and est.chain == 0, est.per_camera
     assert np.linalg.norm(est.point - point) <= 0.010
+    # the onset pair went as soon as the pose of the frame before it arrived (within onset_pose_age; a coarse pose,
+    # wider robot mask), one frame period before its own; with the pose of its own stamp the contact is the same
+    assert found.work.coarse
+    exact = locator.locate(dataclasses.replace(found.work, pose=sched.poses.at(s, sched.max_pose_age), coarse=False))
+    assert exact is not None and (exact.estimate.link, exact.estimate.chain) == (LINK_PLATE, 0), exact.estimate
+    assert np.linalg.norm(exact.estimate.point - est.point) <= 0.005
     # the robot drawn from the newest pose at the START (0.3 s stale) is not where the frame shows it, and the
     # uncovered robot pixels read as an object touching a link
     stale = locator.isolator.isolate({c: (f.rgb, f.depth) for c, f in found.frames.items()},

@@ -7,12 +7,18 @@ time) and `collision` (hexa_msgs/CollisionEvent). Publishes `contact` (hexa_msgs
 `/diagnostics`. Service `capture_background` (std_srvs/Trigger): the next frame of each camera becomes its background
 (workspace clear); the first ones are taken `background_delay` s after the first frame.
 
-Images stay undecoded (zero-copy views in a ring buffer per camera) until a pair is evaluated or becomes a
-background. On START the buffered pair nearest the onset is evaluated, then a pair every `eval_period` s of frame
-time until END, each with the plate pose of its stamp: camera poses come late, so a pair waits up to `pose_wait` wall
-s, then the last camera pose carried forward by `plate_pose_estimate` is used (robot mask `coarse_margin` wider),
-else the nearest camera pose within `max_pose_age`; a pair without a pose after `pose_expiry` wall s is dropped. At
-most `max_pending` pairs wait, the onset pair is never dropped (hexa.vision.isolation_scheduler).
+The images are not taken per message: they wait in their DDS readers (the last `frame_history` of each topic, on a
+node `<name>_images` that no executor spins, hexa_ros.polled) and are taken only when frames are wanted: on a
+collision START, every 0.05 s during a collision, and until the backgrounds are taken. So the node spends nothing on
+images between collisions, and a START never waits behind queued images. Taken images go undecoded (zero-copy views
+of the delivered bytes) into a ring buffer per camera and are decoded only when a pair is evaluated or becomes a
+background. On START the buffered pair nearest the onset is evaluated at once, then a pair every `eval_period` s of
+frame time until END, each with the plate pose of its stamp. Camera poses come late: the onset pair waits
+`onset_pose_wait` wall s, then takes the last camera pose carried forward by `plate_pose_estimate`, else the nearest
+camera pose within `onset_pose_age` (robot mask `coarse_margin` wider); the other pairs wait up to `pose_wait` wall
+s, then take the carried pose, else the nearest camera pose within `max_pose_age`; a pair without a pose after
+`pose_expiry` wall s is dropped. At most `max_pending` pairs wait, the onset pair is never dropped
+(hexa.vision.isolation_scheduler).
 """
 from __future__ import annotations
 
@@ -26,6 +32,7 @@ from hexa_ros.conversions import pose_fields
 from hexa_ros.node import DESCRIPTION, DESCRIPTION_PARAM
 from rcl_interfaces.msg import ParameterDescriptor
 from rclpy.node import Node
+from rclpy.qos import QoSProfile
 from sensor_msgs.msg import CameraInfo, Image
 from std_srvs.srv import Trigger
 
@@ -35,6 +42,7 @@ from hexa.vision.isolation import LINK_UNKNOWN
 from hexa.vision.isolation_scheduler import BACKGROUND, ContactLocator, IsolationScheduler, Located
 from hexa.vision.sync import RawImage
 from hexa_ros.cdr import CdrError, image_from_cdr
+from hexa_ros.polled import PolledSubscriptions
 from hexa_msgs.msg import CollisionEvent, Contact
 from hexa_vision.common import CAMERAS, description_cameras, image_msg
 
@@ -55,16 +63,23 @@ class IsolationNode(Node):
             pose_wait=p("pose_wait", 0.5, "wall s a pair waits for a camera pose at/after its stamp"),
             pose_expiry=p("pose_expiry", 3.0, "wall s after which a pair without a pose is dropped"),
             max_pending=p("max_pending", 8, "frame pairs queued while waiting for poses"),
-            eval_period=p("eval_period", 0.1, "s of frame time between evaluated pairs during a collision"))
+            eval_period=p("eval_period", 0.1, "s of frame time between evaluated pairs during a collision"),
+            onset_pose_wait=p("onset_pose_wait", 0.0, "wall s the onset pair waits for the camera pose of its stamp"),
+            onset_pose_age=p("onset_pose_age", 0.05, "s; oldest camera pose the onset pair takes, no estimate"))
+        history = int(p("frame_history", 6, "images of each topic waiting in the reader between takes"))
+        if history < 1:
+            raise ValueError(f"frame_history must be at least 1, got {history}")
         coarse = p("coarse_margin", 0.008, "m around the drawn robot when the pose is carried forward")
         models = description_cameras(desc_path)
         desc = load_hexa(desc_path or None)
         self.locator = ContactLocator(desc, {c: models[c] for c in CAMERAS}, coarse)
         self.pose_checks = {k: PoseCheck.for_hexa(desc) for k in ("plate_pose", "plate_pose_estimate")}
+        self.images = PolledSubscriptions(self, "images")
+        image_qos = QoSProfile(depth=history, reliability=qos.SENSOR.reliability, history=qos.SENSOR.history,
+                               durability=qos.SENSOR.durability)
+        self.image_subs = [(c, color, self.images.subscribe(Image, f"{c}/{topic}", image_qos)) for c in CAMERAS
+                           for topic, color in (("color/image_raw", True), ("aligned_depth_to_color/image_raw", False))]
         for c in CAMERAS:
-            for topic, color in (("color/image_raw", True), ("aligned_depth_to_color/image_raw", False)):
-                self.create_subscription(Image, f"{c}/{topic}", lambda m, c=c, k=color: self._on_image(c, m, k),
-                                         qos.SENSOR, raw=True)
             self.create_subscription(CameraInfo, f"{c}/color/camera_info", lambda m, c=c: self._on_info(c, m),
                                      qos.SENSOR)
         self.create_subscription(PoseStamped, "plate_pose", self._on_pose, qos.STREAM)
@@ -75,20 +90,28 @@ class IsolationNode(Node):
         self.pub_diag = self.create_publisher(DiagnosticArray, "/diagnostics", qos.RELIABLE)
         self.create_service(Trigger, "capture_background", self._on_capture)
         self.create_timer(1.0, self._diagnostics)
-        self.create_timer(0.05, self._run)
+        self.create_timer(0.05, self._tick)
 
     def _on_info(self, cam: str, msg: CameraInfo) -> None:
         self.locator.assemblers[cam].set_camera_info(msg.width, msg.height, msg.k, msg.d)
 
-    def _on_image(self, cam: str, data: bytes, color: bool) -> None:
-        try:
-            m = image_from_cdr(data)     # serialized: the pixels stay a view of the delivered bytes
-        except CdrError:
-            self.sched.counters["reject: malformed image"] += 1
-            return
-        raw = RawImage(m.stamp, m.height, m.width, m.encoding, m.is_bigendian, m.step, m.data)
-        self.sched.add_image(cam, raw, color, time.monotonic())
-        self._run()
+    def close(self) -> None:
+        self.images.close()
+
+    def _take_images(self) -> int:
+        """Take the images waiting in the readers into the scheduler; how many."""
+        images = []
+        for cam, color, sub in self.image_subs:
+            for data in self.images.take(sub):
+                try:
+                    m = image_from_cdr(data)     # serialized: the pixels stay a view of the delivered bytes
+                except CdrError:
+                    self.sched.counters["reject: malformed image"] += 1
+                    continue
+                images.append((cam, RawImage(m.stamp, m.height, m.width, m.encoding, m.is_bigendian, m.step, m.data),
+                               color))
+        self.sched.add_images(images, time.monotonic())
+        return len(images)
 
     def _on_pose(self, msg: PoseStamped) -> None:
         T = self.pose_checks["plate_pose"].check(stamps.to_sec(msg.header.stamp), *pose_fields(msg.pose))
@@ -108,12 +131,20 @@ class IsolationNode(Node):
 
     def _on_collision(self, msg: CollisionEvent) -> None:
         if msg.event == CollisionEvent.START:
+            t0 = time.monotonic()
+            taken = self._take_images()  # the frames around the onset
             self.sched.collision_start(msg.id, stamps.to_sec(msg.onset), time.monotonic())
-            self.get_logger().info(f"collision {msg.id} START, onset {stamps.to_sec(msg.onset):.3f} s, "
+            self.get_logger().info(f"collision {msg.id} START, onset {stamps.to_sec(msg.onset):.3f} s, {taken} "
+                                   f"images taken in {1e3 * (time.monotonic() - t0):.0f} ms, "
                                    f"{len(self.sched.pending)} pair(s) queued")
             self._run()
         elif msg.event == CollisionEvent.END:
             self.sched.collision_end(msg.id, stamps.to_sec(msg.header.stamp))
+
+    def _tick(self) -> None:
+        if self.sched.wants_frames:
+            self._take_images()
+        self._run()
 
     def _run(self) -> None:
         """Do the scheduler's due work: backgrounds, then isolations (a contact per answer)."""

@@ -9,6 +9,10 @@
   new complete pair while the collision lasts, spaced at least `eval_period` s of frame time apart;
 - a queue of at most `max_pending` pairs waiting for the camera plate pose of their stamp (the pose node lags the
   cameras); the onset pair is never dropped for a newer one;
+- the onset pair (the first contact, wanted at once) waits at most `onset_pose_wait` wall s for the camera pose of
+  its stamp; then it takes the newest camera pose carried forward by the observer's estimate, or the nearest camera
+  pose within `onset_pose_age` s, with the wider robot mask of a coarse pose (`Work.coarse`); with neither, it
+  waits like the other pairs;
 - the pose of a pair: interpolated at its stamp once a camera pose at or after the stamp has arrived; after
   `pose_wait` wall seconds, the newest camera pose before the stamp carried forward by the observer's tracked pose
   (`add_pose_estimate`): pose(t) = pose_cam(t0) + est(t) − est(t0) in x y z and Z-Y-X angles (the difference cancels
@@ -87,12 +91,15 @@ class IsolationScheduler:
         background_delay: s of frame time after the first frame before the backgrounds are taken.
         pair_tolerance: s; the largest stamp difference between the frames of a pair.
         estimate_gap: s; the largest gap between pose estimates to interpolate across, or to the nearest one.
+        onset_pose_wait: wall s the onset pair waits for the camera pose of its stamp before it takes a pose
+            already received (`onset_pose_age`).
+        onset_pose_age: s; the oldest camera pose the onset pair takes (nearest to its stamp) without an estimate.
     """
 
     def __init__(self, cameras: Sequence[str] = ("cam_top", "cam_side"), *, keep: int = 30, max_pending: int = 8,
                  pose_wait: float = 0.5, pose_expiry: float = 3.0, max_pose_age: float = 0.2,
                  eval_period: float = 0.1, background_delay: float = 1.0, pair_tolerance: float = 0.02,
-                 estimate_gap: float = 0.05) -> None:
+                 estimate_gap: float = 0.05, onset_pose_wait: float = 0.0, onset_pose_age: float = 0.05) -> None:
         if not cameras:
             raise ValueError("IsolationScheduler needs at least one camera")
         if max_pending < 1:
@@ -101,6 +108,7 @@ class IsolationScheduler:
         self.max_pending, self.pose_wait, self.pose_expiry = int(max_pending), pose_wait, pose_expiry
         self.max_pose_age, self.eval_period, self.background_delay = max_pose_age, eval_period, background_delay
         self.pair_tolerance, self.estimate_gap = pair_tolerance, estimate_gap
+        self.onset_pose_wait, self.onset_pose_age = onset_pose_wait, onset_pose_age
         self.frames: dict[str, deque[Any]] = {c: deque(maxlen=keep) for c in self.cameras}
         self.poses = PoseBuffer(keep=400)
         self.estimates = PoseBuffer(keep=1000)
@@ -114,6 +122,11 @@ class IsolationScheduler:
         self._background: dict[str, Any] = {}
         self._pairers = {c: ImagePairer() for c in self.cameras}
 
+    @property
+    def wants_frames(self) -> bool:
+        """New frames are of use: during a collision, or while a camera's background is still to be taken."""
+        return self.active is not None or bool(self._want_background)
+
     # ------------------------------------------------------------------ inputs
     def add_image(self, cam: str, image: RawImage, color: bool, now: float) -> None:
         """An undecoded colour (`color` True) or depth image of `cam`; the frame it completes goes to `add_frame`."""
@@ -121,6 +134,12 @@ class IsolationScheduler:
         if frame is not None:
             self.counters[f"{cam}: frames paired"] += 1
             self.add_frame(cam, frame, now)
+
+    def add_images(self, images: Sequence[tuple[str, RawImage, bool]], now: float) -> None:
+        """Images taken in a batch, (camera, image, colour?) in any order: added in stamp order, colour before depth,
+        so that each camera's colour and depth pair up and the cameras' frames pair up."""
+        for cam, image, color in sorted(images, key=lambda i: (i[1].stamp, i[0], not i[2])):
+            self.add_image(cam, image, color, now)
 
     def add_frame(self, cam: str, frame: Any, now: float) -> None:
         """Buffer a frame of `cam` (anything with `stamp`); during a collision, queue the pair it completes."""
@@ -194,6 +213,9 @@ class IsolationScheduler:
                 if T is None:                  # the camera lost the plate around the stamp
                     T = self.carried_pose(p.stamp)
                     coarse = T is not None
+            elif p.onset and waited >= self.onset_pose_wait and (T := self.received_pose(p.stamp)) is not None:
+                coarse = True
+                self.counters["onset pair: pose already received"] += 1
             elif waited > self.pose_wait:
                 T = self.carried_pose(p.stamp)
                 coarse = T is not None
@@ -231,6 +253,12 @@ class IsolationScheduler:
         d = pose6_from_transform(e1) - pose6_from_transform(e0)
         d[3:] = (d[3:] + np.pi) % (2 * np.pi) - np.pi
         return transform_from_pose6(pose6_from_transform(T0) + d)
+
+    def received_pose(self, stamp: float) -> np.ndarray | None:
+        """A pose for `stamp` from what has arrived: the camera pose carried forward by the estimate
+        (`carried_pose`), else the nearest camera pose within `onset_pose_age` s, else None."""
+        T = self.carried_pose(stamp)
+        return T if T is not None else self.poses.at(stamp, self.onset_pose_age)
 
     def _pair(self, cam: str, frame: Any) -> dict[str, Any] | None:
         """`frame` with the nearest frame of every other camera within `pair_tolerance`, or None."""
