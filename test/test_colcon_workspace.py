@@ -13,6 +13,8 @@ from pathlib import Path
 
 import pytest
 
+pytestmark = pytest.mark.slow   # colcon builds: left out of `make check`
+
 REPO = Path(__file__).resolve().parents[1]
 VENV = Path(sys.prefix)
 PACKAGES = {"hexa_ros": REPO / "src" / "hexa_ros", "hexa_bringup": REPO / "hexa_bringup",
@@ -41,8 +43,6 @@ USER_PKG_XML = '''<?xml version="1.0"?>
 USER_PKG_MAIN = '''import sys
 from hexa_msgs.msg import CollisionEvent
 from rclpy.serialization import deserialize_message, serialize_message
-
-pytestmark = pytest.mark.slow   # colcon builds: left out of `make check`
 
 
 def main():

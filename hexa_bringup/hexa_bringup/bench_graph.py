@@ -810,7 +810,8 @@ def run(opts: Options) -> dict[str, Any]:
     cache = opts.cache
     results: dict[str, Any] = {}
     info_out: dict[str, Any] = {}
-    previous = {s: signal.getsignal(s) for s in (signal.SIGTERM, signal.SIGHUP)}
+    # SIGINT too: a process started in the background of a non-interactive shell inherits SIGINT ignored
+    previous = {s: signal.getsignal(s) for s in (signal.SIGINT, signal.SIGTERM, signal.SIGHUP)}
 
     def interrupt(_sig: int, _frm: Any) -> None:
         raise KeyboardInterrupt
