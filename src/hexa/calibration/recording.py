@@ -17,8 +17,6 @@ if TYPE_CHECKING:
     from numpy.typing import NDArray
 
 #: m, rad: the plate pose error of the simulated recording (σ), as `hexa eval`'s stand-in for the pose node
-POSE_NOISE = (0.0005, math.radians(0.1))
-CAMERA_PERIOD = 1.0 / 30.0
 COMMAND_RATE_HZ = 100.0
 CURRENT_RATE_HZ = 200.0
 
@@ -108,12 +106,10 @@ def simulate_recording(pose_of: Callable[[float], NDArray], duration: float, see
     done about once a simulated second.
     """
     from hexa.kinematics import hexa6rus as kin
-    from hexa.protocol.driver_core import load_driver_config
-    from hexa.protocol.sensor_model import CurrentSensorModel
     from hexa.robots.hexa_description import load_hexa
     from hexa.sim import Simulator
-    from hexa.sim.boards import board_offsets
-    from hexa.sim.realism import RealismConfig, adc_counts
+    from hexa.sim.boards import CAMERA_PERIOD, CurrentReadout, camera_pose
+    from hexa.sim.realism import RealismConfig
 
     desc = desc or load_hexa()
     realism = realism or RealismConfig.realistic()
@@ -124,10 +120,7 @@ def simulate_recording(pose_of: Callable[[float], NDArray], duration: float, see
         if payload > 0:
             add_plate_payload(sim, payload, point)
         rng = np.random.default_rng([int(seed), 23])
-        driver_cfg = load_driver_config()
-        sensor = CurrentSensorModel.from_dict(driver_cfg.get("sensor", {}))
-        driver_offsets = np.asarray(driver_cfg.get("current_offsets") or np.zeros(6), dtype=float)
-        offsets = board_offsets(sim, seed)
+        readout = CurrentReadout(sim, seed)
         jitter = realism.jitter
         z0 = kin.inverse_kinematics(desc, start)
         sim.set_servo_targets(z0)
@@ -152,15 +145,13 @@ def simulate_recording(pose_of: Callable[[float], NDArray], duration: float, see
                 continue
             s = sim.state()
             t = s.time
-            counts = adc_counts(sensor, sim.motor_currents(s.tau) + offsets, sim.config.current_noise_counts, rng)
             rec["tc"].append(t)     # the board's clock: the driver stamps currents with it
-            rec["i"].append(sensor.current_from_counts(counts) - driver_offsets)
+            rec["i"].append(readout.amps(s.tau, rng))
             rec["ts"].append(t)
             rec["s"].append(sim.servo_setpoints())
             if t >= next_cam - 1e-12:
                 rec["tp"].append(t)
-                rec["p"].append(s.pose + np.concatenate([rng.normal(0, POSE_NOISE[0], 3),
-                                                         rng.normal(0, POSE_NOISE[1], 3)]))
+                rec["p"].append(camera_pose(s.pose, rng))
                 next_cam += CAMERA_PERIOD
             if progress is not None and t >= next_report:
                 progress(min(1.0, t / t_end))

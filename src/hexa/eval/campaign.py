@@ -23,7 +23,6 @@ only, r_low = 2 N / 0.2 N·m, no servo criterion).
 from __future__ import annotations
 
 import dataclasses
-import math
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -37,8 +36,6 @@ TRAJECTORIES = ("circle", "helix", "ellipse")
 LEAD_IN = 1.0
 #: s simulated after a contact's end
 TAIL = 0.8
-CAMERA_PERIOD = 1.0 / 30.0
-POSE_NOISE = (0.0005, math.radians(0.1))    # m, rad: the stand-in for the pose node's error
 #: threshold scales of the DET curve (× the detector's thresholds, plate axes and servo torques together)
 THRESHOLD_SCALES = (0.5, 0.6, 0.7, 0.8, 0.9, 1.0, 1.15, 1.3, 1.5, 1.75, 2.0, 2.5)
 #: the detectors replayed on every run (`detectors`)
@@ -129,12 +126,9 @@ def simulate(collision: ScriptedCollision | None, trajectory: str, duration: flo
     from hexa.dynamics.contact_force import ContactForceConfig, ContactForceTracker, LocatedContact
     from hexa.dynamics.monitor import CollisionMonitor, MonitorConfig
     from hexa.dynamics.observer import ObserverConfig
-    from hexa.protocol.driver_core import load_driver_config
-    from hexa.protocol.sensor_model import CurrentSensorModel
     from hexa.robots.hexa_description import load_hexa
     from hexa.sim import Simulator
-    from hexa.sim.boards import board_offsets
-    from hexa.sim.realism import adc_counts
+    from hexa.sim.boards import CAMERA_PERIOD, CurrentReadout, camera_pose
     from hexa.dynamics.monitoring import MonitoringWatch
     from hexa.trajectory_runner import TrajectoryRunner, TrajectorySettings
 
@@ -144,10 +138,8 @@ def simulate(collision: ScriptedCollision | None, trajectory: str, duration: flo
                     trajectory=None if collision is not None else trajectory, realism=realism)
     rng = np.random.default_rng([int(seed), 11])
     jitter = realism.jitter
-    driver_cfg = load_driver_config()
-    sensor = CurrentSensorModel.from_dict(driver_cfg.get("sensor", {}))
-    driver_offsets = np.asarray(driver_cfg.get("current_offsets") or np.zeros(6), dtype=float)
-    offsets = board_offsets(sim, seed)
+    readout = CurrentReadout(sim, seed)
+    driver_cfg = readout.driver_config
     punctual = jitter.sample_sigma <= 0 and jitter.spike_rate <= 0
     mon = CollisionMonitor(desc, MonitorConfig(sim_clock=punctual), ocfg, detector=detector, cusum=cusum)
     # the observer node's monitoring contract: the runner starts on its first OK and holds on LOST, as live
@@ -190,13 +182,12 @@ def simulate(collision: ScriptedCollision | None, trajectory: str, duration: flo
                 continue
             s = sim.state()
             t = s.time
-            counts = adc_counts(sensor, sim.motor_currents(s.tau) + offsets, sim.config.current_noise_counts, rng)
-            amps = sensor.current_from_counts(counts) - driver_offsets
+            amps = readout.amps(s.tau, rng)
             stamp = t + jitter.sample_delay(rng)
             out = watch.push_currents(stamp, int(round(t * 1e6)), amps)
             out += watch.push_states(stamp, sim.servo_setpoints(), None, None)
             if t >= next_cam - 1e-12:
-                pose = s.pose + np.concatenate([rng.normal(0, POSE_NOISE[0], 3), rng.normal(0, POSE_NOISE[1], 3)])
+                pose = camera_pose(s.pose, rng)
                 out += watch.push_pose(t, pose)
                 if tracker is not None:
                     tracker.on_pose(t, pose)

@@ -14,6 +14,7 @@
 """
 from __future__ import annotations
 
+import math
 import os
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -37,6 +38,38 @@ def board_offsets(sim: "Simulator", seed: int) -> np.ndarray:
     if sim.truth is not None:
         return np.zeros(6)
     return np.random.default_rng([int(seed), 2]).normal(0.0, sim.config.current_offset_sigma, 6)
+
+
+#: a ROS-free run's camera poses: the top camera's frame period (s) and the pose node's error (m, rad per axis)
+CAMERA_PERIOD = 1.0 / 30.0
+POSE_NOISE = (0.0005, math.radians(0.1))
+
+
+def camera_pose(pose: np.ndarray, rng: np.random.Generator) -> np.ndarray:
+    """The plate pose a ROS-free run hands over as the camera's: the true pose plus the pose node's error
+    (POSE_NOISE, Gaussian, position then angles)."""
+    return pose + np.concatenate([rng.normal(0, POSE_NOISE[0], 3), rng.normal(0, POSE_NOISE[1], 3)])
+
+
+class CurrentReadout:
+    """The currents a ROS-free run reads as the driver does, without the virtual Mega: the servo torques as currents
+    plus the Mega's zero offsets (`board_offsets`), through the ADC with the simulator's noise
+    (`hexa.sim.realism.adc_counts`), back to amps by the driver's sensor model minus its configured offsets."""
+
+    def __init__(self, sim: "Simulator", seed: int) -> None:
+        self.sim = sim
+        self.driver_config = load_driver_config()
+        self.sensor = CurrentSensorModel.from_dict(self.driver_config.get("sensor", {}))
+        self.driver_offsets = np.asarray(self.driver_config.get("current_offsets") or np.zeros(6), dtype=float)
+        self.offsets = board_offsets(sim, seed)
+
+    def amps(self, tau: np.ndarray, rng: np.random.Generator) -> np.ndarray:
+        """The driver's currents (A) for servo torques `tau` (N·m); ADC noise drawn from `rng`."""
+        from hexa.sim.realism import adc_counts
+
+        sim = self.sim
+        counts = adc_counts(self.sensor, sim.motor_currents(tau) + self.offsets, sim.config.current_noise_counts, rng)
+        return self.sensor.current_from_counts(counts) - self.driver_offsets
 
 
 class VirtualBoards:
