@@ -41,6 +41,8 @@ class Peer:
         self.collect_max = True
         self.last_mc = None
         self.last_pose = None
+        self.fresh_pose = threading.Event()
+        self.sent_stamps: set[tuple[int, int]] = set()      # of the injected poses, which come back on plate_pose
         sub = node.create_subscription
         sub(Residual, f"{NS}/residual", self._on_residual, qos.STREAM)
         sub(MotorCurrents, f"{NS}/motor_currents", self._on_currents, qos.STREAM)
@@ -70,7 +72,10 @@ class Peer:
             self.last_mc = m
 
     def _on_pose(self, m) -> None:
+        if (m.header.stamp.sec, m.header.stamp.nanosec) in self.sent_stamps:
+            return                                   # our own bad pose, never the base of the next one
         self.last_pose = m
+        self.fresh_pose.set()
 
     def _on_collision(self, m) -> None:
         with self.lock:
@@ -236,9 +241,16 @@ def main() -> int:
         out["duplicate_nodes"] = _duplicates(node)
         # 1. one bad message at a time into every input topic
         for k in range(len(peer.faults())):
+            if peer.faults()[k][1] == "plate_pose":
+                # right after a camera pose: its stamp is then the newest the nodes accepted, and a pose 5 ms
+                # after it is a jump, not a pose older than one that overtook it
+                peer.fresh_pose.clear()
+                peer.fresh_pose.wait(2.0)
             with peer.lock:
                 t_sample = peer.residual[-1][0]
             name, topic, msg = peer.faults()[k]      # stamped from the newest stream values
+            if topic == "plate_pose":
+                peer.sent_stamps.add((msg.header.stamp.sec, msg.header.stamp.nanosec))
             peer.pub[topic].publish(msg)
             out["faults"].append({"name": name, "topic": topic, "t_sample": t_sample, "wall": time.monotonic()})
             time.sleep(0.4)
