@@ -7,10 +7,11 @@ import math
 import numpy as np
 import pytest
 
-from hexa.calibration.excitation import BOUNDS, Excitation, ExcitationSettings, _twist_rate, design_excitation
+from hexa.calibration.excitation import (BOUNDS, SLOW_SPEED, Excitation, ExcitationSettings, _twist_rate,
+                                        design_excitation)
 from hexa.calibration.identify import identify, prepare
 from hexa.calibration.overlay import ServoTorqueModel, write_overlay
-from hexa.calibration.recording import Recording
+from hexa.calibration.recording import Recording, simulate_recording
 from hexa.calibration.regressor import _free_torques, regressor, sym_from_params
 from hexa.calibration.validate import compare
 from hexa.dynamics.lagrange import HexaDynamicParameters, motion_from_plate
@@ -61,6 +62,37 @@ def test_excitation_is_periodic_starts_at_rest_at_home_and_keeps_the_limits(exci
     assert np.allclose(traj(1.234)[0], e.evaluate(1.234)[0], atol=2e-4)    # the file the trajectory node plays
     back = Excitation.read_design(path)
     assert back is not None and np.allclose(back.a, e.a) and back.period == e.period
+    # the design's slow fraction is the time its slowest servo spends below SLOW_SPEED
+    pose, vel, acc = e.evaluate(np.arange(64) * e.period / 64)
+    zd = motion_from_plate(PRM, kin.inverse_kinematics_batch(DESC, pose), pose, kin.twist_from_pose_rate(pose, vel),
+                           _twist_rate(pose, vel, acc)).zeta_dot
+    assert e.slow == pytest.approx(np.mean(np.abs(zd) < SLOW_SPEED, axis=0).max())
+
+
+def test_currents_locked_to_the_servo_frame_alias_its_ripple_into_a_speed_proportional_error(excitation):
+    """The realistic robot's servos take a set-point per 20 ms pulse frame; their torque ripples at 50 Hz. Currents
+    sampled at 200 Hz sit at four fixed phases of the frame and, low-passed, miss the mean torque by an error
+    proportional to the arm's speed; at the calibration's 143 Hz the phases sweep the frame and the error vanishes.
+    One 1 kHz recording, subsampled as each rate's recorder samples it."""
+    from hexa.calibration.identify import _lowpass, frame_locked
+
+    duration = 2.0
+    rec, _ = simulate_recording(lambda t: excitation.evaluate(t)[0], duration, seed=3, desc=DESC, lead_in=0.5,
+                                current_rate_hz=1000.0)
+    t, cur = rec.t_current, rec.currents
+    inner = (t > 0.8) & (t < t[-1] - 0.3)
+    ref = _lowpass(cur, 1000.0)
+    speed = np.gradient(_lowpass(rec.setpoints, 1000.0), t, axis=0)
+    slopes = {}
+    for rate, step in ((200.0, 5), (143.0, 7)):
+        ts = t[::step]
+        assert frame_locked(ts) == (rate == 200.0)
+        low = _lowpass(cur[::step], 1000.0 / step)
+        err = np.stack([np.interp(t, ts, low[:, k]) for k in range(6)], 1) - ref
+        slopes[rate] = np.array([np.polyfit(speed[inner, k], err[inner, k], 1)[0] for k in range(6)])
+    # A·s/rad: at 200 Hz ≥ 0.04 (0.02 N·m·s/rad, five times the truth's viscous friction) on some servo
+    assert np.abs(slopes[200.0]).max() > 0.04, slopes
+    assert np.abs(slopes[143.0]).max() < 0.25 * np.abs(slopes[200.0]).max(), slopes
 
 
 def _truth(rng: np.random.Generator) -> dict:

@@ -76,6 +76,11 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 
 def _common(p: argparse.ArgumentParser) -> None:
+    from hexa.calibration.recording import CALIBRATION_RATE_HZ
+
+    p.add_argument("--stream-rate", type=float, default=CALIBRATION_RATE_HZ, metavar="HZ",
+                   help="--simulate: the currents' sample rate of the simulated runs (the driver's stream_rate_hz; "
+                        f"default {CALIBRATION_RATE_HZ:g}, off the servos' 50 Hz pulse frame; 200 is the graph's)")
     p.add_argument("--description", default=None, help="robot description YAML (default: the packaged one)")
     p.add_argument("--ns", default="/hexa", help="namespace of the recorded graph (default /hexa)")
     p.add_argument("--json", action="store_true", help="print the result as JSON (SI units)")
@@ -102,7 +107,7 @@ def _desc(path: str | None) -> Any:
 
 # ------------------------------------------------------------------------------------------------ excite
 def run_excite(args: argparse.Namespace) -> int:
-    from hexa.calibration.excitation import ExcitationError, ExcitationSettings, design_excitation
+    from hexa.calibration.excitation import SLOW_SPEED, ExcitationError, ExcitationSettings, design_excitation
 
     desc = _desc(args.description)
     given = {k: getattr(args, k) for k in ("period", "harmonics", "cycles", "iterations", "speed_fraction",
@@ -123,13 +128,14 @@ def run_excite(args: argparse.Namespace) -> int:
     path = exc.write(args.out, settings.rate_hz)
     out = {"file": str(path), "period": exc.period, "cycles": exc.cycles, "duration": exc.duration,
            "harmonics": int(exc.a.shape[1]), "condition_number": exc.condition, "peak_zeta_dot": exc.peak_speed,
-           "peak_torque": exc.peak_torque}
+           "peak_torque": exc.peak_torque, "slow_fraction": exc.slow}
     if args.json:
         print(json.dumps(out, indent=1))
     else:
         print(f"excitation: {path} ({exc.cycles} × {exc.period:g} s = {exc.duration:g} s, {out['harmonics']} "
               f"harmonics per DOF)\n  condition number {exc.condition:.1f}; peak |ζ̇| {exc.peak_speed:.2f} rad/s, "
-              f"peak |τ| {exc.peak_torque:.2f} N·m (nominal model)\n"
+              f"peak |τ| {exc.peak_torque:.2f} N·m (nominal model); the slowest servo spends "
+              f"{100 * exc.slow:.1f} % of a period below {SLOW_SPEED:g} rad/s\n"
               f"next: hexa bringup sim --realism realistic --trajectory {path} (with the bag recorder), then "
               f"hexa calibrate identify BAG --trajectory {path}")
     return 0
@@ -223,7 +229,8 @@ def run_identify(args: argparse.Namespace) -> int:
             rec, truth = simulate_recording(lambda t: pose_of(t)[0], duration, seed=args.simulate,
                                             realism=_sim_realism(args.horn_tolerance), desc=desc, payload=m,
                                             payload_point=np.asarray(args.payload_point),
-                                            progress=_progress(f"simulating run {k + 1} (payload {m:g} kg)"))
+                                            progress=_progress(f"simulating run {k + 1} (payload {m:g} kg)"),
+                                            current_rate_hz=args.stream_rate)
             recs.append(rec)
     else:
         if not args.bag:
@@ -251,6 +258,8 @@ def run_identify(args: argparse.Namespace) -> int:
         if not mo.periodic:
             print(f"note: {mo.source} is not the periodic excitation (its poses miss the period's Fourier series: "
                   "paused or late); its motion is low-passed camera poses instead, less accurate")
+    for note in dict.fromkeys(cal.notes):
+        print(f"note: {note}")
     if cal.scale != "payload":
         print("note: no run with a known payload — the torque scale (every K_t and mass) rests on the "
               "description's K_t; record a second run with a known mass (--payload-bag, --payload)")
@@ -319,7 +328,8 @@ def run_validate(args: argparse.Namespace) -> int:
         fn = trajectories.TRAJECTORIES[args.trajectory]
         rec, _ = simulate_recording(lambda t: fn(t)[0], SIM_VALIDATE_SECONDS, seed=args.simulate,
                                     realism=_sim_realism(args.horn_tolerance), desc=desc,
-                                    progress=_progress(f"simulating the {args.trajectory}"))
+                                    progress=_progress(f"simulating the {args.trajectory}"),
+                                    current_rate_hz=args.stream_rate)
     elif args.bag:
         rec = recording_from_bag(args.bag, args.ns)
     else:

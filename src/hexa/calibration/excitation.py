@@ -9,8 +9,10 @@ so the motion is periodic (averaging over periods removes noise), starts at the 
 (Σ_l l a_kl = 0 per DOF: q̇(0) = 0, enforced by projection). The coefficients minimize cond(W) of the column-scaled
 regressor W (hexa.calibration.regressor, nominal model, one period) subject to: every pose inside the workspace
 (IK with margin from the serial singularity, the amplitude bounds `BOUNDS`), |ζ̇| ≤ `speed_fraction`·speed_max and
-the model's servo torques ≤ `torque_fraction`·torque_max. The search is a seeded random start followed by a (1+λ)
-evolution strategy — reproducible, no gradient of cond needed.
+the model's servo torques ≤ `torque_fraction`·torque_max, with a penalty on the time any servo spends below
+`SLOW_SPEED` (`slow_fraction`): Coulomb friction is told from viscous friction and the current offset by the speed
+at which it saturates, so every servo reverses briskly instead of dwelling near rest. The search is a seeded random
+start followed by a (1+λ) evolution strategy — reproducible, no gradient of cond needed.
 """
 from __future__ import annotations
 
@@ -26,6 +28,9 @@ if TYPE_CHECKING:
 
 #: largest excursion from home per DOF (m, m, m, rad, rad, rad): inside the paper's workspace (±0.1 m, tilts ±30°)
 BOUNDS = (0.08, 0.08, 0.04, math.radians(20.0), math.radians(20.0), math.radians(20.0))
+#: rad/s: below this arm speed a servo's friction is in its transition from rest to Coulomb's (the realistic
+#: robot's reaches ≈ 70 % of the Coulomb torque at 0.05 rad/s and all of it above ≈ 0.2 rad/s)
+SLOW_SPEED = 0.05
 
 
 class ExcitationError(ValueError):
@@ -35,13 +40,15 @@ class ExcitationError(ValueError):
 @dataclass(frozen=True)
 class ExcitationSettings:
     """Design knobs: `period` (s) of one cycle, `harmonics` L, `cycles` in the file, limits as fractions of the
-    servo's speed and stall torque, `iterations` of the search, `seed`, `rate_hz` of the written file."""
+    servo's speed and stall torque, `slow_fraction`: the time per period any servo may spend below SLOW_SPEED before
+    the design is penalised, `iterations` of the search, `seed`, `rate_hz` of the written file."""
 
     period: float = 4.0
     harmonics: int = 5
     cycles: int = 7
     speed_fraction: float = 0.5
     torque_fraction: float = 0.6
+    slow_fraction: float = 0.06
     iterations: int = 100
     seed: int = 0
     rate_hz: float = 100.0
@@ -53,7 +60,7 @@ class ExcitationSettings:
             raise ExcitationError(f"harmonics must be 1..10, got {self.harmonics}")
         if not (1 <= self.cycles <= 100):
             raise ExcitationError(f"cycles must be 1..100, got {self.cycles}")
-        for name in ("speed_fraction", "torque_fraction"):
+        for name in ("speed_fraction", "torque_fraction", "slow_fraction"):
             v = getattr(self, name)
             if not (0.0 < v <= 1.0):
                 raise ExcitationError(f"{name} must be in (0, 1], got {v}")
@@ -64,7 +71,8 @@ class ExcitationSettings:
 @dataclass
 class Excitation:
     """A designed excitation: Fourier coefficients a, b (6, L), home pose q0, period (s), and what the design
-    achieved (`condition`, peak |ζ̇| and |τ| of the nominal model, `feasible`)."""
+    achieved (`condition`, peak |ζ̇| and |τ| of the nominal model, `slow`: the largest fraction of a period a servo
+    spends below SLOW_SPEED, `feasible`)."""
 
     q0: NDArray
     a: NDArray
@@ -74,6 +82,7 @@ class Excitation:
     condition: float = math.inf
     peak_speed: float = math.nan
     peak_torque: float = math.nan
+    slow: float = math.nan
     feasible: bool = False
     history: list[float] = field(default_factory=list)
 
@@ -104,7 +113,8 @@ class Excitation:
         pose = self.evaluate(t)[0]
         head = [f"hexa calibrate excite: {self.cycles} x {self.period:g} s Fourier excitation, "
                 f"{self.a.shape[1]} harmonics, cond {self.condition:.1f}",
-                f"peak |zeta_dot| {self.peak_speed:.3f} rad/s, peak |tau| (nominal model) {self.peak_torque:.3f} N*m",
+                f"peak |zeta_dot| {self.peak_speed:.3f} rad/s, peak |tau| (nominal model) {self.peak_torque:.3f} N*m, "
+                f"slowest servo below {SLOW_SPEED:g} rad/s for {100 * self.slow:.1f} % of the period",
                 "period " + repr(self.period), "q0 " + " ".join(repr(float(v)) for v in self.q0),
                 "a " + " ".join(repr(float(v)) for v in self.a.ravel()),
                 "b " + " ".join(repr(float(v)) for v in self.b.ravel()),
@@ -137,7 +147,7 @@ def _project_rest(a: NDArray) -> NDArray:
 
 
 class _Scorer:
-    """cond(W) and the limits of one candidate, on one period sampled at `samples` points."""
+    """cond(W), the limits and the slow fraction of one candidate, on one period sampled at `samples` points."""
 
     def __init__(self, desc: Any, settings: ExcitationSettings, samples: int = 64) -> None:
         from hexa.dynamics.lagrange import HexaDynamicParameters
@@ -147,14 +157,14 @@ class _Scorer:
         self.t = np.arange(samples) * settings.period / samples
         self.scale: NDArray | None = None
 
-    def __call__(self, exc: Excitation) -> tuple[float, float, float, bool]:
+    def __call__(self, exc: Excitation) -> tuple[float, float, float, float, bool]:
         from hexa.calibration.regressor import regressor
         from hexa.dynamics.lagrange import DynamicsError, motion_from_plate
         from hexa.kinematics import hexa6rus as kin
 
         pose, vel, acc = exc.evaluate(self.t)
         if np.any(np.abs(pose - exc.q0) > np.asarray(BOUNDS) * 1.0001):
-            return math.inf, math.nan, math.nan, False
+            return math.inf, math.nan, math.nan, math.nan, False
         try:
             zeta = kin.inverse_kinematics_batch(self.desc, pose)
             V = kin.twist_from_pose_rate(pose, vel)
@@ -162,8 +172,9 @@ class _Scorer:
             state = motion_from_plate(self.prm, zeta, pose, V, Vd)
             reg = regressor(self.prm, state)
         except (ValueError, DynamicsError):
-            return math.inf, math.nan, math.nan, False
+            return math.inf, math.nan, math.nan, math.nan, False
         speed = float(np.abs(state.zeta_dot).max())
+        slow = float(np.mean(np.abs(state.zeta_dot) < SLOW_SPEED, axis=0).max())
         n = self.prm
         tau = reg.torques(_sym(n), np.full(6, n.J_a), np.full(6, n.m_a * n.s_a), np.zeros(6), np.zeros(6))
         torque = float(np.abs(tau).max())
@@ -174,7 +185,7 @@ class _Scorer:
         cond = float(sv[0] / sv[-1]) if sv[-1] > 0 else math.inf
         ok = (speed <= self.s.speed_fraction * float(self.desc.speed_max)
               and torque <= self.s.torque_fraction * float(self.desc.torque_max))
-        return cond, speed, torque, ok
+        return cond, speed, torque, slow, ok
 
 
 def _sym(prm: Any) -> NDArray:
@@ -229,18 +240,18 @@ def design_excitation(desc: Any = None, settings: ExcitationSettings | None = No
     best: Excitation | None = None
     best_cost = math.inf
 
-    def cost(cond: float, speed: float, torque: float, ok: bool) -> float:
+    def cost(cond: float, speed: float, torque: float, slow: float, ok: bool) -> float:
         if not math.isfinite(cond):
             return math.inf
         over = max(0.0, speed / (s.speed_fraction * desc.speed_max) - 1.0) + \
             max(0.0, torque / (s.torque_fraction * desc.torque_max) - 1.0)
-        return cond * (1.0 + 20.0 * over) + (0.0 if ok else 1e6)
+        return cond * (1.0 + 20.0 * over + 4.0 * max(0.0, slow / s.slow_fraction - 1.0)) + (0.0 if ok else 1e6)
 
     def trial(a: NDArray, b: NDArray) -> tuple[float, Excitation]:
         e = Excitation(q0=q0, a=_project_rest(a), b=b, period=s.period, cycles=s.cycles)
-        cond, speed, torque, ok = score(e)
-        e.condition, e.peak_speed, e.peak_torque, e.feasible = cond, speed, torque, ok
-        return cost(cond, speed, torque, ok), e
+        cond, speed, torque, slow, ok = score(e)
+        e.condition, e.peak_speed, e.peak_torque, e.slow, e.feasible = cond, speed, torque, slow, ok
+        return cost(cond, speed, torque, slow, ok), e
 
     for scale in (1.0, 0.7, 0.5, 0.3, 0.15):   # random starts, shrinking until feasible ones appear
         for _ in range(12):

@@ -35,7 +35,7 @@ from typing import TYPE_CHECKING, Any, Sequence
 
 import numpy as np
 
-from hexa.calibration.recording import Recording
+from hexa.calibration.recording import CALIBRATION_RATE_HZ, Recording
 from hexa.calibration.regressor import BASE_SYM, SYM_NAMES, params_with_sym, regressor, sym_from_params
 
 if TYPE_CHECKING:
@@ -76,6 +76,18 @@ class Motion:
     source: str
     periodic: bool
     horn: tuple[NDArray, NDArray, NDArray, NDArray]   # IK angle − set-point, currents, ζ̇ at the camera instants
+    notes: list[str] = field(default_factory=list)
+
+
+def frame_locked(t_current: NDArray, frame_period: float = 0.0) -> bool:
+    """Whether currents sampled at instants `t_current` sit at a few fixed phases of the servos' pulse frame (the
+    rate a multiple of a quarter of the frame rate: 50, 100, 200 Hz … for the 20 ms frame), where the frame's torque
+    ripple aliases to a steady, speed-proportional error (hexa.calibration.recording.CALIBRATION_RATE_HZ)."""
+    from hexa.calibration.recording import SERVO_FRAME_PERIOD
+
+    dt = float(np.median(np.diff(t_current)))
+    per_frame = (frame_period or SERVO_FRAME_PERIOD) / dt
+    return bool(abs(4.0 * per_frame - round(4.0 * per_frame)) < 0.02 * 4.0)
 
 
 def _unwrap_pose(poses: NDArray) -> NDArray:
@@ -205,9 +217,15 @@ def prepare(rec: Recording, desc: Any, prm: Any = None, period: float | None = N
     payload_sym = np.array([m, *(m * c), I_pl[0, 0], I_pl[1, 1], I_pl[2, 2], I_pl[0, 1], I_pl[0, 2], I_pl[1, 2],
                             0.0, 0.0, 0.0])
     assert state.zeta_ddot is not None   # set from full.zeta_ddot above
+    notes = []
+    if frame_locked(rec.t_current):
+        rate = 1.0 / float(np.median(np.diff(rec.t_current)))
+        notes.append(f"{rec.source or 'recording'}: currents at {rate:.0f} Hz, locked to the servos' 20 ms pulse "
+                     "frame: their torque ripple aliases to a speed-proportional error that biases friction (and "
+                     f"the rest); record with the driver's stream_rate_hz {CALIBRATION_RATE_HZ:.0f}")
     return Motion(t=t, currents=cur, reg=reg, zeta=zeta, zeta_dot=state.zeta_dot, zeta_ddot=state.zeta_ddot,
                   poses=pose, payload_sym=payload_sym, source=rec.source, periodic=periodic,
-                  horn=(_wrap(zc - sp), ic, zd, sp))
+                  horn=(_wrap(zc - sp), ic, zd, sp), notes=notes)
 
 
 def _wrap(a: NDArray) -> NDArray:
@@ -233,7 +251,8 @@ class Calibration:
     along and across the arm), `horn_offset` (rad); the plate's `plate_mass`, `plate_com` ({P}, m), `plate_inertia`
     (about the COM, {P}); the rods' `rod_K`; `ci95` of each
     (same keys, arrays); `scale`: "payload" or "nominal K_t" (what fixed the torque scale); `consistency`: "free",
-    "bounded" or "projected"; `rms` per servo of the fit (N·m) and the number of `samples`."""
+    "bounded" or "projected"; `rms` per servo of the fit (N·m) and the number of `samples`; `notes`: what
+    limits the result (a run's currents locked to the servos' pulse frame)."""
 
     k_t: NDArray
     current_offset: NDArray
@@ -254,6 +273,7 @@ class Calibration:
     rms: NDArray
     samples: int
     sources: list[str] = field(default_factory=list)
+    notes: list[str] = field(default_factory=list)
 
     def as_dict(self) -> dict[str, Any]:
         out: dict[str, Any] = {}
@@ -435,7 +455,8 @@ def identify(motions: Sequence[Motion], desc: Any) -> Calibration:
               "plate_first_moment": ci_plate[1:4], "plate_inertia_P": ci_plate[4:10], "rod_K": float(ci_plate[10])},
         scale=scale, consistency=consistency,
         rms=np.array([np.sqrt(np.mean(torque_res[servo == i] ** 2)) for i in range(6)]),
-        samples=int(I.size // 6), sources=[mo.source for mo in motions])
+        samples=int(I.size // 6), sources=[mo.source for mo in motions],
+        notes=[n for mo in motions for n in mo.notes])
 
 
 #: s: an MG996R-class servo's dead band in pulse width (datasheet: 5 µs)

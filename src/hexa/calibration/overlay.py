@@ -5,7 +5,7 @@ An overlay is a YAML file with `calibration_of: BASE` (hexa.robots.hexa_descript
 - `actuators.K_t` (the mean torque constant), `sim.servo.armature` (the mean inertia about the motor axis beyond the
   arm's own: the rotor's) and `sim.servo.damping` (the mean viscous friction) — the nodes' symmetric model;
 - `calibration`: the per-servo values (k_t, current_offset, coulomb, viscous, inertia, first_moment, first_moment_y,
-  horn_offset),
+  horn_offset), the speed ε of the Coulomb term's tanh(ζ̇/ε) (`coulomb_speed`, rad/s),
   their 95 % confidence half-widths, the runs used and how the torque scale was fixed.
 `ServoTorqueModel` applies the per-servo part to the currents (the observer's torques), the driver applies
 `horn_offset` to its angle ↔ pulse map.
@@ -35,6 +35,7 @@ def _floats(a: Any) -> Any:
 
 def overlay_mapping(cal: "Calibration", desc: Any) -> dict[str, Any]:
     """The overlay (module docstring) of `cal` on the description `desc`."""
+    from hexa.calibration.regressor import COULOMB_SPEED
     base = str(getattr(desc, "path", "") or "")
     from hexa.robots.hexa_description import DEFAULT_PATH
 
@@ -56,7 +57,7 @@ def overlay_mapping(cal: "Calibration", desc: Any) -> dict[str, Any]:
         "calibration": {
             "created": _dt.datetime.now(_dt.timezone.utc).strftime("%Y-%m-%dT%H:%M:%SZ"),
             "sources": list(cal.sources), "scale": cal.scale, "consistency": cal.consistency,
-            "samples": int(cal.samples), "fit_rms": _floats(cal.rms),
+            "samples": int(cal.samples), "fit_rms": _floats(cal.rms), "coulomb_speed": COULOMB_SPEED,
             **{k: _floats(getattr(cal, k)) for k in PER_SERVO},
             "ci95": {k: _floats(v) for k, v in cal.ci95.items()},
         },
@@ -109,7 +110,7 @@ class ServoTorqueModel:
         ms = arr("first_moment", 0.0)
         self.dms_g = (ms - ms.mean()) * 9.81
         self.msy_g = arr("first_moment_y", 0.0) * 9.81
-        self.eps = COULOMB_SPEED
+        self.eps = float(cal.get("coulomb_speed", COULOMB_SPEED))   # the smoothing the friction was identified with
         self.friction = self.calibrated and bool(np.any(self.fc) or np.any(self.dfv) or np.any(self.dms_g)
                                                  or np.any(self.msy_g))
 

@@ -16,9 +16,17 @@ import numpy as np
 if TYPE_CHECKING:
     from numpy.typing import NDArray
 
-#: m, rad: the plate pose error of the simulated recording (σ), as `hexa eval`'s stand-in for the pose node
 COMMAND_RATE_HZ = 100.0
-CURRENT_RATE_HZ = 200.0
+CURRENT_RATE_HZ = 200.0     # Hz: the driver's default stream rate (hexa_driver/config/driver.yaml)
+#: Hz: the Mega's stream rate of a calibration run (the driver's `stream_rate_hz`). The servos' torque ripples at
+#: their 50 Hz pulse frame (a new set-point every 20 ms, the position loop's step response); 200 Hz is a multiple of
+#: 50 Hz, so each sample sits at the same phase of the frame and the ripple's 200, 400 … Hz harmonics alias to
+#: a steady error proportional to the arm's speed (±0.06 N·m·s/rad on the realistic robot, as large as the
+#: friction). At 143 Hz (a 6993 µs period, 979 µs of frame phase more every three samples) the samples sweep the
+#: frame every 140 ms: the aliases land at ≥ 7 Hz, above the analysis low-pass, and average out.
+CALIBRATION_RATE_HZ = 143.0
+#: s: the servo board's pulse frame (firmware uno_servo)
+SERVO_FRAME_PERIOD = 0.02
 
 
 class RecordingError(ValueError):
@@ -96,14 +104,15 @@ def add_plate_payload(sim: Any, mass: float, point: NDArray) -> None:
 
 def simulate_recording(pose_of: Callable[[float], NDArray], duration: float, seed: int = 0, realism: Any = None,
                        desc: Any = None, payload: float = 0.0, payload_point: NDArray | None = None,
-                       lead_in: float = 1.0, progress: Callable[[float], None] | None = None
-                       ) -> tuple[Recording, Any]:
+                       lead_in: float = 1.0, progress: Callable[[float], None] | None = None,
+                       current_rate_hz: float = CALIBRATION_RATE_HZ) -> tuple[Recording, Any]:
     """Run the simulated robot of `seed` along `pose_of(t)` (trajectory time t in [0, duration]) and record it as
     the live graph would (module docstring). Returns (recording, the simulator's truth or None).
 
     pose_of: trajectory time → plate pose (6,); realism: hexa.sim.realism.RealismConfig (default realistic);
     payload: a point mass (kg) fixed at `payload_point` on the plate for the run; progress: called with the fraction
-    done about once a simulated second.
+    done about once a simulated second; current_rate_hz: the currents' sample rate (the simulator's step divided by
+    a whole number: 1 kHz / 7 for the default `CALIBRATION_RATE_HZ`, the driver's 200 Hz with CURRENT_RATE_HZ).
     """
     from hexa.kinematics import hexa6rus as kin
     from hexa.robots.hexa_description import load_hexa
@@ -126,7 +135,7 @@ def simulate_recording(pose_of: Callable[[float], NDArray], duration: float, see
         sim.set_servo_targets(z0)
         pending: list[tuple[float, NDArray]] = []
         rec: dict[str, list] = {k: [] for k in ("tc", "i", "ts", "s", "tp", "p")}
-        steps = max(1, int(round(1.0 / (CURRENT_RATE_HZ * sim.timestep))))
+        steps = max(1, int(round(1.0 / (current_rate_hz * sim.timestep))))
         next_cmd, next_cam, next_report, k = 0.0, 0.0, 0.0, 0
         t_end = lead_in + duration
         while sim.time < t_end - 1e-9:
