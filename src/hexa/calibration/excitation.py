@@ -24,6 +24,8 @@ import numpy as np
 if TYPE_CHECKING:
     from numpy.typing import NDArray
 
+    from hexa.robots.hexa_description import HexaDescription
+
 #: largest excursion from home per DOF (m, m, m, rad, rad, rad): inside the paper's workspace (±0.1 m, tilts ±30°)
 BOUNDS = (0.08, 0.08, 0.04, math.radians(20.0), math.radians(20.0), math.radians(20.0))
 
@@ -139,7 +141,7 @@ def _project_rest(a: NDArray) -> NDArray:
 class _Scorer:
     """cond(W) and the limits of one candidate, on one period sampled at `samples` points."""
 
-    def __init__(self, desc: Any, settings: ExcitationSettings, samples: int = 64) -> None:
+    def __init__(self, desc: HexaDescription, settings: ExcitationSettings, samples: int = 64) -> None:
         from hexa.dynamics.lagrange import HexaDynamicParameters
 
         self.desc, self.s = desc, settings
@@ -207,7 +209,7 @@ def identification_matrix(reg: Any) -> NDArray:
     return Y.reshape(n * 6, -1)
 
 
-def design_excitation(desc: Any = None, settings: ExcitationSettings | None = None,
+def design_excitation(desc: HexaDescription | None = None, settings: ExcitationSettings | None = None,
                       progress: Callable[[int, float], None] | None = None) -> Excitation:
     """The excitation of `settings` for the robot `desc` (default the packaged one): see the module docstring.
 

@@ -24,11 +24,17 @@ from __future__ import annotations
 
 import dataclasses
 from dataclasses import dataclass, field
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
 from hexa.sim.scenarios import ScriptedCollision
+
+if TYPE_CHECKING:
+    from hexa.dynamics.cusum import CusumConfig
+    from hexa.dynamics.observer import ObserverConfig
+    from hexa.robots.hexa_description import HexaDescription
+    from hexa.sim.realism import RealismConfig
 
 LINKS = ("plate", "arm", "rod")
 TRAJECTORIES = ("circle", "helix", "ellipse")
@@ -115,9 +121,10 @@ class RunRecord:
     counters: dict[str, Any] = field(default_factory=dict)
 
 
-def simulate(collision: ScriptedCollision | None, trajectory: str, duration: float, realism: Any, seed: int,
-             observer_config: Any = None, identify: bool = True, desc: Any = None, detector: str = "threshold",
-             cusum: Any = None) -> RunRecord:
+def simulate(collision: ScriptedCollision | None, trajectory: str, duration: float, realism: RealismConfig,
+             seed: int, observer_config: ObserverConfig | None = None, identify: bool = True,
+             desc: HexaDescription | None = None, detector: str = "threshold",
+             cusum: CusumConfig | None = None) -> RunRecord:
     """Run the robot `duration` s of trajectory time (after LEAD_IN) with an optional scripted contact (its onset in
     trajectory time); see the module docstring for what runs. Free motion (no contact) loops the trajectory and
     ignores STARTs (it keeps moving, to count false alarms); with a contact a START holds the trajectory, as the
