@@ -116,7 +116,7 @@ class DriverCore:
             After the driver stalled (a starved or paused host) the newest trajectory point can lie far ahead of the
             last one sent, and the time since it would allow the whole jump: the servos jumped there at their full
             speed, a real jerk that the collision observer saw as a collision. With one command period here they
-            catch up at max_speed instead (docs/driver.md, "Catching up after a stall").
+            catch up at max_speed instead (docs/driver_timing.md, "Catching up after a stall").
         joint_names: names expected in joint_commands / used in joint_states.
     """
 
