@@ -488,7 +488,7 @@ class SampleSequencer:
     of the other (matched by stamp; a partner lost in transport is dropped and counted). A sample is released only
     once its pair is complete, with the command of its own joint_states (the one the driver had sent when it handled
     the sample) — not the command current at its board time by host stamps: in sim mode those stamps are quantized
-    and lagged by /clock, which misplaced command changes by a few ms (docs/observer_node.md, "Command timing").
+    and lagged by /clock, which misplaced command changes by a few ms (docs/history/observer_node.md, "Command timing").
 
     Camera poses are released into the same stream at sample time stamp + pose_delay (the vision chain's latency is
     0.1-0.47 s on this loaded machine); a pose that arrives later than that is released on arrival and counted in

@@ -6,8 +6,8 @@ The simulator steps as fast as it can and sleeps to keep sim time at `real_time_
 until the pace is restored: sim time then runs several times faster than the rest of the graph, whose commands
 (trajectory → driver → virtual Uno) then reach the simulated servos sparser in sim time than they were played —
 gaps of 20–50 ms followed by a burst of set-point steps, which the arms really follow with jerks that the observer
-sees as unmodelled torque (docs/observer_node.md, "Command timing"). So when the loop is more than `max_lag` wall
-seconds behind, the lost wall time is dropped instead: the run gets longer, and sim time never runs ahead of the
+sees as unmodelled torque (docs/history/observer_node.md, "Command timing"). So when the loop is more than `max_lag`
+wall seconds behind, the lost wall time is dropped instead: the run gets longer, and sim time never runs ahead of the
 requested factor.
 """
 from __future__ import annotations
