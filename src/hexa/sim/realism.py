@@ -1,5 +1,5 @@
 """The realistic simulated robot: a *truth* that is not the nodes' model, hobby-servo mechanics, a real current
-sensor's noise and host timing jitter. See docs/simulator.md, "The realistic robot".
+sensor's noise and host timing jitter. See docs/realism.md.
 
     from hexa.sim.realism import RealismConfig, draw_truth
     truth = draw_truth(load_hexa(), seed=3)             # masses, COMs, inertias, K_t, friction, offsets... per seed
