@@ -81,12 +81,11 @@ class ObserverConfig:
     (currents + plate pose from image processing) and the one for hobby servos, whose angle is not measured.
     """
 
-    # the live graph's values (the observer node declares these): K = 100 1/s, a 10 ms first-order lag — once the
-    # simulated graph delivers commands on time, free-motion residual peaks reach r_low only in runs of a few samples,
-    # and the plate is detected 35 ms sooner than at 25 1/s; min_duration 0.02 s, 5 consecutive samples at 200 Hz —
-    # free motion has had runs of up to 3 samples over a threshold (the plate axes in 3 × 60 s before the board-clock
-    # driver; the servo torques once, at a trajectory's start; 0.015 s raises false STARTs;
-    # docs/history/observer_node.md, "Command timing", "Free motion that moves for 60 s"; docs/detectors.md)
+    # the live graph's values (the observer node declares these): K = 100 1/s, a 10 ms first-order lag — with the
+    # commands delivered on time, free-motion residual peaks reach r_low only in runs of a few samples, and the plate
+    # is detected 35 ms sooner than at 25 1/s; min_duration 0.02 s, 5 consecutive samples at 200 Hz — free motion
+    # shows runs of up to 3 samples over a threshold, and 0.015 s raises false STARTs
+    # (docs/history/observer_node.md, "Command timing", "Free motion that moves for 60 s"; docs/detectors.md)
     gains: tuple[float, ...] = (100.0, 100.0, 100.0, 100.0, 100.0, 100.0)
     thresholds: tuple[float, ...] = (2.0, 2.0, 2.0, 0.2, 0.2, 0.2)
     # free motion in the live graph peaks at 0.3–0.52 N·m in single samples; an arm push of 5 N gives 0.4–0.54 N·m,
