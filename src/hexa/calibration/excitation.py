@@ -24,6 +24,7 @@ import numpy as np
 if TYPE_CHECKING:
     from numpy.typing import NDArray
 
+    from hexa.dynamics.lagrange import HexaDynamicParameters
     from hexa.robots.hexa_description import HexaDescription
 
 #: largest excursion from home per DOF (m, m, m, rad, rad, rad): inside the paper's workspace (±0.1 m, tilts ±30°)
@@ -179,7 +180,7 @@ class _Scorer:
         return cond, speed, torque, ok
 
 
-def _sym(prm: Any) -> NDArray:
+def _sym(prm: HexaDynamicParameters) -> NDArray:
     from hexa.calibration.regressor import sym_from_params
 
     return sym_from_params(prm)

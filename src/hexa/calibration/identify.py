@@ -456,7 +456,7 @@ def _armature(desc: HexaDescription) -> float:
     return servo_armature_damping(desc)[0]
 
 
-def _rod_share_at_B(prm: Any) -> float:
+def _rod_share_at_B(prm: HexaDynamicParameters) -> float:
     """The inertia about the motor axis a rod's regrouped share at B_i adds to J_i (m_r (1−κ)… as a point at B_i):
     (m_r − 2 m_r κ + K_r) l_a² — the rod's kinetic energy at B_i's speed when C_i stands still."""
     K_r = prm.m_r * prm.kappa ** 2 + prm.I_r / prm.l_d ** 2

@@ -17,6 +17,7 @@ if TYPE_CHECKING:
     from numpy.typing import NDArray
 
     from hexa.robots.hexa_description import HexaDescription
+    from hexa.sim.realism import RealismConfig, RobotTruth
     from hexa.sim.simulator import Simulator
 
 #: m, rad: the plate pose error of the simulated recording (σ), as `hexa eval`'s stand-in for the pose node
@@ -97,10 +98,10 @@ def add_plate_payload(sim: Simulator, mass: float, point: NDArray) -> None:
     mujoco.mj_forward(m, d)
 
 
-def simulate_recording(pose_of: Callable[[float], NDArray], duration: float, seed: int = 0, realism: Any = None,
-                       desc: HexaDescription | None = None, payload: float = 0.0, payload_point: NDArray | None = None,
-                       lead_in: float = 1.0, progress: Callable[[float], None] | None = None
-                       ) -> tuple[Recording, Any]:
+def simulate_recording(pose_of: Callable[[float], NDArray], duration: float, seed: int = 0,
+                       realism: RealismConfig | None = None, desc: HexaDescription | None = None,
+                       payload: float = 0.0, payload_point: NDArray | None = None, lead_in: float = 1.0,
+                       progress: Callable[[float], None] | None = None) -> tuple[Recording, RobotTruth | None]:
     """Run the simulated robot of `seed` along `pose_of(t)` (trajectory time t in [0, duration]) and record it as
     the live graph would (module docstring). Returns (recording, the simulator's truth or None).
 

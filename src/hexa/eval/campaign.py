@@ -63,14 +63,14 @@ class DetectorSpec:
     thresholds: tuple[float, ...]
     servo_thresholds: tuple[float, ...]
     kind: str = "threshold"
-    cusum: Any = None
+    cusum: CusumConfig | None = None
 
-    def config(self, base: Any, scale: float = 1.0) -> Any:
+    def config(self, base: ObserverConfig, scale: float = 1.0) -> ObserverConfig:
         return dataclasses.replace(base, thresholds=tuple(scale * v for v in self.thresholds),
                                    servo_thresholds=tuple(scale * v for v in self.servo_thresholds))
 
 
-def detectors(observer_config: Any, cusum: Any = None) -> tuple[DetectorSpec, ...]:
+def detectors(observer_config: ObserverConfig, cusum: CusumConfig | None = None) -> tuple[DetectorSpec, ...]:
     """The detectors replayed on every run: the CUSUM detector (`cusum`: CusumConfig, default the node's), the
     threshold detector (both at the configured thresholds) and the paper's baseline."""
     from hexa.dynamics.cusum import CusumConfig
@@ -239,7 +239,7 @@ def simulate(collision: ScriptedCollision | None, trajectory: str, duration: flo
                      counters={**mon.counters(), "monitoring_lost": watch.lost_count})
 
 
-def replay(rec: RunRecord, spec: DetectorSpec, base_config: Any, scale: float = 1.0
+def replay(rec: RunRecord, spec: DetectorSpec, base_config: ObserverConfig, scale: float = 1.0
            ) -> list[tuple[float, str, int, str]]:
     """The events `spec` at `scale` raises on the recorded residuals (the live detector, replayed; the CUSUM fed the
     recorded ζ̂̇ as in the monitor)."""

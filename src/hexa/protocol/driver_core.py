@@ -12,13 +12,16 @@ import sys
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Sequence
+from typing import TYPE_CHECKING, Any, Sequence
 
 import numpy as np
 import yaml
 
 from hexa.protocol.frames import MAX_RATE_HZ, MIN_RATE_HZ, PULSE_MAX_US, PULSE_MIN_US
 from hexa.protocol.sensor_model import CurrentSensorModel
+
+if TYPE_CHECKING:
+    from hexa.robots.hexa_description import HexaDescription
 
 N_JOINTS = 6
 #: a command this far (rad) outside the joint range is float noise at a limit: clamped; farther: rejected
@@ -62,7 +65,8 @@ class ServoCalibration:
         return self.zeta_ref + (pulse_us - self.zero_us) / self.us_per_rad
 
 
-def servo_calibrations_from_config(items: Sequence[dict] | None, desc=None) -> list[ServoCalibration]:
+def servo_calibrations_from_config(items: Sequence[dict] | None,
+                                   desc: HexaDescription | None = None) -> list[ServoCalibration]:
     """Six ServoCalibration from the `servos` list of driver.yaml; None: from the robot description's pulse map.
 
     Args:
@@ -282,7 +286,7 @@ def load_driver_config(path: str | os.PathLike | None = None) -> dict:
     return cfg
 
 
-def servo_calibrations_from_description(desc) -> list[ServoCalibration]:
+def servo_calibrations_from_description(desc: HexaDescription) -> list[ServoCalibration]:
     """Six ServoCalibration from a HexaDescription's actuator pulse map (centre of the joint range at the centre
     pulse, us_per_rad * direction_i, pulse limits).
 

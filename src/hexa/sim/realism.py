@@ -19,6 +19,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 if TYPE_CHECKING:
+    from hexa.protocol.sensor_model import CurrentSensorModel
     from hexa.robots.hexa_description import HexaDescription
 
 #: The current sensor of the realistic robot: Allegro ACS712ELCTR-05B-T datasheet figures (Vcc = 5 V, 25 °C,
@@ -286,7 +287,8 @@ class ServoMechanics:
         return np.where(self.engaged, tau_m, 0.0)
 
 
-def adc_counts(sensor: Any, amps: np.ndarray, noise_counts: float, rng: np.random.Generator) -> np.ndarray:
+def adc_counts(sensor: CurrentSensorModel, amps: np.ndarray, noise_counts: float,
+               rng: np.random.Generator) -> np.ndarray:
     """The Mega's ADC counts for currents `amps` (A) through `sensor` (hexa.protocol.sensor_model), with Gaussian
     output noise of `noise_counts` σ (in counts) before quantisation — the virtual Mega's sampling, for offline runs."""
     volts = sensor.zero_voltage + sensor.sensitivity * np.asarray(amps, dtype=float)
