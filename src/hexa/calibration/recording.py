@@ -16,6 +16,10 @@ import numpy as np
 if TYPE_CHECKING:
     from numpy.typing import NDArray
 
+    from hexa.robots.hexa_description import HexaDescription
+    from hexa.sim.realism import RealismConfig, RobotTruth
+    from hexa.sim.simulator import Simulator
+
 #: m, rad: the plate pose error of the simulated recording (σ), as `hexa eval`'s stand-in for the pose node
 COMMAND_RATE_HZ = 100.0
 CURRENT_RATE_HZ = 200.0
@@ -69,7 +73,7 @@ class Recording:
                              payload=float(z["payload"]), source=str(z["source"]))
 
 
-def add_plate_payload(sim: Any, mass: float, point: NDArray) -> None:
+def add_plate_payload(sim: Simulator, mass: float, point: NDArray) -> None:
     """Fix a point mass (kg) at `point` ({P}, m) to the simulated plate: its body's mass, COM and inertia change."""
     import mujoco
 
@@ -94,10 +98,10 @@ def add_plate_payload(sim: Any, mass: float, point: NDArray) -> None:
     mujoco.mj_forward(m, d)
 
 
-def simulate_recording(pose_of: Callable[[float], NDArray], duration: float, seed: int = 0, realism: Any = None,
-                       desc: Any = None, payload: float = 0.0, payload_point: NDArray | None = None,
-                       lead_in: float = 1.0, progress: Callable[[float], None] | None = None
-                       ) -> tuple[Recording, Any]:
+def simulate_recording(pose_of: Callable[[float], NDArray], duration: float, seed: int = 0,
+                       realism: RealismConfig | None = None, desc: HexaDescription | None = None,
+                       payload: float = 0.0, payload_point: NDArray | None = None, lead_in: float = 1.0,
+                       progress: Callable[[float], None] | None = None) -> tuple[Recording, RobotTruth | None]:
     """Run the simulated robot of `seed` along `pose_of(t)` (trajectory time t in [0, duration]) and record it as
     the live graph would (module docstring). Returns (recording, the simulator's truth or None).
 
