@@ -1,5 +1,5 @@
 #!/usr/bin/env python3
-"""CPU time per current sample of the observer node's callbacks (docs/node_layer.md, "Hot paths in CPU time").
+"""CPU time per current sample of the observer node's callbacks (docs/realtime.md, "Hot paths in CPU time").
 
     .venv/bin/python scripts/bench_observer_node.py [--repeat 3] [--separate]
 
@@ -8,7 +8,7 @@ Feeds the plate case of `hexa bench realtime` (hexa.benchmarks.realtime.plate_ca
 (motor_currents carrying the set-points as serialized bytes — with `--separate` the set-points on joint_states
 instead, as in bags recorded before the field —, plate_pose as a message), with one subscriber on `residual`,
 and prints the process CPU time per sample (time.process_time over the whole stream, best of `--repeat` fresh nodes).
-What it leaves out is the executor and the transport (docs/node_layer.md, "Measured").
+What it leaves out is the executor and the transport (docs/realtime.md).
 """
 from __future__ import annotations
 

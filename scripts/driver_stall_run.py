@@ -8,7 +8,7 @@ Runs test/test_observer_node_free_motion.py's `free_motion_run` (the whole graph
 the trajectory, no collision scenario) and, from 15 s of wall time on (the graph is up by then), stops every
 hexa driver process for `--stall-ms` of wall time every `--every` s — what a starved or paused robot PC does to the
 driver. Prints the run's JSON (collision events, residual peaks, samples over a threshold, the longest run of them)
-and the wall times of the stalls. docs/driver.md ("Which command a sample carries") has the figures.
+and the wall times of the stalls. docs/driver_timing.md ("Which command a sample carries") has the figures.
 """
 from __future__ import annotations
 

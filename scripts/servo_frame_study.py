@@ -16,12 +16,12 @@ quantization and noise go to the ζ estimator (hexa.estimation) and its ζ̂, ζ
 
 With --gaps: no frame, commands on time, but every 0.5 s the host sends nothing for 90 ms (a stalled driver), then
 catches up with the trajectory — at once (a jump) or at 1.5 or 1 rad/s (the driver's `max_speed`, 1.5, over one 10 ms
-command period); the residual's peak during each gap and in the 0.15 s after it (docs/driver.md).
+command period); the residual's peak during each gap and in the 0.15 s after it (docs/driver_timing.md).
 
 Printed per row: the estimator's ζ̇ error RMS (rad/s), the residual force RMS and peak per axis (N) after the first
 second, samples with a force component over r_low = 2 N, the residual as servo torques (peak, samples over the
 servo threshold 0.35 N·m), and the residual from the true ζ, ζ̇ (the observer itself).
-docs/observer_node.md ("What it takes to run with the pulse frame") has the table and what it means.
+docs/history/observer_node.md ("What it takes to run with the pulse frame") has the table and what it means.
 """
 from __future__ import annotations
 

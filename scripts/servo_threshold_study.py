@@ -1,5 +1,5 @@
 #!/usr/bin/env python3
-"""How the servo-torque criterion's threshold was chosen (docs/observer_node.md, "Detection in servo coordinates").
+"""How the servo-torque criterion's threshold was chosen (docs/detectors.md, "Detection in servo coordinates").
 
     .venv/bin/python scripts/servo_threshold_study.py bags out/demo/*/bag [--thresholds 0.3 0.35 0.4]
     .venv/bin/python scripts/servo_threshold_study.py arm-draws [--draws 16]

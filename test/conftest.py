@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import os
+import shutil
 import signal
 import subprocess
 import sys
@@ -93,8 +94,27 @@ def procs() -> Iterator[ProcessGroup]:
         group.stop_all()
 
 
+@pytest.fixture(scope="session")
+def plate_demo_bag(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Path]:
+    """The plate case of `hexa demo --record-images` for 4.2 s of sim time (its START included), recorded once for
+    the replay tests: the graph's outputs and its sensor inputs, both cameras included (the observer's ζ estimator
+    starts from the camera's plate pose)."""
+    pytest.importorskip("rclpy", reason="ROS 2 Jazzy wheels not installed: run `make test` (it sets them up)")
+    from rosdomain import held_ros_domain
+
+    from hexa_bringup.demo_run import run_case
+    from hexa_bringup.rosenv import ros_env as make_env
+
+    out = tmp_path_factory.mktemp("plate_demo")
+    with held_ros_domain(range(98, 0, -1)) as domain:       # held while the graph records
+        run = run_case("plate", out, make_env(domain), duration=4.2, status_every=1e9, record_images=True)
+    assert (run.bag / "metadata.yaml").exists(), f"no bag recorded (rc {run.returncode}, logs {run.log_dir})"
+    yield run.bag
+    shutil.rmtree(out, ignore_errors=True)          # images: hundreds of MB
+
+
 #: fixtures that start ROS processes or hold a ROS domain: a test using one is `slow` (left out of `make check`)
-SLOW_FIXTURES = frozenset({"ros_env", "ros_domain_id", "module_ros_domain_id", "procs"})
+SLOW_FIXTURES = frozenset({"ros_env", "ros_domain_id", "module_ros_domain_id", "procs", "plate_demo_bag"})
 
 
 def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:

@@ -5,7 +5,6 @@ from __future__ import annotations
 
 import json
 import os
-import shutil
 import signal
 import subprocess
 import sys
@@ -42,22 +41,10 @@ def test_replay_topics_name_what_is_missing():
         replay_topics(["/hexa/joint_states"], exclude=["/hexa/joint_states"])
 
 
-@pytest.fixture(scope="module")
-def demo_bag(tmp_path_factory):
-    """The plate case of `hexa demo --record-images` for 4.2 s of sim time (its START included): the graph's outputs
-    and its sensor inputs, both cameras included (the observer's ζ estimator starts from the camera's plate pose)."""
-    pytest.importorskip("rclpy", reason="ROS 2 Jazzy wheels not installed: run `make test` (it sets them up)")
-    from rosdomain import held_ros_domain
-
-    from hexa_bringup.demo_run import run_case
-    from hexa_bringup.rosenv import ros_env
-
-    out = tmp_path_factory.mktemp("replay_demo")
-    with held_ros_domain(range(98, 0, -1)) as domain:
-        run = run_case("plate", out, ros_env(domain), duration=4.2, status_every=1e9, record_images=True)
-    assert (run.bag / "metadata.yaml").exists(), f"no bag recorded (rc {run.returncode}, logs {run.log_dir})"
-    yield run.bag
-    shutil.rmtree(out, ignore_errors=True)          # images: hundreds of MB
+@pytest.fixture
+def demo_bag(plate_demo_bag):
+    """The plate case of the demo with its images (conftest.plate_demo_bag)."""
+    return plate_demo_bag
 
 
 def _messages(bag, topics) -> dict[str, list]:

@@ -281,3 +281,26 @@ def test_param_load_reads_the_sections_and_wildcards_of_a_ros_parameters_file():
     assert file_parameters(data, "/hexa/rnea", "f") == {"use_sim_time": True, "a": 4}
     with pytest.raises(CliError, match="no ros__parameters for /hexa/pose"):
         file_parameters({"/hexa/observer": {"ros__parameters": {"a": 1}}}, "/hexa/pose", "f")
+
+
+def test_a_verb_started_with_sigint_ignored_still_stops_on_sigint(graph):
+    """A background job of a non-interactive shell inherits SIGINT ignored; `hexa` restores it, so Ctrl-C or
+    `kill -INT` ends a waiting verb with 130 instead of leaving it running."""
+    echo = subprocess.Popen([*HEXA, "topic", "echo", "/hexa/cli_quiet", "std_msgs/msg/String"], env=graph,
+                            preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_IGN),
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    try:
+        deadline = time.monotonic() + 60
+        while time.monotonic() < deadline:       # the echo is up once its subscription is in the graph
+            r = hexa(graph, "topic", "info", "/hexa/cli_quiet")
+            if r.returncode == 0 and "Subscription count: 1" in r.stdout:
+                break
+            time.sleep(0.5)
+        echo.send_signal(signal.SIGINT)
+        out, err = echo.communicate(timeout=30)
+    finally:
+        if echo.poll() is None:
+            echo.kill()
+            echo.wait()
+    assert echo.returncode == 130, (echo.returncode, err[-2000:])
+    assert "Traceback" not in err, err

@@ -289,7 +289,7 @@ def test_a_stopped_driver_dates_its_next_command_after_the_samples_that_waited_i
     sent, is raised by the first read of the port after it (board_clock.CommandTimeline.confirm). Without that, a
     command sent before that read was dated at most board_clock_max_extrapolation (10 ms) past the last sample read
     before the stop, and the rest of the stop's samples carried it — in the live graph a false collision START
-    (docs/driver.md). And the servos catch up on the commands they missed at max_speed (1.5 rad/s, the default):
+    (docs/driver_timing.md). And the servos catch up on the commands they missed at max_speed (1.5 rad/s, the default):
     the slew allowance builds up over one command period at most, not over the whole stop."""
     import os
     import signal
@@ -469,7 +469,8 @@ def test_command_sync_holds_commands_for_the_quiet_gap(tmp_path, procs, ros_env,
     Only the plumbing is checked here: where in the frame the commands land is not. This test process runs both
     emulators and the probe, and starves now and then — the Mega's samples (the driver's board clock) and the Uno's
     handling then come late by tens of ms, more than the gap's margins. The aim itself is tested in
-    test_board_clock.py; scripts/latch_mapping_check.py measures it against the simulated servos (docs/driver.md)."""
+    test_board_clock.py; scripts/latch_mapping_check.py measures it against the simulated servos
+    (docs/driver_timing.md)."""
     desc = load_hexa()
     servos = servo_calibrations_from_config(None, desc)
     with MegaEmulator(current_source=lambda t: [0.0] * 6, link=tmp_path / "mega") as mega, \

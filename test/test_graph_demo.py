@@ -49,7 +49,7 @@ def test_demo_writes_the_report_with_a_plot_per_case(demo_run):
 def test_all_three_cases_are_detected_after_the_true_contact_onset_on_the_right_link(demo_run):
     # The arm push's plate-equivalent wrench J_Dᵀ F stays below the plate thresholds (1.9 N / 0.15 N·m); the servo-
     # torque criterion finds it (0.45 N·m on servo 4 against 0.35): 6 runs of 6 at 56-121 ms, rod at -19 to -4 ms
-    # (before its force reaches r_low), plate 16-21 ms (docs/observer_node.md, "Detection in servo coordinates").
+    # (before its force reaches r_low), plate 16-21 ms (docs/detectors.md, "Detection in servo coordinates").
     for c in demo_run["result"]["cases"]:
         assert math.isfinite(c["detect_time"]), f"{c['case']}: no collision detected"
         assert c["detect_time"] > c["onset_true"], f"{c['case']}: detected before the contact began"
@@ -69,8 +69,8 @@ def test_all_three_cases_are_detected_after_the_true_contact_onset_on_the_right_
 def test_plate_and_arm_force_rmse_is_below_the_papers_on_every_axis(demo_run):
     # the rod's RMSE is below the paper's in most runs, but a stalled-servo outlier can double it: not asserted.
     # The arm force is observable in one component only; the rest comes from the push direction
-    # the vision measures, clamped into a friction cone (docs/dynamics.md, "Arm force models compared": y 0.84-1.08 N
-    # over 4 scripted runs, paper 1.497)
+    # the vision measures, clamped into a friction cone (docs/identification.md, "Arm force models compared":
+    # y 0.84-1.08 N over 4 scripted runs, paper 1.497)
     for case in ("plate", "arm"):
         c = [c for c in demo_run["result"]["cases"] if c["case"] == case][0]
         assert all(ours < paper for ours, paper in zip(c["force_rmse"], c["paper_rmse"])), c

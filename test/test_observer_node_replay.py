@@ -17,19 +17,10 @@ PY = sys.executable
 INPUTS = ["/hexa/joint_states", "/hexa/motor_currents", "/hexa/plate_pose", "/hexa/contact"]
 
 
-@pytest.fixture(scope="module")
-def recorded_bag(tmp_path_factory):
-    """One short plate-case run of the whole simulated graph, recorded (≈ 30 s wall)."""
-    from rosdomain import held_ros_domain
-
-    from hexa_bringup.demo_run import run_case
-    from hexa_bringup.rosenv import ros_env
-
-    out = tmp_path_factory.mktemp("replay")
-    with held_ros_domain(range(99, 0, -1)) as domain:  # held while the graph records
-        run = run_case("plate", out, ros_env(domain), duration=4.2, status_every=1e9)
-    assert (run.bag / "metadata.yaml").exists(), f"no bag recorded (rc {run.returncode}, logs {run.log_dir})"
-    return run.bag
+@pytest.fixture
+def recorded_bag(plate_demo_bag):
+    """One short plate-case run of the whole simulated graph, recorded (conftest.plate_demo_bag)."""
+    return plate_demo_bag
 
 
 def _recorded_events(bag) -> list[tuple]:

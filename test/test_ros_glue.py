@@ -68,7 +68,8 @@ def test_compose_with_an_unknown_class_exits_2_in_one_line(procs, ros_env):
 
 def test_polled_subscriptions_keep_the_last_depth_messages_until_taken(ros_env, monkeypatch):
     """hexa_ros.polled: no executor spins the polled node; `take` returns the reader's last `depth` messages (raw
-    bytes, oldest first), then nothing until new ones arrive."""
+    bytes, oldest first), then nothing until new ones arrive; the owner's node-local remaps (a composed node's)
+    apply."""
     import time
 
     for k, v in ros_env.items():
@@ -82,14 +83,16 @@ def test_polled_subscriptions_keep_the_last_depth_messages_until_taken(ros_env, 
 
     ctx = rclpy.Context()
     rclpy.init(context=ctx)
-    owner = rclpy.create_node("polled_owner", namespace="/t", context=ctx)
+    owner = rclpy.create_node("polled_owner", namespace="/t", context=ctx,
+                              cli_args=["--ros-args", "-r", "numbers:=renamed"])
     polled = PolledSubscriptions(owner, "images")
     try:
         assert (polled.node.get_name(), polled.node.get_namespace()) == ("polled_owner_images", "/t")
         sub = polled.subscribe(UInt32, "numbers", QoSProfile(depth=3, reliability=ReliabilityPolicy.BEST_EFFORT))
+        assert sub.topic_name == "/t/renamed"
         pub = owner.create_publisher(UInt32, "numbers", 10)
         deadline = time.monotonic() + 20.0
-        while (pub.get_subscription_count() < 1 or polled.node.count_publishers("/t/numbers") < 1) \
+        while (pub.get_subscription_count() < 1 or polled.node.count_publishers("/t/renamed") < 1) \
                 and time.monotonic() < deadline:       # publisher and reader have matched
             time.sleep(0.05)
         assert pub.get_subscription_count() == 1, "the polled subscription was not discovered"

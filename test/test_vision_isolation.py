@@ -132,7 +132,7 @@ def desc():
 def test_isolation_accuracy_against_simulator_truth(desc) -> None:
     """24 feasible randomised contacts (8 per link, chains 1..6): median error ≤ 10 mm and link+chain ≥ 90 %.
 
-    The issue's 95 % target is checked over the larger run in docs/vision.md (`python -m hexa.vision.evaluation`);
+    The 95 % target is checked over the larger run in docs/vision.md (`python -m hexa.vision.evaluation`);
     on 24 contacts one miss is already 4 %, so this test allows two (a regression still fails it)."""
     from hexa.vision.evaluation import contact_samples, evaluate_isolation
 

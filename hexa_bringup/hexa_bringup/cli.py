@@ -64,6 +64,12 @@ def main(argv: list[str] | None = None) -> int:
     except ImportError:
         pass
     args = parser.parse_args(argv)
+    import signal
+
+    if signal.getsignal(signal.SIGINT) is signal.SIG_IGN:
+        # started in the background of a non-interactive shell, which ignores SIGINT for its jobs: Ctrl-C and
+        # `kill -INT` still stop every verb cleanly
+        signal.signal(signal.SIGINT, signal.default_int_handler)
     where = " ".join([args.command] + [str(v) for k, v in sorted(vars(args).items())
                                        if k.endswith("_command") and isinstance(v, str)])
     try:

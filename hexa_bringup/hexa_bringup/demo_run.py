@@ -82,7 +82,7 @@ class _ClockWatcher:
 #: wall seconds the simulator holds sim time at 0 while the graph starts (DDS discovery, serial handshakes)
 START_DELAY = 3.0
 #: simulator real-time factor the demo asks for; on 2 cores the simulator (rendering both cameras) and the whole
-#: graph reach about 0.55-0.6 when asked for 1 (docs/node_layer.md, "Measured"), so 0.5 is mostly kept; the
+#: graph reach about 0.55-0.6 when asked for 1 (docs/realtime.md), so 0.5 is mostly kept; the
 #: pacing drops what a stall loses
 REAL_TIME_FACTOR = 0.5
 #: sim seconds at rest before the trajectory and the scenario clock start (the estimator and observer settle, the

@@ -55,7 +55,7 @@ PARAMETERS = {
     "servo_frame_period": Param(-1.0, "s between servo set-point frames (0..0.1); < 0 = the description's "
                                       "(or the realism's)", range=(-1.0, 0.1)),
     "realism": Param("ideal", "ideal (the robot is the nodes' model) | realistic (a truth drawn from `seed`, servo "
-                              "friction, gear play, dead band, 20 ms pulse frame, ACS712 noise; docs/simulator.md)",
+                              "friction, gear play, dead band, 20 ms pulse frame, ACS712 noise; docs/realism.md)",
                      choices=("ideal", "realistic"))}
 
 

@@ -37,7 +37,7 @@ def observer_parameters() -> dict[str, Param]:
         "min_duration": Param(float(o.min_duration), "s over threshold before START, all released before END"),
         "detector": Param("threshold", "collision detector: threshold (|r| over the thresholds for min_duration) | "
                           "cusum (sequential test on the residual whitened by the thresholds, a slow baseline and "
-                          "the motion; docs/observer_node.md)", choices=DETECTORS),
+                          "the motion; docs/detectors.md)", choices=DETECTORS),
         "cusum_drift": Param(float(c.drift), "cusum: drift nu subtracted from the whitened residual (threshold units)",
                              range=(0.0, 10.0)),
         "cusum_alarm": Param(float(c.alarm), "cusum: START when a channel's sum reaches this (threshold units * s)",

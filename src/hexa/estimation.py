@@ -41,6 +41,8 @@ from hexa.stream_gate import ACCEPTED, TimeGate
 if TYPE_CHECKING:
     from numpy.typing import NDArray
 
+    from hexa.robots.hexa_description import HexaDescription
+
 REJECT_REASONS = ("bad_shape", "non_finite", "time_not_increasing", "time_jump", "gap", "camera_unreachable",
                   "camera_gate", "camera_too_old", "camera_before_start")
 
@@ -70,7 +72,7 @@ class ServoModel:
             raise EstimationError(f"servo command_delay must be >= 0 s, got {self.command_delay!r}")
 
     @classmethod
-    def from_description(cls, desc: Any, command_delay: float = 0.0) -> "ServoModel":
+    def from_description(cls, desc: HexaDescription, command_delay: float = 0.0) -> "ServoModel":
         """k_p, k_v from the description's `sim.servo` section (the simulator's servo), ω_max from `actuators`."""
         servo = {}
         try:
@@ -170,7 +172,8 @@ class ZetaEstimator:
         e.zeta, e.zeta_dot
     """
 
-    def __init__(self, desc: Any, servo: ServoModel | None = None, config: EstimatorConfig | None = None) -> None:
+    def __init__(self, desc: HexaDescription, servo: ServoModel | None = None,
+                 config: EstimatorConfig | None = None) -> None:
         self.desc = desc
         self.servo = servo or ServoModel.from_description(desc)
         self.config = config or EstimatorConfig()
@@ -430,7 +433,7 @@ class InputCheck:
     commands outside it), finite velocities and efforts when present, efforts within ±current_factor·K_t·current_max.
     """
 
-    def __init__(self, desc: Any, current_factor: float = 4.0, angle_margin: float = 0.1) -> None:
+    def __init__(self, desc: HexaDescription, current_factor: float = 4.0, angle_margin: float = 0.1) -> None:
         self.current_max = current_factor * float(desc.current_max)
         self.torque_max = self.current_max * float(desc.K_t)
         self.zeta_range = (float(desc.zeta_min) - angle_margin, float(desc.zeta_max) + angle_margin)
@@ -485,7 +488,7 @@ class SampleSequencer:
     of the other (matched by stamp; a partner lost in transport is dropped and counted). A sample is released only
     once its pair is complete, with the command of its own joint_states (the one the driver had sent when it handled
     the sample) — not the command current at its board time by host stamps: in sim mode those stamps are quantized
-    and lagged by /clock, which misplaced command changes by a few ms (docs/observer_node.md, "Command timing").
+    and lagged by /clock, which misplaced command changes by a few ms (docs/history/observer_node.md, "Command timing").
 
     Camera poses are released into the same stream at sample time stamp + pose_delay (the vision chain's latency is
     0.1-0.47 s on this loaded machine); a pose that arrives later than that is released on arrival and counted in

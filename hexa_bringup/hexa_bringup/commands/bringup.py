@@ -28,7 +28,7 @@ def register(sub: argparse._SubParsersAction) -> None:
                         "start at most this fast (rad/s); 0 = off (first command at full servo speed). "
                         f"Default {ROBOT_APPROACH_SPEED} in robot mode, 0 in sim (the simulator starts there)")
     p.add_argument("--realism", choices=["ideal", "realistic"], default=None,
-                   help="sim mode: the simulated robot, ideal or realistic (docs/simulator.md); default: the sim "
+                   help="sim mode: the simulated robot, ideal or realistic (docs/realism.md); default: the sim "
                         "node's parameter (ideal)")
     p.add_argument("--trajectory", default=None, metavar="FILE",
                    help="sim/robot: the trajectory node plays this pose file (CSV t x y z alpha beta gamma, SI; e.g. "

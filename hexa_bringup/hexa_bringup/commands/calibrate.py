@@ -269,7 +269,7 @@ def run_identify(args: argparse.Namespace) -> int:
 
 
 def truth_errors(cal: Any, truth: Any) -> dict[str, Any]:
-    """Identified minus true values of the simulated robot (relative where the issue's targets are relative)."""
+    """Identified minus true values of the simulated robot (relative where the targets are relative)."""
     import numpy as np
 
     K = truth.k_t / truth.sensor_gain

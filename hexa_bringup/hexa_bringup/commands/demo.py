@@ -25,7 +25,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--realism", choices=["ideal", "realistic"], default="ideal",
                    help="the simulated robot: ideal (the nodes' model, set-points applied at once; default) or "
                         "realistic (a truth drawn from --seed within the documented tolerances, servo friction, gear "
-                        "play, dead band, ACS712 noise, the 20 ms pulse frame: docs/simulator.md)")
+                        "play, dead band, ACS712 noise, the 20 ms pulse frame: docs/realism.md)")
     p.add_argument("--ns", default="/hexa")
     p.add_argument("--json", action="store_true", help="print the metrics as JSON")
     p.set_defaults(func=run)

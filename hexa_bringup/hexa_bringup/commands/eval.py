@@ -21,7 +21,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     size.add_argument("--hours", type=float, help="free motion per robot, hours")
     p.add_argument("--seed", type=int, default=0, help="campaign seed: draws the contacts and seeds the simulators")
     p.add_argument("--realism", choices=["ideal", "realistic", "both"], default="both",
-                   help="the simulated robot: ideal (the simulator is the model), realistic (docs/simulator.md) or "
+                   help="the simulated robot: ideal (the simulator is the model), realistic (docs/realism.md) or "
                         "both, each on the same contacts (default both)")
     p.add_argument("--workers", type=int, default=None, help="worker processes (default: the CPU count)")
     p.add_argument("--scheduler", metavar="local:N|ADDRESS", default=None,

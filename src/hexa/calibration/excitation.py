@@ -26,6 +26,9 @@ import numpy as np
 if TYPE_CHECKING:
     from numpy.typing import NDArray
 
+    from hexa.dynamics.lagrange import HexaDynamicParameters
+    from hexa.robots.hexa_description import HexaDescription
+
 #: largest excursion from home per DOF (m, m, m, rad, rad, rad): inside the paper's workspace (±0.1 m, tilts ±30°).
 #: ±6 cm in z: the plate's weight reaches every servo as a nearly constant torque, like the arms' own first moments
 #: and the current offsets, and only a large change of the arm angles tells them apart (±4 cm left the plate mass
@@ -152,7 +155,7 @@ def _project_rest(a: NDArray) -> NDArray:
 class _Scorer:
     """cond(W), the limits and the slow fraction of one candidate, on one period sampled at `samples` points."""
 
-    def __init__(self, desc: Any, settings: ExcitationSettings, samples: int = 64) -> None:
+    def __init__(self, desc: HexaDescription, settings: ExcitationSettings, samples: int = 64) -> None:
         from hexa.dynamics.lagrange import HexaDynamicParameters
 
         self.desc, self.s = desc, settings
@@ -191,7 +194,7 @@ class _Scorer:
         return cond, speed, torque, slow, ok
 
 
-def _sym(prm: Any) -> NDArray:
+def _sym(prm: HexaDynamicParameters) -> NDArray:
     from hexa.calibration.regressor import sym_from_params
 
     return sym_from_params(prm)
@@ -221,7 +224,7 @@ def identification_matrix(reg: Any) -> NDArray:
     return Y.reshape(n * 6, -1)
 
 
-def design_excitation(desc: Any = None, settings: ExcitationSettings | None = None,
+def design_excitation(desc: HexaDescription | None = None, settings: ExcitationSettings | None = None,
                       progress: Callable[[int, float], None] | None = None) -> Excitation:
     """The excitation of `settings` for the robot `desc` (default the packaged one): see the module docstring.
 

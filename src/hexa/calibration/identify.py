@@ -41,6 +41,9 @@ from hexa.calibration.regressor import BASE_SYM, SYM_NAMES, params_with_sym, reg
 if TYPE_CHECKING:
     from numpy.typing import NDArray
 
+    from hexa.dynamics.lagrange import HexaDynamicParameters
+    from hexa.robots.hexa_description import HexaDescription
+
 ANALYSIS_RATE_HZ = 100.0    # currents resampled at this rate and filtered …
 CUTOFF_HZ = 4.0             # … by a zero-phase 4th-order Butterworth low-pass at this cut-off; the regressor …
 DECIMATE = 4                # … at every DECIMATE-th of those instants (25 Hz)
@@ -139,8 +142,8 @@ def fourier_fit(t: NDArray, y: NDArray, period: float, harmonics: int, at: NDArr
     return basis(at, 0) @ coef, basis(at, 1) @ coef, basis(at, 2) @ coef
 
 
-def prepare(rec: Recording, desc: Any, prm: Any = None, period: float | None = None,
-            harmonics: int = 15) -> Motion:
+def prepare(rec: Recording, desc: HexaDescription, prm: HexaDynamicParameters | None = None,
+            period: float | None = None, harmonics: int = 15) -> Motion:
     """A recording → its analysis samples (module docstring). With the `period` (s) of a periodic excitation the
     motion is its Fourier series with `harmonics` harmonics fitted over the moving window (the camera noise averages
     out over the periods); without, the camera poses low-passed at POSE_CUTOFF_HZ.
@@ -284,7 +287,7 @@ class Calibration:
                 out[k] = np.asarray(v).tolist() if isinstance(v, np.ndarray) else v
         return out
 
-    def dynamic_parameters(self, desc: Any) -> Any:
+    def dynamic_parameters(self, desc: HexaDescription) -> HexaDynamicParameters:
         """The nodes' (symmetric) model with these values: plate, mean arm J and first moment, mean viscous friction
         (the per-servo parts are `servo_torque_correction`'s)."""
         import dataclasses
@@ -374,7 +377,7 @@ class _OutputError:
         return J
 
 
-def identify(motions: Sequence[Motion], desc: Any) -> Calibration:
+def identify(motions: Sequence[Motion], desc: HexaDescription) -> Calibration:
     """Identify the model from prepared runs (module docstring).
 
     Raises:
@@ -463,18 +466,18 @@ def identify(motions: Sequence[Motion], desc: Any) -> Calibration:
 DEAD_BAND_US = 5e-6
 
 
-def servo_dead_band(desc: Any) -> float:
+def servo_dead_band(desc: HexaDescription) -> float:
     """The servo's dead band (rad, total width) from its pulse dead band and the description's µs per rad."""
     return DEAD_BAND_US * 1e6 / float(desc.us_per_rad)
 
 
-def _armature(desc: Any) -> float:
+def _armature(desc: HexaDescription) -> float:
     from hexa.dynamics._desc_adapter import servo_armature_damping
 
     return servo_armature_damping(desc)[0]
 
 
-def _rod_share_at_B(prm: Any) -> float:
+def _rod_share_at_B(prm: HexaDynamicParameters) -> float:
     """The inertia about the motor axis a rod's regrouped share at B_i adds to J_i (m_r (1−κ)… as a point at B_i):
     (m_r − 2 m_r κ + K_r) l_a² — the rod's kinetic energy at B_i's speed when C_i stands still."""
     K_r = prm.m_r * prm.kappa ** 2 + prm.I_r / prm.l_d ** 2

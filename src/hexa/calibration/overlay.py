@@ -23,6 +23,7 @@ if TYPE_CHECKING:
     from numpy.typing import NDArray
 
     from hexa.calibration.identify import Calibration
+    from hexa.robots.hexa_description import HexaDescription
 
 PER_SERVO = ("k_t", "current_offset", "coulomb", "viscous", "inertia", "first_moment", "first_moment_y",
              "horn_offset")
@@ -33,7 +34,7 @@ def _floats(a: Any) -> Any:
     return np.asarray(a, dtype=float).tolist()
 
 
-def overlay_mapping(cal: "Calibration", desc: Any) -> dict[str, Any]:
+def overlay_mapping(cal: "Calibration", desc: HexaDescription) -> dict[str, Any]:
     """The overlay (module docstring) of `cal` on the description `desc`."""
     from hexa.calibration.regressor import COULOMB_SPEED
     base = str(getattr(desc, "path", "") or "")
@@ -64,7 +65,7 @@ def overlay_mapping(cal: "Calibration", desc: Any) -> dict[str, Any]:
     }
 
 
-def write_overlay(path: str | Path, cal: "Calibration", desc: Any) -> Path:
+def write_overlay(path: str | Path, cal: "Calibration", desc: HexaDescription) -> Path:
     """Write the overlay of `cal` to `path` (YAML, SI units) and check it loads; returns the path.
 
     Raises:
@@ -91,7 +92,7 @@ class ServoTorqueModel:
     model's (its mean first moment along the arm; the model has none across it) (hexa.calibration.regressor;
     u'_i·g = −g cos ζ_i, u_i·g = −g sin ζ_i). Without ζ̇ only the current part applies."""
 
-    def __init__(self, desc: Any) -> None:
+    def __init__(self, desc: HexaDescription) -> None:
         from hexa.calibration.regressor import COULOMB_SPEED
 
         self.calibrated = "calibration" in desc.sections()

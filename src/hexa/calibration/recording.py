@@ -16,6 +16,10 @@ import numpy as np
 if TYPE_CHECKING:
     from numpy.typing import NDArray
 
+    from hexa.robots.hexa_description import HexaDescription
+    from hexa.sim.realism import RealismConfig, RobotTruth
+    from hexa.sim.simulator import Simulator
+
 COMMAND_RATE_HZ = 100.0
 CURRENT_RATE_HZ = 200.0     # Hz: the driver's default stream rate (hexa_driver/config/driver.yaml)
 #: Hz: the Mega's stream rate of a calibration run (the driver's `stream_rate_hz`). The servos' torque ripples at
@@ -77,7 +81,7 @@ class Recording:
                              payload=float(z["payload"]), source=str(z["source"]))
 
 
-def add_plate_payload(sim: Any, mass: float, point: NDArray) -> None:
+def add_plate_payload(sim: Simulator, mass: float, point: NDArray) -> None:
     """Fix a point mass (kg) at `point` ({P}, m) to the simulated plate: its body's mass, COM and inertia change."""
     import mujoco
 
@@ -102,10 +106,11 @@ def add_plate_payload(sim: Any, mass: float, point: NDArray) -> None:
     mujoco.mj_forward(m, d)
 
 
-def simulate_recording(pose_of: Callable[[float], NDArray], duration: float, seed: int = 0, realism: Any = None,
-                       desc: Any = None, payload: float = 0.0, payload_point: NDArray | None = None,
-                       lead_in: float = 1.0, progress: Callable[[float], None] | None = None,
-                       current_rate_hz: float = CALIBRATION_RATE_HZ) -> tuple[Recording, Any]:
+def simulate_recording(pose_of: Callable[[float], NDArray], duration: float, seed: int = 0,
+                       realism: RealismConfig | None = None, desc: HexaDescription | None = None,
+                       payload: float = 0.0, payload_point: NDArray | None = None, lead_in: float = 1.0,
+                       progress: Callable[[float], None] | None = None,
+                       current_rate_hz: float = CALIBRATION_RATE_HZ) -> tuple[Recording, RobotTruth | None]:
     """Run the simulated robot of `seed` along `pose_of(t)` (trajectory time t in [0, duration]) and record it as
     the live graph would (module docstring). Returns (recording, the simulator's truth or None).
 

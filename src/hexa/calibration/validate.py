@@ -16,6 +16,10 @@ import numpy as np
 if TYPE_CHECKING:
     from numpy.typing import NDArray
 
+    from hexa.calibration.identify import Motion
+    from hexa.calibration.recording import Recording
+    from hexa.robots.hexa_description import HexaDescription
+
 AXES = ("Fx", "Fy", "Fz", "Mx", "My", "Mz")
 
 
@@ -41,7 +45,7 @@ class ResidualComparison:
                 "samples": int(self.t.size)}
 
 
-def _model_torques(desc: Any, mo: Any) -> NDArray:
+def _model_torques(desc: HexaDescription, mo: Motion) -> NDArray:
     """The symmetric model's free-motion servo torques of `desc` along the prepared motion `mo`."""
     from hexa.calibration.regressor import sym_from_params
     from hexa.dynamics.lagrange import HexaDynamicParameters
@@ -52,7 +56,7 @@ def _model_torques(desc: Any, mo: Any) -> NDArray:
                      np.full(6, prm.arm_damping))
 
 
-def compare(rec: Any, desc_before: Any, desc_after: Any) -> ResidualComparison:
+def compare(rec: Recording, desc_before: HexaDescription, desc_after: HexaDescription) -> ResidualComparison:
     """Residuals of the run `rec` with the two descriptions (module docstring).
 
     Raises:

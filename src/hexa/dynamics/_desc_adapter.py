@@ -1,14 +1,17 @@
 """The one place that reads the robot description (HexaDescription) for the dynamics parameters."""
 from __future__ import annotations
 
-from typing import Any
+from typing import TYPE_CHECKING
 
 import numpy as np
+
+if TYPE_CHECKING:
+    from hexa.robots.hexa_description import HexaDescription
 
 GRAVITY_SIM = 9.81  # the simulator's MJCF uses gravity="0 0 -9.81"
 
 
-def _link(desc: Any, name: str) -> tuple[float, np.ndarray, np.ndarray]:
+def _link(desc: HexaDescription, name: str) -> tuple[float, np.ndarray, np.ndarray]:
     li = getattr(desc, name)
     I = np.asarray(li.inertia, dtype=float)
     if I.shape == (3,):
@@ -16,7 +19,7 @@ def _link(desc: Any, name: str) -> tuple[float, np.ndarray, np.ndarray]:
     return float(li.mass), np.asarray(li.com, dtype=float).reshape(3), I.reshape(3, 3)
 
 
-def servo_armature_damping(desc: Any) -> tuple[float, float]:
+def servo_armature_damping(desc: HexaDescription) -> tuple[float, float]:
     """Reflected rotor inertia (kg·m²) and viscous friction (N·m·s/rad) of a servo at the horn.
 
     Read from the description's `sim.servo` section when present (the modelled servo), else zero.
@@ -29,7 +32,7 @@ def servo_armature_damping(desc: Any) -> tuple[float, float]:
     return float(servo.get("armature", 0.0)), float(servo.get("damping", 0.0))
 
 
-def dynamic_fields(desc: Any) -> dict:
+def dynamic_fields(desc: HexaDescription) -> dict:
     """Keyword arguments of HexaDynamicParameters from a HexaDescription.
 
     Arm: body frame {A2i} (x along A_i→B_i, z the motor axis); it turns about z through A_i, so only

@@ -61,9 +61,9 @@ class CusumConfig:
     baseline.
     """
 
-    # tuned on the realistic simulated robot (`hexa eval`, docs/eval.md "The CUSUM detector"): with the node's
-    # thresholds, no false alarm down to thresholds × 0.8 in free motion; c_v = 0: the campaign's trajectories move
-    # at nearly constant speed, so velocity does not separate free-motion peaks there
+    # tuned on the realistic simulated robot (`hexa eval`, docs/detectors.md "The CUSUM detector against the
+    # paper's"): with the node's thresholds, no false alarm down to thresholds × 0.8 in free motion; c_v = 0: the
+    # campaign's trajectories move at nearly constant speed, so velocity does not separate free-motion peaks there
     drift: float = 0.5
     alarm: float = 0.01
     velocity_gain: float = 0.0

@@ -11,7 +11,7 @@ import dataclasses
 import math
 from collections import deque
 from dataclasses import dataclass
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 from numpy.typing import NDArray
@@ -22,6 +22,9 @@ from hexa.estimation import EstimatorConfig, InputCheck, SampleSequencer, ServoM
 from hexa.pose_check import PoseCheck
 from hexa.rotations import pose6_from_transform
 from hexa.stream_gate import ACCEPTED, StreamGate
+
+if TYPE_CHECKING:
+    from hexa.robots.hexa_description import HexaDescription
 
 ZETA_SOURCES = ("estimator", "measured")
 #: estimator settings the monitor takes at run time
@@ -156,9 +159,9 @@ class CollisionMonitor:
         ValueError (ObserverError, EstimationError): a setting out of range, naming it.
     """
 
-    def __init__(self, desc: Any, config: MonitorConfig | None = None, observer: ObserverConfig | None = None,
-                 estimator: EstimatorConfig | None = None, detector: str = "threshold",
-                 cusum: CusumConfig | None = None) -> None:
+    def __init__(self, desc: HexaDescription, config: MonitorConfig | None = None,
+                 observer: ObserverConfig | None = None, estimator: EstimatorConfig | None = None,
+                 detector: str = "threshold", cusum: CusumConfig | None = None) -> None:
         from hexa.dynamics.lagrange import HexaDynamicParameters
 
         self.desc = desc

@@ -29,7 +29,7 @@ residual as servo torques τ_r = J_ζ⁻ᵀ r (N·m; u = J_ζᵀ τ maps servo t
 each servo delivers beyond the model) over a per-servo threshold. A contact on arm k gives τ_r = e_k·(moment of the
 force about the servo axis) exactly; a rod contact spreads over several servos, peaking on one. The sensor noise
 is per servo, so a per-servo threshold separates these contacts from free motion sooner than the plate-axis
-thresholds, which see them diluted (docs/observer_node.md, "Detection in servo coordinates").
+thresholds, which see them diluted (docs/detectors.md, "Detection in servo coordinates").
 """
 from __future__ import annotations
 
@@ -81,16 +81,15 @@ class ObserverConfig:
     (currents + plate pose from image processing) and the one for hobby servos, whose angle is not measured.
     """
 
-    # the live graph's values (the observer node declares these): K = 100 1/s, a 10 ms first-order lag — once the
-    # simulated graph delivers commands on time, free-motion residual peaks reach r_low only in runs of a few samples,
-    # and the plate is detected 35 ms sooner than at 25 1/s; min_duration 0.02 s, 5 consecutive samples at 200 Hz —
-    # free motion has had runs of up to 3 samples over a threshold (the plate axes in 3 × 60 s before the board-clock
-    # driver; the servo torques once, at a trajectory's start; 0.015 s raises false STARTs;
-    # docs/observer_node.md, "Command timing", "Free motion that moves for 60 s", "Detection in servo coordinates")
+    # the live graph's values (the observer node declares these): K = 100 1/s, a 10 ms first-order lag — with the
+    # commands delivered on time, free-motion residual peaks reach r_low only in runs of a few samples, and the plate
+    # is detected 35 ms sooner than at 25 1/s; min_duration 0.02 s, 5 consecutive samples at 200 Hz — free motion
+    # shows runs of up to 3 samples over a threshold, and 0.015 s raises false STARTs
+    # (docs/history/observer_node.md, "Command timing", "Free motion that moves for 60 s"; docs/detectors.md)
     gains: tuple[float, ...] = (100.0, 100.0, 100.0, 100.0, 100.0, 100.0)
     thresholds: tuple[float, ...] = (2.0, 2.0, 2.0, 0.2, 0.2, 0.2)
     # free motion in the live graph peaks at 0.3–0.52 N·m in single samples; an arm push of 5 N gives 0.4–0.54 N·m,
-    # a rod push 0.8 N·m (docs/observer_node.md, "Detection in servo coordinates")
+    # a rod push 0.8 N·m (docs/detectors.md, "Detection in servo coordinates")
     servo_thresholds: tuple[float, ...] = (0.35, 0.35, 0.35, 0.35, 0.35, 0.35)
     release_ratio: float = 0.5
     min_duration: float = 0.02

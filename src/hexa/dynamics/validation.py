@@ -134,8 +134,8 @@ def pose_driven_residual(run: SimRun, params: HexaDynamicParameters, pose_noise:
     Returns (residual wrench (N, 6), events, observer)."""
     from hexa.dynamics.observer import ObserverConfig, ResidualObserver
 
-    # K = 25 1/s and min_duration 0.01 s: the settings docs/dynamics.md's validation figures were measured with (the
-    # live graph's defaults came later, docs/observer_node.md)
+    # K = 25 1/s and min_duration 0.01 s: the settings of docs/dynamics.md's validation figures (the live graph's
+    # defaults differ: docs/observer_parameters.md)
     obs = ResidualObserver(params, ObserverConfig(kinematics="pose", gains=(25.0,) * 6, min_duration=0.01))
     rng = np.random.default_rng(seed)
     out = np.full((run.t.size, 6), np.nan)

@@ -24,11 +24,17 @@ from __future__ import annotations
 
 import dataclasses
 from dataclasses import dataclass, field
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
 from hexa.sim.scenarios import ScriptedCollision
+
+if TYPE_CHECKING:
+    from hexa.dynamics.cusum import CusumConfig
+    from hexa.dynamics.observer import ObserverConfig
+    from hexa.robots.hexa_description import HexaDescription
+    from hexa.sim.realism import RealismConfig
 
 LINKS = ("plate", "arm", "rod")
 TRAJECTORIES = ("circle", "helix", "ellipse")
@@ -57,14 +63,14 @@ class DetectorSpec:
     thresholds: tuple[float, ...]
     servo_thresholds: tuple[float, ...]
     kind: str = "threshold"
-    cusum: Any = None
+    cusum: CusumConfig | None = None
 
-    def config(self, base: Any, scale: float = 1.0) -> Any:
+    def config(self, base: ObserverConfig, scale: float = 1.0) -> ObserverConfig:
         return dataclasses.replace(base, thresholds=tuple(scale * v for v in self.thresholds),
                                    servo_thresholds=tuple(scale * v for v in self.servo_thresholds))
 
 
-def detectors(observer_config: Any, cusum: Any = None) -> tuple[DetectorSpec, ...]:
+def detectors(observer_config: ObserverConfig, cusum: CusumConfig | None = None) -> tuple[DetectorSpec, ...]:
     """The detectors replayed on every run: the CUSUM detector (`cusum`: CusumConfig, default the node's), the
     threshold detector (both at the configured thresholds) and the paper's baseline."""
     from hexa.dynamics.cusum import CusumConfig
@@ -115,9 +121,10 @@ class RunRecord:
     counters: dict[str, Any] = field(default_factory=dict)
 
 
-def simulate(collision: ScriptedCollision | None, trajectory: str, duration: float, realism: Any, seed: int,
-             observer_config: Any = None, identify: bool = True, desc: Any = None, detector: str = "threshold",
-             cusum: Any = None) -> RunRecord:
+def simulate(collision: ScriptedCollision | None, trajectory: str, duration: float, realism: RealismConfig,
+             seed: int, observer_config: ObserverConfig | None = None, identify: bool = True,
+             desc: HexaDescription | None = None, detector: str = "threshold",
+             cusum: CusumConfig | None = None) -> RunRecord:
     """Run the robot `duration` s of trajectory time (after LEAD_IN) with an optional scripted contact (its onset in
     trajectory time); see the module docstring for what runs. Free motion (no contact) loops the trajectory and
     ignores STARTs (it keeps moving, to count false alarms); with a contact a START holds the trajectory, as the
@@ -232,7 +239,7 @@ def simulate(collision: ScriptedCollision | None, trajectory: str, duration: flo
                      counters={**mon.counters(), "monitoring_lost": watch.lost_count})
 
 
-def replay(rec: RunRecord, spec: DetectorSpec, base_config: Any, scale: float = 1.0
+def replay(rec: RunRecord, spec: DetectorSpec, base_config: ObserverConfig, scale: float = 1.0
            ) -> list[tuple[float, str, int, str]]:
     """The events `spec` at `scale` raises on the recorded residuals (the live detector, replayed; the CUSUM fed the
     recorded ζ̂̇ as in the monitor)."""

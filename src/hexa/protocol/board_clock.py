@@ -4,8 +4,8 @@ The current board (Mega) stamps each sample with its own microsecond clock; the 
 *arrived*, and samples arrive in bursts — a USB-serial latency timer, a busy host, a driver thread that waited for the
 GIL. Pairing each sample with the command sent by the time the driver *handles* the sample would pair a burst of
 samples measured before a command went out with that command: the arm-angle estimator would place the set-point
-step up to a burst early, and the collision observer's residual would spike (docs/driver.md, "Which command a
-sample carries").
+step up to a burst early, and the collision observer's residual would spike (docs/driver_timing.md, "Which
+command a sample carries").
 
 Here the host keeps a map from its clock to the board's, built from the samples themselves. A sample with board time
 b_k that arrived at host time t_k says that the board clock read *at least* b_k at t_k (it was measured before it
@@ -185,8 +185,8 @@ class CommandTimeline:
     already waiting in the port when the command went out — a driver that was stopped or starved while the board
     went on measuring — are not in the map yet, so the estimate can be early by the whole wait, and every sample of
     that wait would carry a command the servos did not have yet (seen as a false collision START after a 45 ms driver
-    stall, docs/driver.md). Each such read raises the estimate to what its samples prove: they had all been measured
-    when the read started.
+    stall, docs/driver_timing.md). Each such read raises the estimate to what its samples prove: they had all been
+    measured when the read started.
 
     Args:
         horizon: board seconds of superseded commands kept for samples that arrive late (s).

@@ -12,13 +12,16 @@ import sys
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Sequence
+from typing import TYPE_CHECKING, Any, Sequence
 
 import numpy as np
 import yaml
 
 from hexa.protocol.frames import MAX_RATE_HZ, MIN_RATE_HZ, PULSE_MAX_US, PULSE_MIN_US
 from hexa.protocol.sensor_model import CurrentSensorModel
+
+if TYPE_CHECKING:
+    from hexa.robots.hexa_description import HexaDescription
 
 N_JOINTS = 6
 #: a command this far (rad) outside the joint range is float noise at a limit: clamped; farther: rejected
@@ -62,7 +65,8 @@ class ServoCalibration:
         return self.zeta_ref + (pulse_us - self.zero_us) / self.us_per_rad
 
 
-def servo_calibrations_from_config(items: Sequence[dict] | None, desc=None) -> list[ServoCalibration]:
+def servo_calibrations_from_config(items: Sequence[dict] | None,
+                                   desc: HexaDescription | None = None) -> list[ServoCalibration]:
     """Six ServoCalibration from the `servos` list of driver.yaml; None: from the robot description's pulse map.
 
     Args:
@@ -116,7 +120,7 @@ class DriverCore:
             After the driver stalled (a starved or paused host) the newest trajectory point can lie far ahead of the
             last one sent, and the time since it would allow the whole jump: the servos jumped there at their full
             speed, a real jerk that the collision observer saw as a collision. With one command period here they
-            catch up at max_speed instead (docs/driver.md, "Catching up after a stall").
+            catch up at max_speed instead (docs/driver_timing.md, "Catching up after a stall").
         joint_names: names expected in joint_commands / used in joint_states.
     """
 
@@ -282,7 +286,7 @@ def load_driver_config(path: str | os.PathLike | None = None) -> dict:
     return cfg
 
 
-def servo_calibrations_from_description(desc) -> list[ServoCalibration]:
+def servo_calibrations_from_description(desc: HexaDescription) -> list[ServoCalibration]:
     """Six ServoCalibration from a HexaDescription's actuator pulse map (centre of the joint range at the centre
     pulse, us_per_rad * direction_i, pulse limits).
 

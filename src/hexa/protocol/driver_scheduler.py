@@ -1,6 +1,6 @@
 """When each joint command goes out to the servo board, and which set-points each current sample carries.
 
-`DriverScheduler` is the driver's timing state between the two boards (docs/driver.md):
+`DriverScheduler` is the driver's timing state between the two boards (docs/driver_timing.md):
 
 - commands: the newest command waits while the previous one went out less than 1/`command_rate_hz` ago (faster
   ones coalesce, the latest wins); with `command_sync` it is held until it would reach the Uno in the middle of the

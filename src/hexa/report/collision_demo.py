@@ -8,8 +8,12 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
+
+if TYPE_CHECKING:
+    from hexa.robots.hexa_description import HexaDescription
 
 LINK_NAMES = {0: "plate", 1: "arm", 2: "rod", 255: "unknown"}
 
@@ -88,7 +92,7 @@ def _nearest_index(t: np.ndarray, tq: np.ndarray) -> np.ndarray:
     return np.where(np.abs(t[i - 1] - tq) <= np.abs(t[i] - tq), i - 1, i)
 
 
-def plate_equivalent_truth(d: CaseData, desc=None) -> np.ndarray:
+def plate_equivalent_truth(d: CaseData, desc: HexaDescription | None = None) -> np.ndarray:
     """The true contact force as the plate-equivalent wrench W = J_Dᵀ F (N, N·m) at every truth sample — what the
     residual converges to (hexa.dynamics.contact_map); zeros where nothing touches, NaN rows without a pose or IK.
 
@@ -114,7 +118,8 @@ def plate_equivalent_truth(d: CaseData, desc=None) -> np.ndarray:
     return W
 
 
-def servo_equivalent_truth(d: CaseData, plate_equivalent: np.ndarray, desc=None) -> np.ndarray | None:
+def servo_equivalent_truth(d: CaseData, plate_equivalent: np.ndarray,
+                           desc: HexaDescription | None = None) -> np.ndarray | None:
     """The true contact force as servo torques τ_W = J_ζ⁻ᵀ W (N·m) at every truth sample — what the residual's servo
     form (hexa.dynamics.observer.servo_torque_residual) converges to; None without truth_zeta or truth_pose."""
     from hexa.dynamics.lagrange import HexaDynamicParameters, chain_jacobian, pose_to_position_rotation
@@ -137,8 +142,8 @@ def servo_equivalent_truth(d: CaseData, plate_equivalent: np.ndarray, desc=None)
     return tau
 
 
-def compute_metrics(d: CaseData, r_low: float = 2.0, desc=None, plate_equivalent: np.ndarray | None = None
-                    ) -> CaseMetrics:
+def compute_metrics(d: CaseData, r_low: float = 2.0, desc: HexaDescription | None = None,
+                    plate_equivalent: np.ndarray | None = None) -> CaseMetrics:
     """Detection delay, link/chain, contact point error and force RMSE of one case against the ground truth.
 
     Two delays: from the first instant a true force component exceeds r_low (the detection-delay definition), and — with

@@ -19,6 +19,7 @@ from hexa.sim.config import SimConfig, sim_config_of
 
 if TYPE_CHECKING:
     from hexa.robots.hexa_description import HexaDescription
+    from hexa.sim.realism import RobotTruth
 
 HOME_POSE = np.array([0.0, 0.0, -0.55, 0.0, 0.0, 0.0])
 PARK_POS = (0.0, 0.0, 5.0)      # where unused mocap bodies (object, occluders) wait: outside every view
@@ -75,7 +76,7 @@ def _inertial(mass: float, com: np.ndarray, inertia: np.ndarray) -> str:
 
 
 def build_mjcf(desc: HexaDescription, pose: np.ndarray | None = None, config: SimConfig | None = None,
-               physical_contact: bool = False, truth: Any = None, motor_servos: bool = False) -> str:
+               physical_contact: bool = False, truth: RobotTruth | None = None, motor_servos: bool = False) -> str:
     """MJCF text of the Hexa of `desc`, assembled at plate `pose` [x y z α β γ] (m, rad; Z-Y-X, eq 38).
 
     Args:

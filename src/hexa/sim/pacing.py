@@ -6,15 +6,15 @@ The simulator steps as fast as it can and sleeps to keep sim time at `real_time_
 until the pace is restored: sim time then runs several times faster than the rest of the graph, whose commands
 (trajectory → driver → virtual Uno) then reach the simulated servos sparser in sim time than they were played —
 gaps of 20–50 ms followed by a burst of set-point steps, which the arms really follow with jerks that the observer
-sees as unmodelled torque (docs/observer_node.md, "Command timing"). So when the loop is more than `max_lag` wall
-seconds behind, the lost wall time is dropped instead: the run gets longer, and sim time never runs ahead of the
+sees as unmodelled torque (docs/history/observer_node.md, "Command timing"). So when the loop is more than `max_lag`
+wall seconds behind, the lost wall time is dropped instead: the run gets longer, and sim time never runs ahead of the
 requested factor.
 """
 from __future__ import annotations
 
 import math
 import time
-from typing import Any, Callable, Protocol
+from typing import Callable, Protocol
 
 
 #: shortest sleep (s): the loop is paced every step, so the virtual boards' threads (which run while it sleeps) apply a
@@ -65,6 +65,18 @@ class Pacer:
             self.dropped -= ahead
 
 
+class SteppedSim(Protocol):
+    """What the stepping loop needs of the simulator (hexa.sim.Simulator): its clock and one physics step."""
+
+    @property
+    def time(self) -> float: ...
+
+    @property
+    def timestep(self) -> float: ...
+
+    def step(self, n: int) -> None: ...
+
+
 class SimOutputs(Protocol):
     """What the stepping loop asks its owner to publish (the sim node's publishers)."""
 
@@ -94,7 +106,7 @@ class SimRunner:
         spin_every: steps between two `outputs.spin()` calls (the node's own service/parameter callbacks).
     """
 
-    def __init__(self, sim: Any, pacer: Pacer, clock_rate: float, truth_rate: float, camera_rate: float | None,
+    def __init__(self, sim: SteppedSim, pacer: Pacer, clock_rate: float, truth_rate: float, camera_rate: float | None,
                  duration: float = 0.0, start_delay: float = 0.0, spin_every: int = 50,
                  clock: Callable[[], float] = time.monotonic, sleep: Callable[[float], None] = time.sleep) -> None:
         dt = sim.timestep

@@ -1,5 +1,5 @@
 """The realistic simulated robot: a *truth* that is not the nodes' model, hobby-servo mechanics, a real current
-sensor's noise and host timing jitter. See docs/simulator.md, "The realistic robot".
+sensor's noise and host timing jitter. See docs/realism.md.
 
     from hexa.sim.realism import RealismConfig, draw_truth
     truth = draw_truth(load_hexa(), seed=3)             # masses, COMs, inertias, K_t, friction, offsets... per seed
@@ -14,9 +14,13 @@ from __future__ import annotations
 import dataclasses
 import math
 from dataclasses import dataclass, field
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
+
+if TYPE_CHECKING:
+    from hexa.protocol.sensor_model import CurrentSensorModel
+    from hexa.robots.hexa_description import HexaDescription
 
 #: The current sensor of the realistic robot: Allegro ACS712ELCTR-05B-T datasheet figures (Vcc = 5 V, 25 °C,
 #: C_F = 47 nF on the filter pin, 2 kHz bandwidth) read by the Mega's 10-bit ADC (V_ref = 5 V, 4.88 mV/count).
@@ -108,7 +112,7 @@ class RobotTruth:
         return out
 
 
-def _link_nominal(desc: Any, name: str) -> LinkTruth:
+def _link_nominal(desc: HexaDescription, name: str) -> LinkTruth:
     li = getattr(desc, name)
     I = np.asarray(li.inertia, dtype=float)
     return LinkTruth(float(li.mass), np.asarray(li.com, dtype=float).copy(), np.diag(I) if I.shape == (3,) else I)
@@ -126,7 +130,7 @@ def _draw_link(nominal: LinkTruth, rng: np.random.Generator, tol: Tolerances) ->
     return LinkTruth(float(mass), com, 0.5 * (inertia + inertia.T))
 
 
-def nominal_truth(desc: Any) -> RobotTruth:
+def nominal_truth(desc: HexaDescription) -> RobotTruth:
     """The truth that *is* the description: the ideal robot (no friction, no play, exact K_t and sensor)."""
     z = np.zeros(6)
     return RobotTruth(seed=-1, plate=_link_nominal(desc, "plate"), arms=(_link_nominal(desc, "arm"),) * 6,
@@ -135,7 +139,7 @@ def nominal_truth(desc: Any) -> RobotTruth:
                       sensor_gain=np.ones(6), current_offset=z.copy())
 
 
-def draw_truth(desc: Any, seed: int, tolerances: Tolerances | None = None) -> RobotTruth:
+def draw_truth(desc: HexaDescription, seed: int, tolerances: Tolerances | None = None) -> RobotTruth:
     """The robot of `seed`: the description's values with errors drawn within `tolerances` (see `Tolerances`).
 
     The same (description, seed, tolerances) always gives the same truth; masses stay positive and inertias valid.
@@ -283,7 +287,8 @@ class ServoMechanics:
         return np.where(self.engaged, tau_m, 0.0)
 
 
-def adc_counts(sensor: Any, amps: np.ndarray, noise_counts: float, rng: np.random.Generator) -> np.ndarray:
+def adc_counts(sensor: CurrentSensorModel, amps: np.ndarray, noise_counts: float,
+               rng: np.random.Generator) -> np.ndarray:
     """The Mega's ADC counts for currents `amps` (A) through `sensor` (hexa.protocol.sensor_model), with Gaussian
     output noise of `noise_counts` σ (in counts) before quantisation — the virtual Mega's sampling, for offline runs."""
     volts = sensor.zero_voltage + sensor.sensitivity * np.asarray(amps, dtype=float)

@@ -33,6 +33,7 @@ from hexa.vision.isolation import (
 
 if TYPE_CHECKING:
     from hexa.robots.hexa_description import HexaDescription
+    from hexa.sim.simulator import Simulator
 
 LINK_CODE = {"plate": LINK_PLATE, "arm": LINK_ARM, "rod": LINK_ROD, "none": LINK_UNKNOWN}
 TRAJECTORIES = ("circle", "helix", "ellipse")
@@ -57,7 +58,7 @@ class ContactSample:
     meta: dict[str, Any] = field(default_factory=dict)
 
 
-def camera_models(sim: Any) -> dict[str, CameraModel]:
+def camera_models(sim: Simulator) -> dict[str, CameraModel]:
     """CameraModel of each simulated camera."""
     return {name: CameraModel.from_any(sim.camera_model(name), name) for name in ("cam_top", "cam_side")}
 

@@ -31,7 +31,7 @@ import math
 from collections import Counter, deque
 from collections.abc import Sequence
 from dataclasses import dataclass, field
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -46,6 +46,9 @@ from hexa.vision.isolation import (
     debug_image,
 )
 from hexa.vision.sync import FrameAssembler, ImagePairer, PoseBuffer, RawFrame, RawImage, RGBDFrame
+
+if TYPE_CHECKING:
+    from hexa.robots.hexa_description import HexaDescription
 
 ISOLATE, BACKGROUND = "isolate", "background"
 
@@ -307,7 +310,7 @@ class ContactLocator:
         coarse_margin: m added around the drawn robot when the pose is carried forward.
     """
 
-    def __init__(self, desc: Any, cameras: dict[str, CameraModel], coarse_margin: float = 0.008) -> None:
+    def __init__(self, desc: HexaDescription, cameras: dict[str, CameraModel], coarse_margin: float = 0.008) -> None:
         self.desc = desc
         self.isolator = CollisionIsolator(cameras)
         self.assemblers = {c: FrameAssembler(c, m.T_base_camera) for c, m in cameras.items()}

@@ -8,6 +8,7 @@ from __future__ import annotations
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from itertools import combinations
+from typing import TYPE_CHECKING
 
 import cv2
 import numpy as np
@@ -15,6 +16,9 @@ import numpy as np
 from hexa.rotations import quaternion_from_matrix  # noqa: F401 - part of this module's interface
 from hexa.vision.camera import CameraModel
 from hexa.vision.rigid import RigidFitError, fit_plane, fit_rigid_transform, residuals
+
+if TYPE_CHECKING:
+    from hexa.robots.hexa_description import HexaDescription
 
 
 class MarkerError(ValueError):
@@ -32,7 +36,7 @@ class MarkerLayout:
     surface_offset: float = 0.0   # height of the marker tops above the plate surface (m)
 
     @classmethod
-    def from_description(cls, desc) -> MarkerLayout:
+    def from_description(cls, desc: HexaDescription) -> MarkerLayout:
         """Layout from the robot description's `markers` section (top face of each disc: position + plate
         half-thickness + disc thickness along z of {P})."""
         try:

@@ -4,8 +4,8 @@ A node that needs only some of a heavy stream (the isolation node: camera frames
 through `PolledSubscriptions`: the subscriptions belong to a second node of the process (`<owner>_<suffix>`) that no
 executor spins, so no callback runs per message and the owner's executor queue holds only its own (light) messages.
 `take(sub)` returns what the reader holds, oldest first: the last `depth` messages, as serialized bytes for a raw
-subscription. The owner's remaps given on the process's command line apply; node-local ones (a composed node's)
-do not.
+subscription. Topic names resolve through the owner, so its remaps apply, the node-local ones of a composed node
+included (the polled node itself ignores the process's arguments, which would remap a resolved name twice).
 """
 from __future__ import annotations
 
@@ -25,14 +25,18 @@ class PolledSubscriptions:
         from rclpy.parameter import Parameter
 
         name = f"{owner.get_name()}_{suffix}"
+        self.owner = owner
         self.node = Node(name, namespace=owner.get_namespace(), context=owner.context,
-                         cli_args=["--ros-args", "-r", f"__node:={name}"], start_parameter_services=False,
+                         cli_args=["--ros-args", "-r", f"__node:={name}"], use_global_arguments=False,
+                         start_parameter_services=False,
                          enable_rosout=False,
                          parameter_overrides=[Parameter("use_sim_time", value=False)])   # no /clock to take
 
     def subscribe(self, msg_type: Any, topic: str, qos: Any, raw: bool = True) -> Any:
-        """A subscription whose reader keeps the last `qos.depth` messages until `take`."""
-        return self.node.create_subscription(msg_type, topic, _never_called, qos, raw=raw)
+        """A subscription whose reader keeps the last `qos.depth` messages until `take`, on `topic` as the owner
+        resolves it (its namespace and remaps)."""
+        return self.node.create_subscription(msg_type, self.owner.resolve_topic_name(topic), _never_called, qos,
+                                             raw=raw)
 
     @staticmethod
     def take(sub: Any) -> list[Any]:
