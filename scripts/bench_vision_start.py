@@ -136,6 +136,7 @@ def main() -> int:
                "contacts": [{"stamp": round(c[1], 3), "link": c[3], "chain": c[4], "point_mm": c[5],
                              "after_start_s": round(c[0] - seen["start_wall"], 3)} for c in seen["contacts"]],
                "top_frames": len(frames), "plate_poses": len(seen["poses"]),
+               "top_frames_without_pose": sorted(set(frames) - {round(st, 6) for _, st in seen["poses"]}),
                "frame_to_pose_s": {"p50": float(np.percentile(lat, 50)), "p95": float(np.percentile(lat, 95)),
                                    "max": float(np.max(lat))} if lat else None,
                "cpu_percent": {n: round(cpu.percent(n, t0, t1), 1) for n in pids},

@@ -24,6 +24,16 @@ def test_stamps_round_trip_and_never_carry_a_billion_nanoseconds():
         to_stamp(float("nan"))
 
 
+def test_malloc_thresholds_are_in_the_child_environment_and_applied_in_process():
+    from hexa_ros.env import MALLOC_THRESHOLDS, ros_env, tune_malloc
+
+    env = ros_env(base={})
+    assert env["MALLOC_MMAP_THRESHOLD_"] == str(MALLOC_THRESHOLDS["MMAP_THRESHOLD"])
+    assert env["MALLOC_TRIM_THRESHOLD_"] == str(MALLOC_THRESHOLDS["TRIM_THRESHOLD"])
+    assert ros_env(base={"MALLOC_MMAP_THRESHOLD_": "1"})["MALLOC_MMAP_THRESHOLD_"] == "1"   # the user's value stays
+    assert tune_malloc() is sys.platform.startswith("linux")
+
+
 def test_compose_refuses_a_malformed_spec_naming_it():
     from hexa_ros.compose import ComposeError, parse_specs
 
@@ -58,6 +68,8 @@ def test_composed_nodes_keep_their_names_and_parameters_and_stop_on_ctrl_c(procs
     p.send_signal(signal.SIGINT)
     _out, err = p.communicate(timeout=15)
     assert p.returncode == 0 and "Traceback" not in err, err
+    # each node logs once when built, so the first log call's inspect cost is not paid in a callback
+    assert "[glue.observer]: ready" in err and "[glue.singularity]: ready" in err, err
 
 
 def test_compose_with_an_unknown_class_exits_2_in_one_line(procs, ros_env):

@@ -170,3 +170,24 @@ def test_marker_pose_accuracy_against_simulator_truth() -> None:
     assert rep.ok == rep.n >= 6
     assert rep.median_position_error <= 0.002
     assert np.degrees(rep.median_rotation_error) <= 0.5
+
+
+def test_filters_on_the_box_around_their_pixels_equal_the_whole_frame_ones_also_at_the_border() -> None:
+    """The isolation runs its median and box filters on `_box` crops: at the pixels they serve, the values equal
+    those of the filter over the whole frame, for pixels inside the frame and on its edges."""
+    import cv2
+
+    from hexa.vision.isolation import _box
+
+    rng = np.random.default_rng(3)
+    depth = rng.integers(0, 3000, (48, 64)).astype(np.uint16)
+    values = rng.random((48, 64)).astype(np.float32)
+    for corner in ((10, 20), (0, 0), (40, 57)):           # inside, top-left and bottom-right edges
+        vv = rng.integers(corner[0], corner[0] + 8, 30).clip(0, 47)
+        uu = rng.integers(corner[1], corner[1] + 7, 30).clip(0, 63)
+        rows, cols = _box(vv, uu, 2, depth.shape)
+        assert np.array_equal(cv2.medianBlur(depth[rows, cols], 5)[vv - rows.start, uu - cols.start],
+                              cv2.medianBlur(depth, 5)[vv, uu])
+        rows, cols = _box(vv, uu, 7 // 2 + 1, values.shape)
+        assert np.array_equal(cv2.boxFilter(values[rows, cols], -1, (7, 7), normalize=False)[
+            vv - rows.start, uu - cols.start], cv2.boxFilter(values, -1, (7, 7), normalize=False)[vv, uu])

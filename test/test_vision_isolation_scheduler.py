@@ -233,22 +233,6 @@ def test_image_pairer_pairs_raw_images_by_stamp_and_the_assembler_decodes_them_o
     assert fa.rejects["colour/depth size mismatch"] == 1
 
 
-def test_frames_are_wanted_until_the_backgrounds_and_during_collisions_only() -> None:
-    s = IsolationScheduler(CAMS, background_delay=0.1)
-    assert s.wants_frames
-    _frames(s, 1.0, 6)                                     # 0.17 s: both backgrounds offered
-    for w in s.due(0.0):
-        assert w.kind == BACKGROUND
-        s.background_taken(next(iter(w.frames)))
-    assert not s.wants_frames
-    s.collision_start(1, onset=1.1, now=0.0)
-    assert s.wants_frames
-    s.collision_end(1, 1.2)
-    assert not s.wants_frames
-    s.capture_background()
-    assert s.wants_frames
-
-
 def test_a_batch_of_images_taken_per_topic_pairs_into_every_frame() -> None:
     """Ten colour images, then ten depth images of each camera (as the readers hand them over): every frame pairs
     (the pairer alone keeps five unpaired images), and a collision queues pairs of both cameras."""

@@ -86,14 +86,15 @@ def test_frames_without_camera_info_or_markers_are_counted_as_rejects(frame) -> 
     color, depth = frame
     est = PlatePoseEstimator(LAYOUT, "cam_top", CAM.T_base_camera)
     est.add_color(1.0, *color)
-    assert est.add_depth(1.0, *depth) is None                     # no camera_info yet
-    est.set_camera_info(CAM.width, CAM.height, CAM.K.reshape(-1).tolist())
+    assert est.add_depth(1.0, *depth) is None                     # no camera_info yet: the pair is held
+    first = est.set_camera_info(CAM.width, CAM.height, CAM.K.reshape(-1).tolist())
+    assert first is not None and first.stamp == 1.0 and first.fit is not None   # ... and fitted with it
     blank = numpy_to_image(np.full((CAM.height, CAM.width, 3), 30, np.uint8), "rgb8")
     est.add_color(2.0, blank.height, blank.width, blank.encoding, blank.is_bigendian, blank.step, blank.data)
     out = est.add_depth(2.0, *depth)
     assert out is not None and out.fit is None
-    assert est.counters() == {"no camera_info": 1, "frames": 1, "marker fit rejected": 1}
-    assert est.rejected() == 2
+    assert est.counters() == {"frames": 2, "poses": 1, "marker fit rejected": 1}
+    assert est.rejected() == 1
 
 
 def _moving_frames(n: int) -> list[tuple[tuple, tuple]]:

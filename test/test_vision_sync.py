@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import numpy as np
+import pytest
 
 from hexa.vision.camera import intrinsics
 from hexa.vision.images import numpy_to_image
@@ -48,9 +49,11 @@ def test_bad_input_is_counted_and_skipped() -> None:
     rgb = np.zeros((6, 8, 3), np.uint8)
     depth = np.full((6, 8), 500, np.uint16)
     fa.add_color(1.0, *_fields(rgb, "rgb8"))
-    assert fa.add_depth(1.0, *_fields(depth, "16UC1")) is None           # no camera_info yet
-    fa.set_camera_info(8, 6, [0.0] * 9)                                  # empty camera_info
-    fa.set_camera_info(8, 6, K)
+    assert fa.add_depth(1.0, *_fields(depth, "16UC1")) is None           # no camera_info yet: held
+    assert fa.set_camera_info(8, 6, [0.0] * 9) is None                   # empty camera_info
+    first = fa.set_camera_info(8, 6, K)                                  # the held pair, now usable
+    assert first is not None and first.stamp == 1.0 and first.depth[0, 0] == pytest.approx(0.5)
+    assert fa.set_camera_info(8, 6, K) is None                           # given once
     h, w, _, be, step, data = _fields(rgb, "rgb8")
     assert fa.add_color(2.0, h, w, "yuv422", be, step, data) is None     # unknown encoding
     assert fa.add_color(3.0, h, w, "rgb8", be, step, data[:10]) is None  # truncated data
@@ -59,6 +62,16 @@ def test_bad_input_is_counted_and_skipped() -> None:
     assert fa.add_depth(5.0, *_fields(depth[:4], "16UC1")) is None      # frame smaller than camera_info
     fa.add_color(6.0, *_fields(np.zeros((6, 8, 3), np.uint8), "rgb8"))
     assert fa.add_depth(6.0, *_fields(np.full((4, 8), 500, np.uint16), "16UC1")) is None  # colour/depth differ
-    assert fa.rejects == {"no camera_info": 1, "bad camera_info": 1, "bad colour image": 2, "empty depth": 1,
+    assert fa.rejects == {"bad camera_info": 1, "bad colour image": 2, "empty depth": 1,
                           "frame/camera_info size mismatch": 1, "colour/depth size mismatch": 1}
-    assert fa.frames == 0
+    assert fa.frames == 1
+
+
+def test_of_the_pairs_before_the_first_camera_info_the_newest_is_held_the_older_counted() -> None:
+    fa = FrameAssembler("cam_top", np.eye(4))
+    for t in (1.0, 2.0):
+        fa.add_color(t, *_fields(np.zeros((6, 8, 3), np.uint8), "rgb8"))
+        assert fa.add_depth(t, *_fields(np.full((6, 8), 500, np.uint16), "16UC1")) is None
+    frame = fa.set_camera_info(8, 6, K)
+    assert frame is not None and frame.stamp == 2.0
+    assert fa.rejects == {"no camera_info": 1} and fa.frames == 1

@@ -1,4 +1,4 @@
-"""Shared helpers of the vision nodes: Image/CameraInfo filling and the description's cameras (stamps, QoS and
+"""Shared helpers of the vision nodes: Image/CameraInfo/Contact filling and the description's cameras (stamps, QoS and
 diagnostics are hexa_ros')."""
 from __future__ import annotations
 
@@ -9,6 +9,7 @@ import numpy as np
 from hexa.vision.camera import CameraModel
 from hexa.vision.images import numpy_to_image
 from hexa_ros.qos import RELIABLE as RELIABLE_QOS  # noqa: F401 - the tests' name for hexa_ros.qos.RELIABLE
+from hexa_ros.stamps import fill_stamp
 
 CAMERAS = ("cam_top", "cam_side")
 
@@ -42,6 +43,24 @@ def camera_info_msg(cam: CameraModel, frame_id: str, stamp: Any, fields: dict | 
     msg.k = f["k"]
     msg.r = f["r"]
     msg.p = f["p"]
+    return msg
+
+
+def contact_msg(found: Any):
+    """hexa_msgs/Contact of an isolated pair (hexa.vision.isolation_scheduler.Located): stamped with the pair's
+    stamp, point in `base` (m), the push direction where measured (zeros otherwise)."""
+    from hexa_msgs.msg import Contact
+
+    est, msg = found.estimate, Contact()
+    fill_stamp(msg.header.stamp, found.work.stamp)
+    msg.header.frame_id = "base"
+    msg.collision_id = found.work.collision_id
+    msg.link, msg.chain = int(est.link), int(est.chain)
+    msg.point.x, msg.point.y, msg.point.z = (float(v) for v in est.point)
+    msg.pixel_u, msg.pixel_v = (float(v) for v in est.pixel)
+    msg.camera, msg.confidence = est.camera, float(est.confidence)
+    if np.all(np.isfinite(est.push_direction)):
+        msg.push_direction.x, msg.push_direction.y, msg.push_direction.z = (float(v) for v in est.push_direction)
     return msg
 
 

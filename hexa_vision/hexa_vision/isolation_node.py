@@ -5,32 +5,26 @@ node's, PoseStamped in base), `plate_pose_estimate` (the observer's tracked pose
 time) and `collision` (hexa_msgs/CollisionEvent). Publishes `contact` (hexa_msgs/Contact), `isolation/debug_image`
 (rgb8 mosaic of the steps like the paper's Figs. 12/17/22; onset pairs only, only while subscribed) and
 `/diagnostics`. Service `capture_background` (std_srvs/Trigger): the next frame of each camera becomes its background
-(workspace clear); the first ones are taken `background_delay` s after the first frame.
+(workspace clear); the first ones are taken `background_delay` s after the first frame. Parameters:
+hexa_vision.isolation_params (read-only; the same defaults in hexa_bringup/config/hexa_params.yaml).
 
 The images are not taken per message: they wait in their DDS readers (the last `frame_history` of each topic, on a
-node `<name>_images` that no executor spins, hexa_ros.polled) and are taken only when frames are wanted: on a
-collision START, every 0.05 s during a collision, and until the backgrounds are taken. So the node spends nothing on
-images between collisions, and a START never waits behind queued images. Taken images go undecoded (zero-copy views
-of the delivered bytes) into a ring buffer per camera and are decoded only when a pair is evaluated or becomes a
-background. On START the buffered pair nearest the onset is evaluated at once, then a pair every `eval_period` s of
-frame time until END, each with the plate pose of its stamp. Camera poses come late: the onset pair waits
-`onset_pose_wait` wall s, then takes the last camera pose carried forward by `plate_pose_estimate`, else the nearest
-camera pose within `onset_pose_age` (robot mask `coarse_margin` wider); the other pairs wait up to `pose_wait` wall
-s, then take the carried pose, else the nearest camera pose within `max_pose_age`; a pair without a pose after
-`pose_expiry` wall s is dropped. At most `max_pending` pairs wait, the onset pair is never dropped
-(hexa.vision.isolation_scheduler).
+node `<name>_images` that no executor spins, hexa_ros.polled) and are taken as serialized bytes every 0.05 s and on
+a collision START, so a START never waits behind queued images and finds the frames of its onset already buffered.
+Taken images go undecoded (views of the delivered bytes) into the last second of frames per camera and are decoded
+only when a pair is evaluated or becomes a background. On START the buffered pair nearest the onset is evaluated at
+once with a pose already received, then a pair every `eval_period` s of frame time until END with the plate pose of
+its stamp; the waits, the carried-forward poses and the queue are hexa.vision.isolation_scheduler's.
 """
 from __future__ import annotations
 
 import time
 
-import numpy as np
 from diagnostic_msgs.msg import DiagnosticArray
 from geometry_msgs.msg import PoseStamped
 from hexa_ros import diagnostics, node, qos, stamps
 from hexa_ros.conversions import pose_fields
-from hexa_ros.node import DESCRIPTION, DESCRIPTION_PARAM
-from rcl_interfaces.msg import ParameterDescriptor
+from hexa_ros.node import DESCRIPTION, declare_parameters
 from rclpy.node import Node
 from rclpy.qos import QoSProfile
 from sensor_msgs.msg import CameraInfo, Image
@@ -39,44 +33,26 @@ from std_srvs.srv import Trigger
 from hexa.pose_check import PoseCheck
 from hexa.robots.hexa_description import load_hexa
 from hexa.vision.isolation import LINK_UNKNOWN
-from hexa.vision.isolation_scheduler import BACKGROUND, ContactLocator, IsolationScheduler, Located
-from hexa.vision.sync import RawImage
+from hexa.vision.isolation_scheduler import BACKGROUND, ContactLocator, IsolationScheduler
 from hexa_ros.cdr import CdrError, image_from_cdr
 from hexa_ros.polled import PolledSubscriptions
 from hexa_msgs.msg import CollisionEvent, Contact
-from hexa_vision.common import CAMERAS, description_cameras, image_msg
-
+from hexa_vision.common import CAMERAS, contact_msg, description_cameras, image_msg
+from hexa_vision.isolation_params import PARAMETERS, SCHEDULER
 
 class IsolationNode(Node):
     def __init__(self, **kwargs) -> None:
         super().__init__("hexa_vision_isolation", **kwargs)
-
-        def p(name: str, default, description: str):
-            return self.declare_parameter(name, default, ParameterDescriptor(description=description,
-                                                                             read_only=True)).value
-
-        desc_path = p(DESCRIPTION, DESCRIPTION_PARAM.default, DESCRIPTION_PARAM.description)
-        self.want_debug = bool(p("debug_image", True, "publish the debug mosaic of onset pairs"))
-        self.sched = IsolationScheduler(
-            CAMERAS, background_delay=p("background_delay", 1.0, "s of frames before the backgrounds"),
-            max_pose_age=p("max_pose_age", 0.2, "s; largest gap to interpolate plate poses across"),
-            pose_wait=p("pose_wait", 0.5, "wall s a pair waits for a camera pose at/after its stamp"),
-            pose_expiry=p("pose_expiry", 3.0, "wall s after which a pair without a pose is dropped"),
-            max_pending=p("max_pending", 8, "frame pairs queued while waiting for poses"),
-            eval_period=p("eval_period", 0.1, "s of frame time between evaluated pairs during a collision"),
-            onset_pose_wait=p("onset_pose_wait", 0.0, "wall s the onset pair waits for the camera pose of its stamp"),
-            onset_pose_age=p("onset_pose_age", 0.05, "s; oldest camera pose the onset pair takes, no estimate"))
-        history = int(p("frame_history", 6, "images of each topic waiting in the reader between takes"))
-        if history < 1:
-            raise ValueError(f"frame_history must be at least 1, got {history}")
-        coarse = p("coarse_margin", 0.008, "m around the drawn robot when the pose is carried forward")
-        models = description_cameras(desc_path)
-        desc = load_hexa(desc_path or None)
-        self.locator = ContactLocator(desc, {c: models[c] for c in CAMERAS}, coarse)
+        v = declare_parameters(self, PARAMETERS)
+        self.want_debug = bool(v["debug_image"])
+        self.sched = IsolationScheduler(CAMERAS, **{k: v[k] for k in SCHEDULER})
+        models = description_cameras(v[DESCRIPTION])
+        desc = load_hexa(v[DESCRIPTION] or None)
+        self.locator = ContactLocator(desc, {c: models[c] for c in CAMERAS}, v["coarse_margin"])
         self.pose_checks = {k: PoseCheck.for_hexa(desc) for k in ("plate_pose", "plate_pose_estimate")}
         self.images = PolledSubscriptions(self, "images")
-        image_qos = QoSProfile(depth=history, reliability=qos.SENSOR.reliability, history=qos.SENSOR.history,
-                               durability=qos.SENSOR.durability)
+        image_qos = QoSProfile(depth=v["frame_history"], reliability=qos.SENSOR.reliability,
+                               history=qos.SENSOR.history, durability=qos.SENSOR.durability)
         self.image_subs = [(c, color, self.images.subscribe(Image, f"{c}/{topic}", image_qos)) for c in CAMERAS
                            for topic, color in (("color/image_raw", True), ("aligned_depth_to_color/image_raw", False))]
         for c in CAMERAS:
@@ -104,12 +80,9 @@ class IsolationNode(Node):
         for cam, color, sub in self.image_subs:
             for data in self.images.take(sub):
                 try:
-                    m = image_from_cdr(data)     # serialized: the pixels stay a view of the delivered bytes
+                    images.append((cam, image_from_cdr(data).raw(), color))   # pixels: a view of the bytes
                 except CdrError:
                     self.sched.counters["reject: malformed image"] += 1
-                    continue
-                images.append((cam, RawImage(m.stamp, m.height, m.width, m.encoding, m.is_bigendian, m.step, m.data),
-                               color))
         self.sched.add_images(images, time.monotonic())
         return len(images)
 
@@ -132,18 +105,17 @@ class IsolationNode(Node):
     def _on_collision(self, msg: CollisionEvent) -> None:
         if msg.event == CollisionEvent.START:
             t0 = time.monotonic()
-            taken = self._take_images()  # the frames around the onset
+            taken = self._take_images()  # the frames since the last tick
             self.sched.collision_start(msg.id, stamps.to_sec(msg.onset), time.monotonic())
-            self.get_logger().info(f"collision {msg.id} START, onset {stamps.to_sec(msg.onset):.3f} s, {taken} "
-                                   f"images taken in {1e3 * (time.monotonic() - t0):.0f} ms, "
-                                   f"{len(self.sched.pending)} pair(s) queued")
             self._run()
+            self.get_logger().info(f"collision {msg.id} START, onset {stamps.to_sec(msg.onset):.3f} s: {taken} "
+                                   f"images taken, onset pair handled in {1e3 * (time.monotonic() - t0):.0f} ms, "
+                                   f"{len(self.sched.pending)} pair(s) waiting")
         elif msg.event == CollisionEvent.END:
             self.sched.collision_end(msg.id, stamps.to_sec(msg.header.stamp))
 
     def _tick(self) -> None:
-        if self.sched.wants_frames:
-            self._take_images()
+        self._take_images()
         self._run()
 
     def _run(self) -> None:
@@ -157,26 +129,12 @@ class IsolationNode(Node):
             found = self.locator.locate(work, debug)
             if found is None:
                 continue
-            self.get_logger().info(found.summary())
             if found.estimate.link != LINK_UNKNOWN:
-                self.pub_contact.publish(self._contact(found))
+                self.pub_contact.publish(contact_msg(found))
+            self.get_logger().info(found.summary())
             if debug:
                 self.pub_debug.publish(image_msg(self.locator.debug_mosaic(found), "rgb8", found.estimate.camera
                                                  + "_color_optical_frame", self.get_clock().now().to_msg()))
-
-    @staticmethod
-    def _contact(found: Located) -> Contact:
-        est, msg = found.estimate, Contact()
-        stamps.fill_stamp(msg.header.stamp, found.work.stamp)
-        msg.header.frame_id = "base"
-        msg.collision_id = found.work.collision_id
-        msg.link, msg.chain = int(est.link), int(est.chain)
-        msg.point.x, msg.point.y, msg.point.z = (float(v) for v in est.point)
-        msg.pixel_u, msg.pixel_v = (float(v) for v in est.pixel)
-        msg.camera, msg.confidence = est.camera, float(est.confidence)
-        if np.all(np.isfinite(est.push_direction)):
-            msg.push_direction.x, msg.push_direction.y, msg.push_direction.z = (float(v) for v in est.push_direction)
-        return msg
 
     def _diagnostics(self) -> None:
         counters = self.locator.all_counters()

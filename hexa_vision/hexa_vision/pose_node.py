@@ -29,6 +29,7 @@ from hexa_ros import diagnostics, qos
 from hexa_ros.cdr import CdrError, image_from_cdr
 from hexa_ros.conversions import fill_pose_msg
 from hexa_ros.node import DESCRIPTION, DESCRIPTION_PARAM, Param, declare_parameters
+from hexa_ros.stamps import to_stamp
 from hexa_vision.common import description_cameras
 
 # `-p detector:=off` arrives as YAML false: any type is accepted
@@ -71,7 +72,10 @@ class PoseNode(Node):
         self.create_timer(1.0, self._diagnostics)
 
     def _on_info(self, msg: CameraInfo) -> None:
-        self.estimator.set_camera_info(msg.width, msg.height, msg.k, msg.d)
+        want = self.pub_det.get_subscription_count() > 0
+        result = self.estimator.set_camera_info(msg.width, msg.height, msg.k, msg.d, want)
+        if result is not None:   # the first frame, paired before its camera_info arrived
+            self._publish(result, to_stamp(result.stamp), want)
 
     def _on_color(self, data: bytes) -> None:
         self._on_image(data, self.estimator.add_color)

@@ -291,7 +291,16 @@ class Background:
             raise IsolationError(f"background rgb {rgb.shape} and depth {depth_m.shape} are not an aligned pair")
         self.gray = cv2.cvtColor(np.ascontiguousarray(rgb), cv2.COLOR_RGB2GRAY)
         self.depth = np.asarray(depth_m, np.float32)
+        self.valid = np.isfinite(self.depth) & (self.depth > 0)
         self.shape = depth_m.shape
+
+
+def _box(vv: np.ndarray, uu: np.ndarray, margin: int, shape: tuple[int, ...]) -> tuple[slice, slice]:
+    """Rows and columns of the pixels (vv, uu) plus `margin` px, clipped to the image: a filter of half-width
+    ≤ `margin` gives these pixels the same values on the crop as on the whole image (where the crop meets the
+    image's border, the border rule is the same)."""
+    return (slice(max(int(vv.min()) - margin, 0), min(int(vv.max()) + margin + 1, shape[0])),
+            slice(max(int(uu.min()) - margin, 0), min(int(uu.max()) + margin + 1, shape[1])))
 
 
 class CollisionIsolator:
@@ -385,8 +394,10 @@ class CollisionIsolator:
                 # (the coloured markers are flush with it); median-filtered depth against the plate plane
                 vv, uu = np.nonzero(foreign & (plate > 0))
                 if vv.size:
-                    dmm = np.nan_to_num(np.asarray(depth, np.float32) * 1000.0, nan=0.0)
-                    dmed = cv2.medianBlur(np.clip(dmm, 0, 65535).astype(np.uint16), 5)[vv, uu] * 1e-3
+                    rows, cols = _box(vv, uu, 2, depth.shape)     # the 5x5 median of these pixels only
+                    dmm = np.nan_to_num(np.asarray(depth[rows, cols], np.float32) * 1000.0, nan=0.0)
+                    dmed = cv2.medianBlur(np.clip(dmm, 0, 65535).astype(np.uint16), 5)[
+                        vv - rows.start, uu - cols.start] * 1e-3
                     ok = dmed > 0
                     ray = self._rays[camera][vv[ok], uu[ok]]
                     pc = np.column_stack([ray * dmed[ok][:, None], dmed[ok]])
@@ -434,9 +445,8 @@ class CollisionIsolator:
             raise IsolationError(f"{camera}: depth frame has no valid pixel")
         gray = cv2.cvtColor(rgb, cv2.COLOR_RGB2GRAY)
         changed = cv2.absdiff(gray, bg.gray) > cfg.gray_threshold
-        bg_valid = np.isfinite(bg.depth) & (bg.depth > 0)
         with np.errstate(invalid="ignore"):
-            changed |= valid & (~bg_valid | (np.abs(depth - bg.depth) > cfg.depth_change))
+            changed |= valid & (~bg.valid | (np.abs(depth - bg.depth) > cfg.depth_change))
         changed &= valid
         robot = self.robot_mask(camera, geom, rgb, depth)
         cand = changed & (robot == 0)
@@ -462,11 +472,12 @@ class CollisionIsolator:
             res.layers["workspace"] = obj.copy()
         if vv.size:
             ltype = cv2.CV_16U if vv.size < 65535 else cv2.CV_32S   # 16-bit labels: faster, safe below 2^16 px
-            n, labels, stats, _ = cv2.connectedComponentsWithStats(obj.astype(np.uint8), connectivity=8,
-                                                                   ltype=ltype)
+            rows, cols = _box(vv, uu, 0, obj.shape)                # the object's pixels lie in this box
+            n, labels, stats, _ = cv2.connectedComponentsWithStats(obj[rows, cols].astype(np.uint8),
+                                                                   connectivity=8, ltype=ltype)
             big = np.zeros(n, bool)
             big[1:] = stats[1:, cv2.CC_STAT_AREA] >= cfg.min_object_area
-            keep = big[labels[vv, uu]]
+            keep = big[labels[vv - rows.start, uu - cols.start]]
             vv, uu, pts, z = vv[keep], uu[keep], pts[keep], z[keep]
             obj[:] = False
             obj[vv, uu] = True
@@ -478,12 +489,14 @@ class CollisionIsolator:
             return res
         if cfg.smooth_px > 1:
             # normalised box filter of the depth over the object only: the object's own surface, less noise
-            m = obj.astype(np.float32)
-            dz = np.where(obj, depth, 0.0).astype(np.float32)
+            rows, cols = _box(vv, uu, cfg.smooth_px // 2 + 1, obj.shape)
+            o = obj[rows, cols]
+            m = o.astype(np.float32)
+            dz = np.where(o, depth[rows, cols], 0.0).astype(np.float32)
             k = (cfg.smooth_px, cfg.smooth_px)
-            num = cv2.boxFilter(dz, -1, k, normalize=False)
-            den = cv2.boxFilter(m, -1, k, normalize=False)
-            z = num[vv, uu] / np.maximum(den[vv, uu], 1.0)
+            num = cv2.boxFilter(dz, -1, k, normalize=False)[vv - rows.start, uu - cols.start]
+            den = cv2.boxFilter(m, -1, k, normalize=False)[vv - rows.start, uu - cols.start]
+            z = num / np.maximum(den, 1.0)
             ray = self._rays[camera][vv, uu]
             pts = np.column_stack([ray * z[:, None], z]) @ cam.T_base_camera[:3, :3].T + cam.T_base_camera[:3, 3]
 

@@ -125,11 +125,6 @@ class IsolationScheduler:
         self._background: dict[str, Any] = {}
         self._pairers = {c: ImagePairer() for c in self.cameras}
 
-    @property
-    def wants_frames(self) -> bool:
-        """New frames are of use: during a collision, or while a camera's background is still to be taken."""
-        return self.active is not None or bool(self._want_background)
-
     # ------------------------------------------------------------------ inputs
     def add_image(self, cam: str, image: RawImage, color: bool, now: float) -> None:
         """An undecoded colour (`color` True) or depth image of `cam`; the frame it completes goes to `add_frame`."""

@@ -62,12 +62,15 @@ class PlatePoseEstimator:
         self.markers: MarkerDetector | None = None
         self._counters: Counter[str] = Counter()
 
-    def set_camera_info(self, width: int, height: int, k: Any, d: Any = None) -> None:
-        """Update the intrinsics from CameraInfo fields (a new marker detector when they change)."""
-        self.assembler.set_camera_info(width, height, k, d)
+    def set_camera_info(self, width: int, height: int, k: Any, d: Any = None, detections_wanted: bool = True
+                        ) -> PlatePose | None:
+        """Update the intrinsics from CameraInfo fields (a new marker detector when they change); the pose of the
+        frame that was paired before the first camera_info, else None."""
+        frame = self.assembler.set_camera_info(width, height, k, d)
         cam = self.assembler.camera
         if cam is not None and not cam.same_as(self.markers.camera if self.markers else None):
             self.markers = MarkerDetector(self.layout, cam)
+        return None if frame is None else self.process(frame, detections_wanted)
 
     def add_color(self, stamp: float, height: int, width: int, encoding: str, is_bigendian: int, step: int,
                   data: Any, detections_wanted: bool = True) -> PlatePose | None:

@@ -96,19 +96,24 @@ class FrameAssembler:
         self._depth: deque[tuple[float, np.ndarray]] = deque(maxlen=keep)
         self.rejects: Counter[str] = Counter()
         self.frames = 0
+        self._waiting: tuple[float, np.ndarray, np.ndarray] | None = None   # a pair that came before camera_info
 
-    def set_camera_info(self, width: int, height: int, k: Any, d: Any = None) -> None:
+    def set_camera_info(self, width: int, height: int, k: Any, d: Any = None) -> RGBDFrame | None:
         """Update the intrinsics from CameraInfo fields (bad ones are counted and ignored; a repeat of the current
-        ones costs a comparison)."""
+        ones costs a comparison). Returns the frame that was paired before the first camera_info arrived (a
+        camera publishes a frame's images before its camera_info), now that it can be used, else None."""
         key = (int(width), int(height), tuple(k), tuple(d) if d is not None else ())
         if self.camera is not None and key == self._info:
-            return
+            return None
         try:
             self.camera = CameraModel.from_camera_info(width, height, k, d, self.T, self.name,
                                                        self.name + "_color_optical_frame")
             self._info = key
         except CameraModelError:
             self.rejects["bad camera_info"] += 1
+            return None
+        waiting, self._waiting = self._waiting, None
+        return None if waiting is None else self._emit(*waiting)
 
     def add_color(self, stamp: float, height: int, width: int, encoding: str, is_bigendian: int, step: int,
                   data: Any) -> RGBDFrame | None:
@@ -166,6 +171,11 @@ class FrameAssembler:
                 if abs(tc - td) <= self.tolerance:
                     del self._color[i]
                     del self._depth[j]
+                    if self.camera is None:      # held for set_camera_info; an older held pair is lost
+                        if self._waiting is not None:
+                            self.rejects["no camera_info"] += 1
+                        self._waiting = (tc, rgb, depth)
+                        return None
                     return self._emit(tc, rgb, depth)
         return None
 

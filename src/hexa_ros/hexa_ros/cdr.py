@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import struct
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 
@@ -35,6 +36,12 @@ class CdrImage:
     @property
     def stamp(self) -> float:
         return self.stamp_sec + 1e-9 * self.stamp_nanosec
+
+    def raw(self) -> Any:
+        """The core's undecoded image (hexa.vision.sync.RawImage), its pixels still a view of the message's bytes."""
+        from hexa.vision.sync import RawImage
+
+        return RawImage(self.stamp, self.height, self.width, self.encoding, self.is_bigendian, self.step, self.data)
 
 
 _U32 = {"<": struct.Struct("<I").unpack_from, ">": struct.Struct(">I").unpack_from}   # compiled once: 1 kHz streams

@@ -12,8 +12,8 @@ RMW = "rmw_fastrtps_cpp"
 
 
 def defaults() -> dict[str, str]:
-    """The variables hexa sets when they are unset: RMW implementation, the Fast DDS profile file, and one thread
-    for numpy's BLAS and OpenCV's loops.
+    """The variables hexa sets when they are unset: RMW implementation, the Fast DDS profile file, one thread
+    for numpy's BLAS and OpenCV's loops, and glibc's malloc thresholds (`MALLOC_THRESHOLDS`).
 
     A node shares two cores with the rest of the graph: a BLAS or OpenCV thread pool per process spins on cores
     the other nodes need (the isolation of a frame pair took ≈ 120 ms of CPU with OpenBLAS's threads, ≈ 55 ms
@@ -27,13 +27,36 @@ def defaults() -> dict[str, str]:
         "RCUTILS_COLORIZED_OUTPUT": "0",
         "OPENBLAS_NUM_THREADS": "1",
         "OPENCV_FOR_THREADS_NUM": "1",
+        **{f"MALLOC_{k}_": str(v) for k, v in MALLOC_THRESHOLDS.items()},
     }
 
 
+#: glibc malloc: blocks up to 16 MB come from the heap and up to 64 MB of free heap top is kept. glibc's default
+#: maps every block above 128 kB (an image message, a full-frame mask) freshly from the kernel and unmaps it when
+#: freed, so each one page-faults in again: taking a 640x480 image from its DDS reader cost 0.2-0.65 ms with the
+#: default, 0.15-0.19 ms with these; isolating a frame pair 15 % less CPU.
+MALLOC_THRESHOLDS = {"MMAP_THRESHOLD": 16 << 20, "TRIM_THRESHOLD": 64 << 20}
+_MALLOPT = {"MMAP_THRESHOLD": -3, "TRIM_THRESHOLD": -1}     # mallopt's parameter numbers (malloc.h)
+
+
+def tune_malloc() -> bool:
+    """Apply `MALLOC_THRESHOLDS` to this process (glibc reads the variables only at start-up); False where malloc
+    is not glibc's."""
+    import ctypes
+
+    try:
+        mallopt = ctypes.CDLL(None).mallopt
+    except (OSError, AttributeError):
+        return False
+    return all(mallopt(_MALLOPT[k], v) == 1 for k, v in MALLOC_THRESHOLDS.items())
+
+
 def apply_defaults() -> None:
-    """Set the defaults in os.environ (keeping anything the user set). Call before rclpy.init()."""
+    """Set the defaults in os.environ (keeping anything the user set) and this process's malloc thresholds. Call
+    before rclpy.init()."""
     for key, value in defaults().items():
         os.environ.setdefault(key, value)
+    tune_malloc()
 
 
 def ros_env(domain_id: int | None = None, localhost_only: bool = True, base: dict[str, str] | None = None
