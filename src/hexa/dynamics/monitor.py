@@ -305,20 +305,22 @@ class CollisionMonitor:
     def _sample(self, t: float, pos: NDArray, tau: NDArray, vel: NDArray | None) -> MonitorSample | None:
         zeta_dot: NDArray | None
         if self.config.zeta_source == "estimator":
-            e = self.estimator.update(t, pos, tau)
+            e = self.estimator.step(t, pos, tau)
             if e is None:
                 self.rejects["estimator"] += 1
                 return None
-            if not e.settled:  # ζ̇ still converging after a (re)start: the observer restarts after it
+            if not e[2]:  # ζ̇ still converging after a (re)start: the observer restarts after it
                 self.settling += 1
                 return None
-            zeta, zeta_dot = e.zeta, e.zeta_dot
+            z_list, zd_list = e[0], e[1]
+            zeta, zeta_dot = np.array(z_list), np.array(zd_list)
         else:
             zeta, zeta_dot = pos, vel    # measured: the rate the sample carries, or None
+            z_list, zd_list = zeta, zeta_dot
         if self._motion is not None:
             self._motion(t, zeta_dot)
         tau = self.torque.correct(tau, zeta, zeta_dot)
-        out = self.observer.update_arm(t, zeta, tau, zeta_dot)
+        out = self.observer.update_arm(t, z_list, tau, zd_list)
         self._tracking = out is not None
         if out is None:
             self.rejects["observer"] += 1

@@ -633,6 +633,12 @@ def servo_torque_residual(geo: list, r: NDArray, jacobian: list[list[float]] | N
 
 
 def _floats(x) -> list | None:
+    """`x` flattened to a new list of plain floats (None: not numbers); a list of floats or a float64 array, as the
+    per-sample path passes them, without a round trip through numpy."""
+    if type(x) is list and all(type(v) is float for v in x):
+        return list(x)
+    if type(x) is np.ndarray and x.dtype == np.float64:
+        return x.reshape(-1).tolist()
     try:
         return np.asarray(x, dtype=float).reshape(-1).tolist()
     except (TypeError, ValueError):
