@@ -308,7 +308,8 @@ class ZetaEstimator:
         else:
             h = t - self._t
             step = sv.speed_max * h
-            c = [ci + min(max(ui - ci, -step), step) for ci, ui in zip(self._c, uc)]
+            c = [ci + (d if -step <= d <= step else step if d > step else -step)   # clip to ±step
+                 for ci, d in ((ci, ui - ci) for ci, ui in zip(self._c, uc))]
             self._predict_update(h, c, tq, free, r_s)
         self._y = [ci - ti / kp for ci, ti in zip(c, tq)]
         self._c = c

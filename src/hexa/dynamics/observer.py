@@ -39,7 +39,8 @@ from typing import TYPE_CHECKING, Iterable
 
 import numpy as np
 
-from hexa.dynamics._kernel import KernelError, SampleKernel, chain_jacobian_rows, exp_rotate, solve6
+from hexa.dynamics._kernel import (KernelError, SampleKernel, chain_jacobian_array, chain_jacobian_rows, exp_rotate,
+                                    solve6)
 from hexa.dynamics.lagrange import (DynamicsError, HexaDynamicParameters, MotionState, _Geometry, _momentum_terms,
                                     _Velocity, inverse_dynamics, motion_from_joint_rates, pose_to_position_rotation,
                                     wrench_to_generalized_zyz)
@@ -598,7 +599,7 @@ class ResidualObserver:
     def _evaluate(self, t, z, tq, zd, p, R, geo, zeta_ddot, V=None) -> _ArmSample:
         s = _ArmSample()
         s.t, s.zeta, s.tau, s.zeta_dot, s.p, s.R = t, z, tq, zd, p, R
-        s.J = np.array(chain_jacobian_rows(geo))
+        s.J = chain_jacobian_array(geo)
         if self.form == "momentum":
             s.V, s.pi, s.u = self._kernel.terms(geo, zd, tq, p, R, twist=V, jacobian=s.J)
             s.Q = None
