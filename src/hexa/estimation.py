@@ -308,8 +308,10 @@ class ZetaEstimator:
         else:
             h = t - self._t
             step = sv.speed_max * h
-            c = [ci + (d if -step <= d <= step else step if d > step else -step)   # clip to ±step
-                 for ci, d in ((ci, ui - ci) for ci, ui in zip(self._c, uc))]
+            c = []
+            for ci, ui in zip(self._c, uc):   # the set-point moves by at most ±step
+                d = ui - ci
+                c.append(ci + (d if -step <= d <= step else step if d > step else -step))
             self._predict_update(h, c, tq, free, r_s)
         self._y = [ci - ti / kp for ci, ti in zip(c, tq)]
         self._c = c
@@ -344,7 +346,8 @@ class ZetaEstimator:
         r_stall = cfg.stall_sigma ** 2
         stall_measured = cfg.stall_sigma > 0.0
         xs, Ps = self._xs, self._Ps   # flat lists, updated in place
-        c, tq, free = (v.tolist() if isinstance(v, np.ndarray) else v for v in (c, tq, free))
+        if isinstance(c, np.ndarray):   # arrays from a caller other than `step`
+            c, tq, free = c.tolist(), np.asarray(tq).tolist(), np.asarray(free).tolist()
         for i, (ci, ti, fi) in enumerate(zip(c, tq, free)):
             z, zd, b = xs[3 * i:3 * i + 3]
             p00, p01, p02, _, p11, p12, _, _, p22 = Ps[9 * i:9 * i + 9]

@@ -146,7 +146,7 @@ class SampleKernel:
 
     def geometry(self, zeta: Sequence[float], p: Sequence[float], R: Sequence[float]) -> tuple[list, float]:
         """Per-chain (r, u, u', d, |d|², D, j) and max |f_i| (f_i = |d_i|² − l_d², eq 15)."""
-        la = self.la
+        la, ld2 = self.la, self.ld2
         r00, r01, r02, r10, r11, r12, r20, r21, r22 = R
         px, py, pz = p
         out = []
@@ -166,9 +166,11 @@ class SampleKernel:
             dy = py + ry - ay - la * uy
             dz = pz + rz - az - la * uz
             dd = dx * dx + dy * dy + dz * dz
-            f = abs(dd - self.ld2)
+            f = dd - ld2
             if f > fmax:
                 fmax = f
+            elif -f > fmax:   # |f| without a call
+                fmax = -f
             D = la * (dx * vx + dy * vy + dz * vz)
             out.append((rx, ry, rz, ux, uy, uz, vx, vy, vz, dx, dy, dz, dd, D))
         return out, fmax

@@ -312,15 +312,13 @@ class CollisionMonitor:
             if not e[2]:  # ζ̇ still converging after a (re)start: the observer restarts after it
                 self.settling += 1
                 return None
-            z_list, zd_list = e[0], e[1]
-            zeta, zeta_dot = np.array(z_list), np.array(zd_list)
+            zeta, zeta_dot = np.array(e[0]), np.array(e[1])
         else:
             zeta, zeta_dot = pos, vel    # measured: the rate the sample carries, or None
-            z_list, zd_list = zeta, zeta_dot
         if self._motion is not None:
             self._motion(t, zeta_dot)
         tau = self.torque.correct(tau, zeta, zeta_dot)
-        out = self.observer.update_arm(t, z_list, tau, zd_list)
+        out = self.observer.update_arm(t, zeta, tau, zeta_dot)
         self._tracking = out is not None
         if out is None:
             self.rejects["observer"] += 1
