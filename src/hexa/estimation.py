@@ -308,6 +308,7 @@ class ZetaEstimator:
         else:
             h = t - self._t
             step = sv.speed_max * h
+            assert self._c is not None   # set with _t
             c = []
             for ci, ui in zip(self._c, uc):   # the set-point moves by at most ±step
                 d = ui - ci
@@ -394,8 +395,8 @@ class ZetaEstimator:
                 lo = mid
             else:
                 hi = mid
-        (t0, z0), (t1, z1) = h[lo], h[hi]
-        z0, z1 = np.array(z0), np.array(z1)
+        (t0, l0), (t1, l1) = h[lo], h[hi]
+        z0, z1 = np.array(l0), np.array(l1)
         w = (t - t0) / (t1 - t0) if t1 > t0 else 0.0
         return z0 + w * (z1 - z0) + corr  # every camera correction so far shifts the past estimate too
 

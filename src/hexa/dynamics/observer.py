@@ -572,8 +572,8 @@ class ResidualObserver:
         if self._calib is not None:
             self._calib.append(np.array(w))
         if dt != self._lag[0]:
-            a = np.exp(-self._K * dt)
-            self._lag = (dt, a.tolist(), (1.0 - a).tolist())
+            lag = np.exp(-self._K * dt)
+            self._lag = (dt, lag.tolist(), (1.0 - lag).tolist())
         _, a, b = self._lag
         # r ← a r + (1 − a) w̄ on plain floats (the same operations as on arrays, rounded the same)
         self.r = np.array([am * rm + bm * wm for am, rm, bm, wm in zip(a, self.r.tolist(), b, w)])
