@@ -380,3 +380,17 @@ def test_servo_frames_unknown_seq_repeats_and_fallback():
     assert tl.frames == 2 and tl.setpoints_at(0.06, cmd) is not None
     with pytest.raises(ValueError):
         ServoFrameTimeline(period=0.0)
+
+
+def test_percentile_linear_equals_numpys_to_the_last_bit():
+    """The driver's delivery-delay percentiles on plain floats give np.percentile's numbers exactly."""
+    from hexa.protocol.board_clock import percentile_linear
+
+    rng = np.random.default_rng(11)
+    for n in list(range(1, 40)) + [199, 200]:
+        for _ in range(20):
+            values = (rng.normal(0.004, 0.002, n) * rng.choice([1.0, 1e-3, 1e3])).tolist()
+            if rng.random() < 0.3:   # repeated values
+                values = [round(v, 4) for v in values]
+            for q in (0, 10, 50, 98, 100, float(rng.uniform(0, 100))):
+                assert percentile_linear(values, q) == float(np.percentile(values, q)), (n, q)

@@ -182,3 +182,35 @@ def test_closed_form_filter_step_equals_the_matrix_form():
         assert np.allclose(est._x, x_ref, rtol=1e-12, atol=1e-15)
         assert np.allclose(est._P, P_ref, rtol=1e-12, atol=1e-18)
         assert np.array_equal(est._P, np.swapaxes(est._P, 1, 2))
+
+
+def test_the_per_sample_step_gives_what_update_gives_with_camera_poses_between():
+    """ZetaEstimator.step (lists, the monitor's per-sample call) and update (ArmEstimate arrays) run the same
+    filter: the same numbers bit for bit, camera corrections (one queued ahead of the samples) and a saturated servo
+    included; `last` is rebuilt after each change."""
+    from hexa.kinematics.hexa6rus import inverse_kinematics
+    from hexa.robots.hexa_description import load_hexa
+
+    desc = load_hexa()
+    pose = np.asarray(desc.home_pose, dtype=float)
+    z = np.asarray(inverse_kinematics(desc, pose))
+    rng = np.random.default_rng(7)
+    by_step, by_update = ZetaEstimator(desc), ZetaEstimator(desc)
+    for k in range(300):
+        t = k * 0.001
+        u = z + 0.01 * np.sin(3.0 * t) + rng.normal(0.0, 1e-4, 6)
+        tau = rng.normal(0.0, 0.05, 6)
+        if 100 <= k < 120:
+            tau[2] = 2.0 * by_step.torque_max        # servo 3 saturated
+        zeta, zeta_dot, settled = by_step.step(t, u, tau)
+        e = by_update.update(t, u, tau)
+        assert zeta == e.zeta.tolist() and zeta_dot == e.zeta_dot.tolist() and settled == e.settled
+        if k % 33 == 5:
+            seen = pose + np.r_[rng.normal(0, 1e-3, 3), rng.normal(0, 0.005, 3)]
+            ahead = t + 0.004 if k == 71 else t - 0.003
+            assert by_step.update_camera(ahead, seen) == by_update.update_camera(ahead, seen)
+    assert by_step.camera_accepted == by_update.camera_accepted >= 8
+    assert by_step.saturated == by_update.saturated > 0
+    a, b = by_step.last, by_update.last
+    for field in ("zeta", "zeta_dot", "bias", "setpoint", "sigma"):
+        assert getattr(a, field).tolist() == getattr(b, field).tolist(), field

@@ -10,7 +10,8 @@ from ζ̂, at pose_estimate_rate_hz), `markers` (only while subscribed), `/diagn
 `external_wrench` (geometry_msgs/WrenchStamped, the residual in `plate`) and `external_joint_torques` (JointState
 effort: the residual in servo space), one per sample while subscribed; `collision_state` (the last CollisionEvent,
 transient local; END with id 0 before the first collision); `monitoring` (OK / DEGRADED / LOST: docs/monitoring.md);
-/tf (base → plate, arm_i, rod_i) and /tf_static (the YAML's cameras). The outputs: hexa_dynamics.observer_outputs.
+/tf (base → plate, arm_i, rod_i, while subscribed) and /tf_static (the YAML's cameras). The outputs:
+hexa_dynamics.observer_outputs.
 Service `~/reset`. Parameters: hexa_dynamics.observer_params (descriptors; start-up ones read-only), defaults in
 hexa_bringup/config/hexa_params.yaml (`/**/observer`), docs/observer_node.md.
 """

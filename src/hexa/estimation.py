@@ -11,7 +11,8 @@ plate pose every ~33 ms. The servo is modelled as the simulator models it (hexa.
 so y_k = c_k − τ_k/k_p = ζ_k + (k_v/k_p)·ζ̇_k is a direct measurement of the arm state, accurate to σ_τ/k_p (0.3 mrad
 for 10-bit current sensing). Per arm a constant-velocity Kalman filter on x = [ζ, ζ̇, b] (white acceleration of
 spectral density q = accel_sigma²) fuses y_k with H = [1, k_v/k_p, 1], R = (torque_sigma/k_p)²; the six arms are
-filtered together as (6, 3) states and (6, 3, 3) covariances (numpy, ≈ 80 µs per sample).
+filtered together; per sample the state [ζ, ζ̇, b] and the covariance of each arm are plain floats (flat lists: at
+1 kHz numpy's per-call overhead on six values costs more than the filter), as numpy arrays for the camera update.
 
 Stalled servos: when |τ_i| > saturation·τ_max the position loop no longer says exactly where the arm is (its true
 torque is beyond the clipped one), so that arm's sample is only a weak measurement (stall_sigma) and its acceleration
@@ -162,6 +163,15 @@ def _six(x: Any) -> NDArray | None:
     return a if a.shape == (6,) else None
 
 
+def six_floats(x: Any) -> list[float] | None:
+    """Six values as a new list of plain floats, or None when `x` is not six numbers (the per-sample paths compute
+    on floats: numpy's per-call overhead dominates on six values)."""
+    if type(x) is np.ndarray and x.shape == (6,) and x.dtype == np.float64:
+        return x.tolist()
+    a = _six(x)
+    return None if a is None else a.tolist()
+
+
 class ZetaEstimator:
     """ζ, ζ̇ of the six arms from commanded angles + torques, corrected by camera poses (see module docstring).
 
@@ -186,23 +196,49 @@ class ZetaEstimator:
         self._time_gate = TimeGate(self.config.max_jump, self.config.adopt_after)
         self._gated = np.zeros(6, dtype=int)
         self.torque_max = float(getattr(desc, "torque_max", math.inf))
-        self._commands: deque[tuple[float, NDArray]] = deque()
-        self._hist: deque[tuple[float, NDArray]] = deque()
+        self._commands: deque[tuple[float, list[float]]] = deque()
+        self._hist: deque[tuple[float, list[float]]] = deque()   # (t, ζ̂ without the camera corrections so far)
         self.reset()
 
     def reset(self) -> None:
         """Forget the filter state; the next sample re-initialises it."""
         self._t: float | None = None
         self._t_start = -math.inf
-        self._c: NDArray | None = None
-        self._us: NDArray = np.zeros(6)    # the smoothed command (command_smoothing)
-        self._x = np.zeros((6, 3))
-        self._P = np.zeros((6, 3, 3))
-        self._corr = np.zeros(6)
+        self._c: list[float] | None = None
+        self._us = [0.0] * 6               # the smoothed command (command_smoothing)
+        self._y = [0.0] * 6                # the servo measurement c − τ/k_p of the newest sample
+        self._xs = [0.0] * 18              # [ζ, ζ̇, b] per arm, flat (the `_x` property: as a (6, 3) array)
+        self._Ps = [0.0] * 54              # P per arm, row-major, flat (`_P`: as a (6, 3, 3) array)
+        self._corr = [0.0] * 6             # the camera corrections of ζ̂ so far
         self._commands.clear()
         self._hist.clear()
         self._pending_cam: deque[tuple[float, Any]] = deque(maxlen=64)
-        self.last: ArmEstimate | None = None
+        self._last: ArmEstimate | None = None   # built when asked for (`last`)
+
+    @property
+    def _x(self) -> NDArray:
+        """The filter states [ζ, ζ̇, b] of the six arms, (6, 3) (a copy; assign to change them)."""
+        return np.array(self._xs).reshape(6, 3)
+
+    @_x.setter
+    def _x(self, x: NDArray) -> None:
+        self._xs = np.asarray(x, dtype=float).reshape(-1).tolist()
+
+    @property
+    def _P(self) -> NDArray:
+        """The covariances of the six arms' states, (6, 3, 3) (a copy; assign to change them)."""
+        return np.array(self._Ps).reshape(6, 3, 3)
+
+    @_P.setter
+    def _P(self, P: NDArray) -> None:
+        self._Ps = np.asarray(P, dtype=float).reshape(-1).tolist()
+
+    @property
+    def last(self) -> ArmEstimate | None:
+        """The estimate after the newest accepted sample or camera correction (None before the first sample)."""
+        if self._last is None and self._t is not None:
+            self._last = self._estimate()
+        return self._last
 
     def _initial_covariance(self) -> NDArray:
         """P of [ζ, ζ̇, b] at a (re)start: ζ = y − b with b ~ N(0, bias_sigma²), ζ̇ ~ N(0, 1 rad²/s²)."""
@@ -215,7 +251,7 @@ class ZetaEstimator:
         self.rejected[reason] += 1
 
     # ------------------------------------------------------------------ servo model
-    def _delayed_command(self, t: float, u: NDArray) -> NDArray:
+    def _delayed_command(self, t: float, u: list[float]) -> list[float]:
         d = self.servo.command_delay
         self._commands.append((t, u))
         if d <= 0.0:
@@ -227,8 +263,13 @@ class ZetaEstimator:
 
     def update(self, t: float, zeta_commanded: Any, tau: Any) -> ArmEstimate | None:
         """One current sample: commanded angles u (rad) and horn torques τ (N·m) at time t (s)."""
-        u = _six(zeta_commanded)
-        tq = _six(tau)
+        return None if self.step(t, zeta_commanded, tau) is None else self.last
+
+    def step(self, t: float, zeta_commanded: Any, tau: Any) -> tuple[list[float], list[float], bool] | None:
+        """`update` without building the ArmEstimate (the per-sample path): (ζ̂, ζ̂̇ as lists of floats, settled), or
+        None when the sample is rejected."""
+        u = six_floats(zeta_commanded)
+        tq = six_floats(tau)
         try:
             t = float(t)
         except (TypeError, ValueError):
@@ -237,7 +278,7 @@ class ZetaEstimator:
         if u is None or tq is None:
             self._reject("bad_shape")
             return None
-        if not (math.isfinite(t) and all(map(math.isfinite, u.tolist())) and all(map(math.isfinite, tq.tolist()))):
+        if not (math.isfinite(t) and all(map(math.isfinite, u)) and all(map(math.isfinite, tq))):
             self._reject("non_finite")
             return None
         sv = self.servo
@@ -254,38 +295,44 @@ class ZetaEstimator:
             self.reset()
         uc = self._delayed_command(t, u)
         if cfg.command_smoothing > 0.0 and self._t is not None:
-            uc = self._us + (uc - self._us) * (1.0 - math.exp(-(t - self._t) / cfg.command_smoothing))
+            k = 1.0 - math.exp(-(t - self._t) / cfg.command_smoothing)
+            uc = [s + (v - s) * k for s, v in zip(self._us, uc)]
         self._us = uc
-        r_s = (cfg.torque_sigma / sv.kp) ** 2
-        free = np.abs(tq) < cfg.saturation * self.torque_max  # saturated servos: τ no longer tells the angle
-        self.saturated += int(6 - free.sum())
+        kp = sv.kp
+        r_s = (cfg.torque_sigma / kp) ** 2
+        lim = cfg.saturation * self.torque_max
+        free = [abs(v) < lim for v in tq]  # saturated servos: τ no longer tells the angle
+        self.saturated += 6 - sum(free)
         if self._t is None:
-            c = uc.copy()
-            x = np.zeros((6, 3))
-            x[:, 0] = c - tq / sv.kp
-            x[:, 2] = 0.0
-            self._x = x
-            self._P = np.tile(self._initial_covariance(), (6, 1, 1))
+            c = list(uc)
+            self._xs = [v for ci, ti in zip(c, tq) for v in (ci - ti / kp, 0.0, 0.0)]
+            self._Ps = self._initial_covariance().reshape(-1).tolist() * 6
             self._t_start = t
         else:
             h = t - self._t
             step = sv.speed_max * h
-            c = self._c + np.minimum(np.maximum(uc - self._c, -step), step)
+            assert self._c is not None   # set with _t
+            c = []
+            for ci, ui in zip(self._c, uc):   # the set-point moves by at most ±step
+                d = ui - ci
+                c.append(ci + (d if -step <= d <= step else step if d > step else -step))
             self._predict_update(h, c, tq, free, r_s)
-        self._y = c - tq / sv.kp
+        self._y = [ci - ti / kp for ci, ti in zip(c, tq)]
         self._c = c
         self._t = t
         self.accepted += 1
-        self._hist.append((t, self._x[:, 0] - self._corr))  # stored without the camera corrections so far
+        xs, corr = self._xs, self._corr
+        self._hist.append((t, [xs[3 * i] - corr[i] for i in range(6)]))  # without the camera corrections so far
         while self._hist and self._hist[0][0] < t - cfg.history:
             self._hist.popleft()
-        self.last = self._estimate()
+        self._last = None
         while self._pending_cam and self._pending_cam[0][0] <= t:  # camera poses that were ahead of the samples
             tc, q = self._pending_cam.popleft()
             self.update_camera(tc, q)
-        return self.last
+        xs = self._xs
+        return xs[0::3], xs[1::3], t - self._t_start >= cfg.settle_time
 
-    def _predict_update(self, h: float, c: NDArray, tq: NDArray, free: NDArray, r_s: float) -> None:
+    def _predict_update(self, h: float, c: Any, tq: Any, free: Any, r_s: float) -> None:
         """Kalman predict over h seconds and the servo-model update, for the six arms at once, in closed form.
 
         State [ζ, ζ̇, b] per arm. Predict: constant velocity (white acceleration √q_a, stall_accel_sigma for a
@@ -302,8 +349,10 @@ class ZetaEstimator:
         q_free, q_stall = cfg.accel_sigma ** 2, cfg.stall_accel_sigma ** 2
         r_stall = cfg.stall_sigma ** 2
         stall_measured = cfg.stall_sigma > 0.0
-        xs, Ps = self._x.reshape(-1).tolist(), self._P.reshape(-1).tolist()   # flat: cheaper both ways
-        for i, (ci, ti, fi) in enumerate(zip(c.tolist(), tq.tolist(), free.tolist())):
+        xs, Ps = self._xs, self._Ps   # flat lists, updated in place
+        if isinstance(c, np.ndarray):   # arrays from a caller other than `step`
+            c, tq, free = c.tolist(), np.asarray(tq).tolist(), np.asarray(free).tolist()
+        for i, (ci, ti, fi) in enumerate(zip(c, tq, free)):
             z, zd, b = xs[3 * i:3 * i + 3]
             p00, p01, p02, _, p11, p12, _, _, p22 = Ps[9 * i:9 * i + 9]
             qa = q_free if fi else q_stall
@@ -325,13 +374,12 @@ class ZetaEstimator:
                 n11, n12, n22 = n11 - ph1 * ph1 / S, n12 - ph1 * ph2 / S, n22 - ph2 * ph2 / S
             xs[3 * i:3 * i + 3] = z, zd, b
             Ps[9 * i:9 * i + 9] = n00, n01, n02, n01, n11, n12, n02, n12, n22
-        self._x = np.array(xs).reshape(6, 3)
-        self._P = np.array(Ps).reshape(6, 3, 3)
 
     def _estimate(self) -> ArmEstimate:
         assert self._t is not None and self._c is not None   # called after a sample was taken
-        return ArmEstimate(time=self._t, zeta=self._x[:, 0].copy(), zeta_dot=self._x[:, 1].copy(),
-                           bias=self._x[:, 2].copy(), setpoint=self._c.copy(),
+        x = self._x
+        return ArmEstimate(time=self._t, zeta=x[:, 0].copy(), zeta_dot=x[:, 1].copy(),
+                           bias=x[:, 2].copy(), setpoint=np.array(self._c),
                            sigma=np.sqrt(np.maximum(self._P[:, 0, 0], 0.0)),
                            settled=self._t - self._t_start >= self.config.settle_time)
 
@@ -340,8 +388,9 @@ class ZetaEstimator:
         h = self._hist
         if not h or t < h[0][0]:
             return None
+        corr = np.array(self._corr)
         if t >= h[-1][0]:  # never extrapolate with the velocity the camera is about to correct
-            return h[-1][1] + self._corr
+            return np.array(h[-1][1]) + corr
         lo, hi = 0, len(h) - 1
         while hi - lo > 1:
             mid = (lo + hi) // 2
@@ -349,9 +398,10 @@ class ZetaEstimator:
                 lo = mid
             else:
                 hi = mid
-        (t0, z0), (t1, z1) = h[lo], h[hi]
+        (t0, l0), (t1, l1) = h[lo], h[hi]
+        z0, z1 = np.array(l0), np.array(l1)
         w = (t - t0) / (t1 - t0) if t1 > t0 else 0.0
-        return z0 + w * (z1 - z0) + self._corr  # every camera correction so far shifts the past estimate too
+        return z0 + w * (z1 - z0) + corr  # every camera correction so far shifts the past estimate too
 
     def zeta_at(self, t: float) -> NDArray | None:
         """ζ̂ at a past time t within `history` (interpolated, with every camera correction so far); None outside."""
@@ -402,7 +452,8 @@ class ZetaEstimator:
         if lost.any():
             x[lost, 0] += e[lost]
             x[lost, 1] = 0.0
-            x[lost, 2] = self._y[lost] - x[lost, 0]  # the offset that makes the servo model agree with the camera
+            # the offset that makes the servo model agree with the camera
+            x[lost, 2] = np.array(self._y)[lost] - x[lost, 0]
             P[lost] = self._initial_covariance()
             self._gated[lost] = 0
             self.camera_resets += int(lost.sum())
@@ -414,12 +465,13 @@ class ZetaEstimator:
             K = P[:, :, 0] / S[:, None] * use[:, None]      # (6, 3); zero gain on gated arms
             x += K * e[:, None]
             P = P - K[:, :, None] * P[:, 0, None, :]
-            self._P = 0.5 * (P + np.swapaxes(P, 1, 2))
-        self._corr = self._corr + (self._x[:, 0] - z_before)
+            P = 0.5 * (P + np.swapaxes(P, 1, 2))
+        self._x, self._P = x, P
+        self._corr = [c + d for c, d in zip(self._corr, (x[:, 0] - z_before).tolist())]
         if not use.any() and not lost.any():
             return False
         self.camera_accepted += 1
-        self.last = self._estimate()
+        self._last = None
         return True
 
 

@@ -76,6 +76,19 @@ def run_monitor(stream: SampleStream, monitor=None, carried: bool = True) -> tup
     return out, mon
 
 
+def run_estimator(stream: SampleStream, desc=None) -> object:
+    """Feeds the stream's samples (set-points, torques K_t·I) to a fresh ZetaEstimator's per-sample call (`desc`:
+    the robot description, default the packaged one); returns the estimator."""
+    from hexa.estimation import ZetaEstimator
+    from hexa.robots.hexa_description import load_hexa
+
+    desc = desc or load_hexa()
+    est, k_t = ZetaEstimator(desc), float(desc.K_t)
+    for stamp, _board_us, cur, cmd in stream.samples:
+        est.step(stamp, cmd, cur * k_t)
+    return est
+
+
 def cpu_per_call(fn, calls: int, repeat: int = 3) -> float:
     """Best-of-`repeat` CPU seconds per call of a run `fn()` that makes `calls` calls."""
     best = float("inf")
@@ -111,6 +124,12 @@ def bench(quick: bool) -> list[BenchRow]:
     t = cpu_per_call(lambda: run_monitor(stream, carried=False), n, repeat=2 if quick else 3)
     rows.append(BenchRow("collision monitor per current sample, set-points on joint_states (CPU)", t * 1e6, "us",
                          "", None, note="bags recorded before motor_currents carried them: two inputs per sample"))
+    from hexa.robots.hexa_description import load_hexa
+
+    desc = load_hexa()
+    t = cpu_per_call(lambda: run_estimator(stream, desc), n, repeat=2 if quick else 3)
+    rows.append(BenchRow("zeta estimator per current sample (CPU)", t * 1e6, "us", "", None,
+                         note="ZetaEstimator.step alone, part of the monitor row"))
     try:
         import cv2
 

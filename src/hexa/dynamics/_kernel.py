@@ -76,16 +76,26 @@ def solve6_python(M: list[list[float]], b: Sequence[float]) -> Vec:
     return x
 
 
-def chain_jacobian_rows(geo: list) -> list[list[float]]:
-    """J_ζ (6×6, ζ̇ = J_ζ V, seed 000 eq 17) from `SampleKernel.geometry` rows: j_i = [d_i, r_i × d_i] / D_i."""
-    J = []
+def _jacobian_flat(geo: list) -> list[float]:
+    """J_ζ row-major in one list of 36 floats (chain_jacobian_rows)."""
+    J: list[float] = []
     for (rx, ry, rz, ux, uy, uz, vx, vy, vz, dx, dy, dz, dd, D) in geo:
         if abs(D) < 1e-12:
             raise KernelError("serial singularity (rod perpendicular to the arm's motion)")
         iD = 1.0 / D
-        J.append([dx * iD, dy * iD, dz * iD, (ry * dz - rz * dy) * iD, (rz * dx - rx * dz) * iD,
-                  (rx * dy - ry * dx) * iD])
+        J += (dx * iD, dy * iD, dz * iD, (ry * dz - rz * dy) * iD, (rz * dx - rx * dz) * iD, (rx * dy - ry * dx) * iD)
     return J
+
+
+def chain_jacobian_rows(geo: list) -> list[list[float]]:
+    """J_ζ (6×6, ζ̇ = J_ζ V, seed 000 eq 17) from `SampleKernel.geometry` rows: j_i = [d_i, r_i × d_i] / D_i."""
+    J = _jacobian_flat(geo)
+    return [J[k:k + 6] for k in range(0, 36, 6)]
+
+
+def chain_jacobian_array(geo: list) -> np.ndarray:
+    """chain_jacobian_rows as a (6, 6) array, built without nested lists (the per-sample path solves with it)."""
+    return np.fromiter(_jacobian_flat(geo), float, 36).reshape(6, 6)
 
 
 def exp_rotate(w0: float, w1: float, w2: float, R: Sequence[float]) -> tuple[float, ...]:
@@ -136,7 +146,7 @@ class SampleKernel:
 
     def geometry(self, zeta: Sequence[float], p: Sequence[float], R: Sequence[float]) -> tuple[list, float]:
         """Per-chain (r, u, u', d, |d|², D, j) and max |f_i| (f_i = |d_i|² − l_d², eq 15)."""
-        la = self.la
+        la, ld2 = self.la, self.ld2
         r00, r01, r02, r10, r11, r12, r20, r21, r22 = R
         px, py, pz = p
         out = []
@@ -156,9 +166,11 @@ class SampleKernel:
             dy = py + ry - ay - la * uy
             dz = pz + rz - az - la * uz
             dd = dx * dx + dy * dy + dz * dz
-            f = abs(dd - self.ld2)
+            f = dd - ld2
             if f > fmax:
                 fmax = f
+            elif -f > fmax:   # |f| without a call
+                fmax = -f
             D = la * (dx * vx + dy * vy + dz * vz)
             out.append((rx, ry, rz, ux, uy, uz, vx, vy, vz, dx, dy, dz, dd, D))
         return out, fmax
@@ -172,13 +184,13 @@ class SampleKernel:
             geo, fmax = self.geometry(zeta, p, R)
             if fmax < tol:
                 return geo, p, R
-            M = []
+            M: list[float] = []   # row-major, flat: one cheap conversion to an array
             rhs = []
             for (rx, ry, rz, _ux, _uy, _uz, _vx, _vy, _vz, dx, dy, dz, dd, _D) in geo:
-                M.append([2 * dx, 2 * dy, 2 * dz, 2 * (ry * dz - rz * dy), 2 * (rz * dx - rx * dz),
-                          2 * (rx * dy - ry * dx)])
+                M += (2 * dx, 2 * dy, 2 * dz, 2 * (ry * dz - rz * dy), 2 * (rz * dx - rx * dz),
+                      2 * (rx * dy - ry * dx))
                 rhs.append(self.ld2 - dd)
-            dx6 = solve6(M, rhs)
+            dx6 = solve6(np.fromiter(M, float, 36).reshape(6, 6), rhs)
             p = (p[0] + dx6[0], p[1] + dx6[1], p[2] + dx6[2])
             R = exp_rotate(dx6[3], dx6[4], dx6[5], R)
         raise KernelError(f"pose tracking did not converge (max |f| = {fmax:.3g} m²)")

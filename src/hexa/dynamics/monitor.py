@@ -308,14 +308,14 @@ class CollisionMonitor:
     def _sample(self, t: float, pos: NDArray, tau: NDArray, vel: NDArray | None) -> MonitorSample | None:
         zeta_dot: NDArray | None
         if self.config.zeta_source == "estimator":
-            e = self.estimator.update(t, pos, tau)
+            e = self.estimator.step(t, pos, tau)
             if e is None:
                 self.rejects["estimator"] += 1
                 return None
-            if not e.settled:  # ζ̇ still converging after a (re)start: the observer restarts after it
+            if not e[2]:  # ζ̇ still converging after a (re)start: the observer restarts after it
                 self.settling += 1
                 return None
-            zeta, zeta_dot = e.zeta, e.zeta_dot
+            zeta, zeta_dot = np.array(e[0]), np.array(e[1])
         else:
             zeta, zeta_dot = pos, vel    # measured: the rate the sample carries, or None
         if self._motion is not None:

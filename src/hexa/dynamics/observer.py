@@ -39,7 +39,8 @@ from typing import TYPE_CHECKING, Iterable
 
 import numpy as np
 
-from hexa.dynamics._kernel import KernelError, SampleKernel, chain_jacobian_rows, exp_rotate, solve6
+from hexa.dynamics._kernel import (KernelError, SampleKernel, chain_jacobian_array, chain_jacobian_rows, exp_rotate,
+                                    solve6)
 from hexa.dynamics.lagrange import (DynamicsError, HexaDynamicParameters, MotionState, _Geometry, _momentum_terms,
                                     _Velocity, inverse_dynamics, motion_from_joint_rates, pose_to_position_rotation,
                                     wrench_to_generalized_zyz)
@@ -192,7 +193,7 @@ class CollisionDetector:
         self._cand_onset: float | None = None
         self._release_since: float | None = None
         self._onset = 0.0
-        self._peak = np.zeros(12)
+        self._peak = [0.0] * 12
 
     def set_thresholds(self, thresholds: Iterable[float]) -> None:
         th = np.asarray(list(thresholds), dtype=float)
@@ -200,11 +201,13 @@ class CollisionDetector:
             raise ObserverError(f"thresholds must be six positive values, got {thresholds!r}")
         self._th = th
         self._scale[:6] = 1.0 / th
+        self._scale_list = self._scale.tolist()
 
     def set_servo_thresholds(self, thresholds: Iterable[float]) -> None:
         th = _check_servo_thresholds(list(thresholds))
         self._th_servo = th
         self._scale[6:] = np.divide(1.0, th, out=np.zeros(6), where=th > 0)  # 0: that servo's check is off
+        self._scale_list = self._scale.tolist()
 
     @property
     def thresholds(self) -> NDArray:
@@ -217,17 +220,18 @@ class CollisionDetector:
     def update(self, t: float, r: NDArray, servo: NDArray | None = None) -> tuple[NDArray, tuple[CollisionEvent, ...]]:
         """Feed one residual sample r (plate axes) and optionally τ_r (servo torques; None or NaN: not checked);
         returns the twelve over-threshold flags (plate axes, then servos) and the events it caused."""
-        value = np.empty(12)  # a few whole-array operations: this runs at the sample rate (hexa bench dynamics)
-        value[:6] = r
-        value[6:] = 0.0 if servo is None else servo
-        mag = np.abs(value)
-        ratio = mag * self._scale
-        top = ratio.max()
-        if top != top:  # NaN servo torques (a singular J_ζ): not checked
-            bad = np.isnan(ratio)
-            value[bad] = mag[bad] = ratio[bad] = 0.0
-            top = ratio.max()
-        over = ratio > 1.0
+        # twelve plain floats: at the sample rate numpy's per-call overhead costs more than the arithmetic
+        value = (r.tolist() if isinstance(r, np.ndarray) else [float(v) for v in r]) + (
+            [0.0] * 6 if servo is None else servo.tolist() if isinstance(servo, np.ndarray)
+            else [float(v) for v in servo])
+        mag = [abs(v) for v in value]
+        ratio = [m * k for m, k in zip(mag, self._scale_list)]
+        if sum(ratio) != sum(ratio):  # NaN servo torques (a singular J_ζ): not checked (ratios are ≥ 0 or NaN)
+            for i, v in enumerate(ratio):
+                if v != v:
+                    value[i] = mag[i] = ratio[i] = 0.0
+        top = max(ratio)
+        over = np.array([v > 1.0 for v in ratio])
         md = self.config.min_duration
         if not self.active:
             if top > 1.0:
@@ -239,20 +243,21 @@ class CollisionDetector:
                     self._onset = self._cand_onset
                     self._peak = mag
                     self._release_since = None
-                    ax = int(np.argmax(ratio))
+                    ax = ratio.index(top)   # the first of the largest, as numpy's argmax
                     return over, (CollisionEvent("START", self.count, t, self._onset, ax, float(value[ax]),
                                                  float(self._peak[ax]), 0.0),)
             else:
                 self._cand_onset = None
             return over, ()
-        np.maximum(self._peak, mag, out=self._peak)
+        self._peak = [max(p, m) for p, m in zip(self._peak, mag)]
         if top < self.config.release_ratio:
             if self._release_since is None:
                 self._release_since = t
             if t - self._release_since >= md - 1e-12:
                 self.active = False
                 self._cand_onset = None
-                ax = int(np.argmax(self._peak * self._scale))
+                peak_ratio = [p * k for p, k in zip(self._peak, self._scale_list)]
+                ax = peak_ratio.index(max(peak_ratio))
                 return over, (CollisionEvent("END", self.count, t, self._onset, ax, float(value[ax]),
                                              float(self._peak[ax]), t - self._onset),)
         else:
@@ -360,7 +365,8 @@ class ResidualObserver:
         self._zeta_est: list[float] | None = None
         self.form = form
         self._K = np.asarray(self.config.gains, dtype=float)
-        self._lag = (math.nan, np.ones(6))  # (Δt, exp(−K Δt)): the sample spacing repeats, the exponentials too
+        # (Δt, exp(−K Δt), 1 − exp(−K Δt)) as floats: the sample spacing repeats, the exponentials too
+        self._lag: tuple[float, list[float], list[float]] = (math.nan, [1.0] * 6, [0.0] * 6)
         self._kernel = SampleKernel(params)
         self.detector = CollisionDetector(self.config)
         self.rejected: dict[str, int] = {k: 0 for k in REJECT_REASONS}
@@ -370,6 +376,7 @@ class ResidualObserver:
         self._cam: tuple | None = None  # (t, p, R) newest camera pose not yet used
         self._cam_t = -math.inf
         self._offset = np.zeros(6)
+        self._offset_list = [0.0] * 6
         self._calib: list[NDArray] | None = None
         self.reset()
 
@@ -387,7 +394,7 @@ class ResidualObserver:
         """Take new gains, thresholds and detector timing at run time; the residual and the pose tracking go on."""
         self.config = config
         self._K = np.asarray(config.gains, dtype=float)
-        self._lag = (math.nan, np.ones(6))
+        self._lag = (math.nan, [1.0] * 6, [0.0] * 6)
         self.detector.config = config
         self.detector.set_thresholds(config.thresholds)
         self.detector.set_servo_thresholds(config.servo_thresholds)
@@ -403,6 +410,7 @@ class ResidualObserver:
             raise ObserverError("calibration collected no accepted samples")
         offset = np.mean(self._calib, axis=0)
         self._offset = self._offset + offset
+        self._offset_list = self._offset.tolist()
         self.r = self.r - offset
         self._calib = None
         return self._offset.copy()
@@ -555,17 +563,19 @@ class ResidualObserver:
         if self.form == "momentum":
             pi, u, pi0, u0 = s.pi, s.u, prev.pi, prev.u
             assert pi is not None and u is not None and pi0 is not None and u0 is not None   # the momentum form's
-            w_bar = np.array([(pi[m] - pi0[m]) / dt - 0.5 * (u[m] + u0[m]) for m in range(6)])
+            w = [(pi[m] - pi0[m]) / dt - 0.5 * (u[m] + u0[m]) for m in range(6)]
         else:
             assert s.Q is not None   # the direct form's
-            w_bar = s.Q
-        w_bar -= self._offset
+            w = s.Q.tolist()
+        w = [wm - om for wm, om in zip(w, self._offset_list)]
         if self._calib is not None:
-            self._calib.append(w_bar)
+            self._calib.append(np.array(w))
         if dt != self._lag[0]:
-            self._lag = (dt, np.exp(-self._K * dt))
-        a = self._lag[1]
-        self.r = a * self.r + (1.0 - a) * w_bar
+            lag = np.exp(-self._K * dt)
+            self._lag = (dt, lag.tolist(), (1.0 - lag).tolist())
+        _, a, b = self._lag
+        # r ← a r + (1 − a) w̄ on plain floats (the same operations as on arrays, rounded the same)
+        self.r = np.array([am * rm + bm * wm for am, rm, bm, wm in zip(a, self.r.tolist(), b, w)])
         return self._output(t, s, geo)
 
     def _output(self, t: float, s: _ArmSample, geo: list) -> ResidualSample:
@@ -588,7 +598,7 @@ class ResidualObserver:
     def _evaluate(self, t, z, tq, zd, p, R, geo, zeta_ddot, V=None) -> _ArmSample:
         s = _ArmSample()
         s.t, s.zeta, s.tau, s.zeta_dot, s.p, s.R = t, z, tq, zd, p, R
-        s.J = np.array(chain_jacobian_rows(geo))
+        s.J = chain_jacobian_array(geo)
         if self.form == "momentum":
             s.V, s.pi, s.u = self._kernel.terms(geo, zd, tq, p, R, twist=V, jacobian=s.J)
             s.Q = None
@@ -632,6 +642,12 @@ def servo_torque_residual(geo: list, r: NDArray, jacobian: list[list[float]] | N
 
 
 def _floats(x) -> list | None:
+    """`x` flattened to a new list of plain floats (None: not numbers); a list of floats or a float64 array, as the
+    per-sample path passes them, without a round trip through numpy."""
+    if type(x) is list and all(type(v) is float for v in x):
+        return list(x)
+    if type(x) is np.ndarray and x.dtype == np.float64:
+        return x.reshape(-1).tolist()
     try:
         return np.asarray(x, dtype=float).reshape(-1).tolist()
     except (TypeError, ValueError):

@@ -202,7 +202,8 @@ def zeta_estimates_from_cdr(buf: bytes | memoryview) -> tuple[np.ndarray, np.nda
     return t, zeta.reshape(-1, 6), zeta_dot.reshape(-1, 6), tau.reshape(-1, 6)
 
 
-# ---------------------------------------------------------------------- writing (the observer's per-sample outputs)
+# ---------------------------------------------------------------------- writing (the driver's and the observer's
+# per-sample messages)
 _LE_HEADER = b"\x00\x01\x00\x00"               # CDR, little endian, as rmw_fastrtps writes it
 
 
@@ -239,6 +240,20 @@ def _f64_seq(out: bytearray, values) -> None:
     if len(values):
         _pad(out, 8)
         out += struct.pack(f"<{len(values)}d", *values)
+
+
+_CURRENTS_BODY = struct.Struct("<6d6H3I")
+
+
+def motor_currents_to_cdr(sec: int, nanosec: int, frame_id: str, current, raw, sequence: int, board_time_us: int,
+                          gaps: int, setpoint) -> bytes:
+    """A serialized hexa_msgs/MotorCurrents (the bytes rclpy would publish for the same fields): the driver's 1 kHz
+    stream, whose message objects cost more to build and convert than the sample's whole handling."""
+    out = _header_cdr(sec, nanosec, frame_id)
+    _pad(out, 8)
+    out += _CURRENTS_BODY.pack(*current, *raw, sequence, board_time_us, gaps)
+    _f64_seq(out, setpoint)
+    return bytes(out)
 
 
 def zeta_estimates_to_cdr(sec: int, nanosec: int, times, zeta, zeta_dot, tau) -> bytes:
