@@ -172,3 +172,18 @@ def test_free_motion_starts_on_the_first_monitoring_ok_and_moves_the_arms():
     assert rec.counters["monitoring_lost"] == 0
     early = rec.truth_t < 0.5                      # before the monitor settles, the start pose is held at rest
     assert np.ptp(rec.truth_zeta[early], axis=0).max() < 0.01
+
+
+def test_a_contact_run_follows_the_trajectory_until_its_contact():
+    """With the hold policy of the contact runs, the runner keeps moving after the monitoring's first OK: it gets the
+    monitoring state at every tick, as the node's 50 ms heartbeat gives it (silence would count as LOST and hold)."""
+    from hexa.eval.campaign import LEAD_IN, simulate
+    from hexa.sim.realism import RealismConfig
+
+    late = draw_contact(5, 1, "random")                        # a contact long after the 3 s simulated here
+    late = dataclasses.replace(late, onset=6.0)
+    rec = simulate(late, late.trajectory, 3.0, RealismConfig.ideal(), 1, identify=False)
+    assert not rec.events and np.abs(rec.truth_force).max() == 0.0
+    moving = rec.truth_t > LEAD_IN + 1.0                       # well past the runner's 0.25 s silence timeout
+    path = rec.truth_pose[moving, :3]
+    assert np.linalg.norm(np.diff(path, axis=0), axis=1).sum() > 0.02, "the trajectory was held"

@@ -189,10 +189,10 @@ def simulate(collision: ScriptedCollision | None, trajectory: str, duration: flo
         while sim.time < t_end - 1e-9:
             now = sim.time
             if now >= next_cmd - 1e-12:
-                # sim time stands for wall time too: the campaign's clock never stalls
-                status = watch.evaluate(now, now)
-                if status is not None:
-                    runner.on_monitoring(status.level, status.reason, now)
+                # sim time stands for wall time too: the campaign's clock never stalls. The runner gets the current
+                # state at every tick, as the observer node re-publishes it every 50 ms: it takes silence as LOST
+                watch.evaluate(now, now)
+                runner.on_monitoring(watch.status.level, watch.status.reason, now)
                 tick = runner.tick(now)
                 if tick.zeta is not None:
                     seq = (seq + 1) & 0xFF
