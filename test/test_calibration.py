@@ -7,17 +7,16 @@ import math
 import numpy as np
 import pytest
 
-from hexa.calibration.excitation import (BOUNDS, SLOW_SPEED, Excitation, ExcitationSettings, _twist_rate,
-                                        design_excitation)
+from hexa.calibration.excitation import BOUNDS, SLOW_SPEED, Excitation, ExcitationSettings, design_excitation
 from hexa.calibration.identify import identify, prepare
 from hexa.calibration.overlay import ServoTorqueModel, write_overlay
 from hexa.calibration.recording import Recording, simulate_recording
-from hexa.calibration.regressor import _free_torques, regressor, sym_from_params
+from hexa.calibration.regressor import free_motion_torques, regressor, sym_from_params
 from hexa.calibration.validate import compare
-from hexa.dynamics.lagrange import HexaDynamicParameters, motion_from_plate
-from hexa.kinematics import hexa6rus as kin
+from hexa.dynamics.lagrange import HexaDynamicParameters
 from hexa.robots.hexa_description import calibration_summary, load_hexa
 from hexa.robots.schema import RobotDescriptionError
+from hexa.servo_motion import servo_motion
 
 DESC = load_hexa()
 PRM = HexaDynamicParameters.from_description(DESC)
@@ -30,8 +29,7 @@ def excitation() -> Excitation:
 
 def _motion(e: Excitation, t: np.ndarray, prm=PRM):
     pose, vel, acc = e.evaluate(t)
-    zeta = kin.inverse_kinematics_batch(DESC, pose)
-    return pose, motion_from_plate(prm, zeta, pose, kin.twist_from_pose_rate(pose, vel), _twist_rate(pose, vel, acc))
+    return pose, servo_motion(DESC, pose, vel, acc, prm)
 
 
 def test_regressor_times_the_model_parameters_is_the_free_motion_torque(excitation):
@@ -40,7 +38,7 @@ def test_regressor_times_the_model_parameters_is_the_free_motion_torque(excitati
     reg = regressor(PRM, state)
     model = reg.torques(sym_from_params(PRM), np.full(6, PRM.J_a), np.full(6, PRM.m_a * PRM.s_a), np.zeros(6),
                         np.zeros(6))
-    assert np.allclose(model, _free_torques(PRM, state), atol=1e-9)
+    assert np.allclose(model, free_motion_torques(PRM, state), atol=1e-9)
     assert np.abs(model).max() > 0.05          # the arms carry the robot: not a trivially zero torque
 
 
@@ -64,8 +62,7 @@ def test_excitation_is_periodic_starts_at_rest_at_home_and_keeps_the_limits(exci
     assert back is not None and np.allclose(back.a, e.a) and back.period == e.period
     # the design's slow fraction is the time its slowest servo spends below SLOW_SPEED
     pose, vel, acc = e.evaluate(np.arange(64) * e.period / 64)
-    zd = motion_from_plate(PRM, kin.inverse_kinematics_batch(DESC, pose), pose, kin.twist_from_pose_rate(pose, vel),
-                           _twist_rate(pose, vel, acc)).zeta_dot
+    zd = servo_motion(DESC, pose, vel, acc, PRM).zeta_dot
     assert e.slow == pytest.approx(np.mean(np.abs(zd) < SLOW_SPEED, axis=0).max())
 
 

@@ -21,7 +21,14 @@ def test_contacts_are_drawn_reproducibly_within_their_ranges():
     assert [dataclasses.asdict(c) for c in cs[:5]] == [dataclasses.asdict(draw_contact(3, i)) for i in range(5)]
     assert dataclasses.asdict(draw_contact(4, 0)) != dataclasses.asdict(cs[0])
     assert {c.link for c in cs} == {"plate", "arm", "rod"}
-    assert {c.trajectory for c in cs} == {"circle", "helix", "ellipse"}
+    # the paper's trajectories and random ones, alternating; every other draw is the same with either kind
+    paper = [draw_contact(3, i, "paper") for i in range(60)]
+    assert {c.trajectory for c in paper} == {"circle", "helix", "ellipse"}
+    assert [c.trajectory for c in cs[1::2]] == [f"random:{3 * 100003 + i}" for i in range(1, 60, 2)]
+    assert [c.trajectory for c in cs[::2]] == [c.trajectory for c in paper[::2]]
+    assert [dataclasses.replace(c, trajectory="") for c in cs] == [dataclasses.replace(c, trajectory="")
+                                                                    for c in paper]
+    assert all(c.trajectory.startswith("random:") for c in (draw_contact(3, i, "random") for i in range(4)))
     for c in cs:
         assert 1.0 <= c.peak_force <= 10.0 and 1.5 <= c.onset <= 8.0
         assert (c.chain == 0) == (c.link == "plate") and 0 <= c.chain <= 6
@@ -54,12 +61,15 @@ def test_a_strong_plate_push_is_detected_within_100_ms_and_its_force_identified(
 
 def test_smoke_campaign_on_two_worker_processes_writes_the_report(tmp_path):
     cfg = CampaignConfig(cases=6, free_seconds=20.0, realisms=("ideal",), seed=5, workers=2)
-    assert len(jobs_of(cfg)) == 7
+    assert cfg.trajectories == "all" and len(jobs_of(cfg)) == 8     # free motion: 10 s paper + 10 s random
     seen: list[float] = []
     result = run_campaign(cfg, progress=seen.append)
-    assert len(seen) == 7 and result["workers"] == 2
+    assert len(seen) == 8 and result["workers"] == 2
     assert len(result["contacts"]) == 6 and all("metrics" in c for c in result["contacts"])
     assert sum(f["seconds"] for f in result["free"]) == pytest.approx(20.0)
+    # contacts and free motion ran over both kinds of trajectory, and the report says per kind
+    assert [c["trajectory_kind"] for c in result["contacts"]] == ["paper", "random"] * 3
+    assert sorted(f["trajectory_kind"] for f in result["free"]) == ["paper", "random"]
     md = write_report(result, tmp_path)
     text = md.read_text()
     for name in ("det_curve.png", "detection_vs_force.png", "delay_per_link.png", "rmse.png"):
@@ -71,6 +81,13 @@ def test_smoke_campaign_on_two_worker_processes_writes_the_report(tmp_path):
     assert s["live_false_starts_free"] == 0                    # ideal free motion raises no false alarm
     assert sum(f["starts"]["threshold"][THRESHOLD_SCALES.index(1.0)] for f in result["free"]) == 0
     assert s["vs_paper"]["detector"] == "cusum" and "delay_vs_paper" in s["targets"]
+    kinds = s["kinds"]
+    assert set(kinds) == {"paper", "random"} and all(k["cases"] == 3 for k in kinds.values())
+    assert all(k["free_hours"] == pytest.approx(10.0 / 3600) and k["live_false_starts_free"] == 0
+               for k in kinds.values())                            # ideal free motion, random too: no false alarm
+    assert sum(k["detected"] for k in kinds.values()) == sum(pl["detected"] for pl in s["links"].values())
+    assert all(k["detectors"][n]["false_alarms"] == 0 for k in kinds.values() for n in ("threshold", "paper"))
+    assert "| random | 3 |" in text and "| paper | 3 |" in text
     # a lower threshold never detects fewer contacts nor raises fewer false alarms
     for name in DETECTOR_NAMES:
         rows = s["det"][name]
@@ -109,17 +126,21 @@ def test_bad_campaign_settings_are_refused_with_their_name():
         CampaignConfig(detector="bayes")
     with pytest.raises(ValueError, match="alarm"):
         CampaignConfig(cusum={"alarm": 0.0})
+    with pytest.raises(ValueError, match="trajectories must be one of"):
+        CampaignConfig(trajectories="spiral")
 
 
 def test_campaign_runs_on_a_local_dask_cluster_of_two_workers():
     import os
 
-    cfg = CampaignConfig(cases=0, free_seconds=1.0, realisms=("ideal", "realistic"), seed=2, scheduler="local:2")
+    cfg = CampaignConfig(cases=0, free_seconds=1.0, realisms=("ideal", "realistic"), seed=2, scheduler="local:2",
+                         trajectories="random")
     seen: list[float] = []
     result = run_campaign(cfg, progress=seen.append)
     assert result["engine"] == "dask local:2" and result["workers"] == 2
     assert len(seen) == 2 and {f["realism"] for f in result["free"]} == {"ideal", "realistic"}
     assert all(f["sim_seconds"] == pytest.approx(2.0) and f["pid"] != os.getpid() for f in result["free"])
+    assert {f["trajectory"] for f in result["free"]} == {f"random:{2 * 100003 + 50000}"}
     assert set(result["free"][0]["starts"]) == set(DETECTOR_NAMES)
 
 
@@ -129,10 +150,11 @@ def test_cli_writes_the_report_and_refuses_bad_sizes(tmp_path, capsys):
     assert main(["eval", "--cases", "-1", "--realism", "ideal"]) == 2
     assert "cases (-1)" in capsys.readouterr().err
     assert main(["eval", "--cases", "1", "--minutes", "0", "--realism", "ideal", "--workers", "1", "--no-identify",
-                 "--out", str(tmp_path), "--json"]) == 0
+                 "--trajectories", "paper", "--out", str(tmp_path), "--json"]) == 0
     out = capsys.readouterr()
     summary = json.loads(out.out)
     assert list(summary) == ["ideal"] and summary["ideal"]["cases"] == 1
+    assert list(summary["ideal"]["kinds"]) == ["paper"]            # --trajectories paper
     assert "1/1 jobs" in out.err                                   # the progress bar
     assert (tmp_path / "report.md").exists() and (tmp_path / "det_curve.png").exists()
 
@@ -150,3 +172,18 @@ def test_free_motion_starts_on_the_first_monitoring_ok_and_moves_the_arms():
     assert rec.counters["monitoring_lost"] == 0
     early = rec.truth_t < 0.5                      # before the monitor settles, the start pose is held at rest
     assert np.ptp(rec.truth_zeta[early], axis=0).max() < 0.01
+
+
+def test_a_contact_run_follows_the_trajectory_until_its_contact():
+    """With the hold policy of the contact runs, the runner keeps moving after the monitoring's first OK: it gets the
+    monitoring state at every tick, as the node's 50 ms heartbeat gives it (silence would count as LOST and hold)."""
+    from hexa.eval.campaign import LEAD_IN, simulate
+    from hexa.sim.realism import RealismConfig
+
+    late = draw_contact(5, 1, "random")                        # a contact long after the 3 s simulated here
+    late = dataclasses.replace(late, onset=6.0)
+    rec = simulate(late, late.trajectory, 3.0, RealismConfig.ideal(), 1, identify=False)
+    assert not rec.events and np.abs(rec.truth_force).max() == 0.0
+    moving = rec.truth_t > LEAD_IN + 1.0                       # well past the runner's 0.25 s silence timeout
+    path = rec.truth_pose[moving, :3]
+    assert np.linalg.norm(np.diff(path, axis=0), axis=1).sum() > 0.02, "the trajectory was held"

@@ -1,13 +1,18 @@
-"""The Hexa test trajectories of seed 000 (circle eq 37, helix eq 40, ellipse eq 41) in SI units, with derivatives.
+"""Plate trajectories of the Hexa in SI units, with derivatives: the test trajectories of seed 000 (circle eq 37,
+helix eq 40, ellipse eq 41), periodic Fourier series (`FourierTrajectory`: the calibration's excitation and the
+random trajectories of `hexa.random_trajectory`), and pose files.
 
-Each function maps time t (s, scalar or array) to `(pose, pose_dot, pose_ddot)`, each (…, 6): x y z (m) and the
+Each trajectory maps time t (s, scalar or array) to `(pose, pose_dot, pose_ddot)`, each (…, 6): x y z (m) and the
 Z-Y-X Tait–Bryan angles α β γ (rad) of eq 38, then their first and second time derivatives. The paper gives the
 formulas in mm and degrees; they are converted here. All three share ω = 0.4π rad/s (period 5 s) and start at
 (x, y) = (a, 0) with non-zero velocity, as in the paper; `DURATIONS` is the run length used by the demo (two turns).
+`trajectory_named` resolves a name: the paper's three, "random:SEED" (the random trajectory of SEED) or "file".
 """
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Callable
 
@@ -52,20 +57,99 @@ TRAJECTORIES: dict[str, Trajectory] = {"circle": circle, "helix": helix, "ellips
 
 #: Run length (s) of each trajectory: two periods; covers the paper's collision instants (3.4–5.6 s).
 DURATIONS: dict[str, float] = {"circle": 10.0, "helix": 10.0, "ellipse": 10.0}
+#: a trajectory name "random:SEED" is the random smooth reachable trajectory of SEED (hexa.random_trajectory)
+RANDOM_PREFIX = "random:"
+
+
+@dataclass
+class FourierTrajectory:
+    """A periodic plate trajectory: per DOF k (x y z α β γ)
+
+        q_k(t) = q0_k + Σ_{l=1..L} a_kl sin(l ω t) + b_kl (cos(l ω t) − 1),      ω = 2π / period,
+
+    so q(0) = q0 and the motion repeats every `period` s; `cycles` periods make its `duration`. a, b: (6, L)."""
+
+    q0: np.ndarray
+    a: np.ndarray
+    b: np.ndarray
+    period: float
+    cycles: int = 1
+
+    @property
+    def duration(self) -> float:
+        return self.period * self.cycles
+
+    def evaluate(self, t: float | np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """(pose, pose_dot, pose_ddot), each (…, 6), at times t (s)."""
+        t = np.asarray(t, dtype=float)
+        L = self.a.shape[1]
+        w = 2.0 * math.pi / self.period * np.arange(1, L + 1)
+        ph = t[..., None] * w                                    # (…, L)
+        s, c = np.sin(ph), np.cos(ph)
+        pose = self.q0 + s @ self.a.T + (c - 1.0) @ self.b.T
+        vel = (c * w) @ self.a.T - (s * w) @ self.b.T
+        acc = -(s * w * w) @ self.a.T - (c * w * w) @ self.b.T
+        return pose, vel, acc
+
+    def __call__(self, t: float | np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        return self.evaluate(t)
+
+    def pose_function(self) -> Callable[[float], np.ndarray]:
+        return lambda t: self.evaluate(t)[0]
+
+    def write(self, path: str | Path, rate_hz: float = 100.0, title: Sequence[str] = ()) -> Path:
+        """Write the pose file the trajectory node plays (`hexa bringup sim|robot --trajectory FILE`: CSV rows
+        t x y z α β γ, SI, at `rate_hz`), `cycles` periods long; `title` lines and the series (period, q0, a, b,
+        read back by `read_design`) go in `#` comment lines."""
+        head = [*title, "period " + repr(float(self.period)), "q0 " + " ".join(repr(float(v)) for v in self.q0),
+                "a " + " ".join(repr(float(v)) for v in self.a.ravel()),
+                "b " + " ".join(repr(float(v)) for v in self.b.ravel())]
+        return write_pose_file(path, self.evaluate, self.duration, rate_hz, head)
+
+    @classmethod
+    def read_design(cls, path: str | Path) -> "FourierTrajectory | None":
+        """The series in a file written by `write` (None when the file has no series lines)."""
+        vals: dict[str, list[float]] = {}
+        with open(path, encoding="utf-8") as fh:
+            for line in fh:
+                if not line.startswith("#"):
+                    break
+                key, _, rest = line[1:].strip().partition(" ")
+                if key in ("period", "q0", "a", "b"):
+                    vals[key] = [float(v) for v in rest.split()]
+        if set(vals) != {"period", "q0", "a", "b"}:
+            return None
+        return cls(q0=np.asarray(vals["q0"]), a=np.asarray(vals["a"]).reshape(6, -1),
+                   b=np.asarray(vals["b"]).reshape(6, -1), period=vals["period"][0])
 
 
 def sample(name: str, rate_hz: float = 100.0,
            duration: float | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-    """Times (N,) and pose, pose_dot, pose_ddot (N, 6) of trajectory `name` sampled at `rate_hz`.
+    """Times (N,) and pose, pose_dot, pose_ddot (N, 6) of trajectory `name` (one of TRAJECTORIES or "random:SEED")
+    sampled at `rate_hz`.
 
     Raises:
         KeyError: unknown trajectory name (the message lists the known ones).
     """
-    if name not in TRAJECTORIES:
-        raise KeyError(f"unknown trajectory {name!r}; known: {sorted(TRAJECTORIES)}")
-    T = DURATIONS[name] if duration is None else float(duration)
+    try:
+        fn, T = trajectory_named(name)
+    except ValueError as exc:
+        raise KeyError(str(exc)) from None
+    T = T if duration is None else float(duration)
     t = np.arange(int(round(T * rate_hz)) + 1) / rate_hz
-    return (t, *TRAJECTORIES[name](t))
+    return (t, *fn(t))
+
+
+def write_pose_file(path: str | Path, trajectory: Trajectory, duration: float, rate_hz: float = 100.0,
+                    title: Sequence[str] = ()) -> Path:
+    """Write `duration` s of `trajectory` at `rate_hz` as the pose file `load_pose_file` reads and the trajectory
+    node plays (CSV rows t x y z α β γ, SI), with `title` lines as `#` comments."""
+    p = Path(path)
+    t = np.arange(int(round(duration * rate_hz)) + 1) / rate_hz
+    pose = np.asarray(trajectory(t)[0], dtype=float)
+    np.savetxt(p, np.column_stack([t, pose]), delimiter=",", fmt="%.9g",
+               header="\n".join([*title, "t x y z alpha beta gamma (s, m, rad)"]))
+    return p
 
 
 def load_pose_file(path: str | Path) -> tuple[Trajectory, float]:
@@ -96,8 +180,23 @@ def load_pose_file(path: str | Path) -> tuple[Trajectory, float]:
     return traj, float(t[-1] - t[0]) if len(t) > 1 else 0.0
 
 
+def random_seed_of(name: str) -> int | None:
+    """SEED of a trajectory name "random:SEED", None for any other name.
+
+    Raises:
+        ValueError: "random:" followed by something other than a non-negative integer.
+    """
+    if not name.startswith(RANDOM_PREFIX):
+        return None
+    tail = name[len(RANDOM_PREFIX):]
+    if not tail.isdigit():
+        raise ValueError(f"a random trajectory is named random:SEED with SEED an integer >= 0, got {name!r}")
+    return int(tail)
+
+
 def trajectory_named(name: str, path: str | Path = "") -> tuple[Trajectory, float]:
-    """(trajectory, duration s) of `name`: one of TRAJECTORIES, or "file" for the pose file at `path`.
+    """(trajectory, duration s) of `name`: one of TRAJECTORIES, "random:SEED" (hexa.random_trajectory, for the
+    packaged description) or "file" for the pose file at `path`.
 
     Raises:
         ValueError: an unknown name, or a bad file (see load_pose_file).
@@ -105,6 +204,12 @@ def trajectory_named(name: str, path: str | Path = "") -> tuple[Trajectory, floa
     """
     if name == "file":
         return load_pose_file(path)
+    seed = random_seed_of(name)
+    if seed is not None:
+        from hexa.random_trajectory import random_trajectory
+
+        traj = random_trajectory(seed)
+        return traj, traj.duration
     if name not in TRAJECTORIES:
-        raise ValueError(f"trajectory must be one of {sorted(TRAJECTORIES)} or 'file', got {name!r}")
+        raise ValueError(f"trajectory must be one of {sorted(TRAJECTORIES)}, 'random:SEED' or 'file', got {name!r}")
     return TRAJECTORIES[name], DURATIONS[name]

@@ -12,9 +12,10 @@ from pathlib import Path
 def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("eval", help="randomized collision campaign on the simulated robot → report, DET curve, JSON",
                        description="Random contacts (link, chain, point, direction, 1-10 N, profile, onset, "
-                                   "trajectory) and free motion, run through the observer's, estimator's and "
-                                   "identification's core classes on the MuJoCo robot without ROS, faster than "
-                                   "real time on a process pool. Writes report.md, report.json and PNGs.")
+                                   "trajectory: the paper's or a random one) and free motion, run through the "
+                                   "observer's, estimator's and identification's core classes on the MuJoCo robot "
+                                   "without ROS, faster than real time on a process pool. Writes report.md, "
+                                   "report.json and PNGs.")
     p.add_argument("--cases", type=int, default=20, help="random contacts per robot (default 20)")
     size = p.add_mutually_exclusive_group()
     size.add_argument("--minutes", type=float, help="free motion per robot, minutes (default 2)")
@@ -31,6 +32,11 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--detector", choices=["cusum", "threshold"], default="threshold",
                    help="the live collision detector, as the observer node's `detector` parameter (default "
                         "threshold); the report replays both and the paper's on every run")
+    p.add_argument("--trajectories", choices=["paper", "random", "all"], default="all",
+                   help="the motion contacts and free motion are drawn over: the paper's three (circle, helix, "
+                        "ellipse), random smooth reachable ones (one per case or free-motion chunk; write one with "
+                        "`hexa trajectory random:SEED --out FILE`) or all (both: contacts alternate, free motion "
+                        "split in halves; default)")
     p.add_argument("--no-identify", action="store_true", help="skip the force identification (no RMSE)")
     p.add_argument("--no-plots", action="store_true", help="no PNG figures")
     p.add_argument("--out", default="out/eval", help="output folder (default out/eval)")
@@ -49,7 +55,7 @@ def run(args: argparse.Namespace) -> int:
             raise ValueError(f"free motion must be >= 0, got {hours} h")
         cfg = CampaignConfig(cases=args.cases, free_seconds=hours * 3600.0, realisms=realisms, seed=args.seed,
                              workers=args.workers, identify=not args.no_identify, scheduler=args.scheduler,
-                             detector=args.detector)
+                             detector=args.detector, trajectories=args.trajectories)
     except ValueError as exc:
         print(f"hexa eval: {exc}", file=sys.stderr)
         return 2

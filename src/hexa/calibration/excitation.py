@@ -17,11 +17,14 @@ start followed by a (1+λ) evolution strategy — reproducible, no gradient of c
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, Callable
 
 import numpy as np
+
+from hexa.trajectories import FourierTrajectory
 
 if TYPE_CHECKING:
     from numpy.typing import NDArray
@@ -75,16 +78,11 @@ class ExcitationSettings:
 
 
 @dataclass
-class Excitation:
-    """A designed excitation: Fourier coefficients a, b (6, L), home pose q0, period (s), and what the design
-    achieved (`condition`, peak |ζ̇| and |τ| of the nominal model, `slow`: the largest fraction of a period a servo
-    spends below SLOW_SPEED, `feasible`)."""
+class Excitation(FourierTrajectory):
+    """A designed excitation: the Fourier series (hexa.trajectories.FourierTrajectory: coefficients a, b (6, L),
+    home pose q0, period (s), cycles), and what the design achieved (`condition`, peak |ζ̇| and |τ| of the nominal
+    model, `slow`: the largest fraction of a period a servo spends below SLOW_SPEED, `feasible`)."""
 
-    q0: NDArray
-    a: NDArray
-    b: NDArray
-    period: float
-    cycles: int = 1
     condition: float = math.inf
     peak_speed: float = math.nan
     peak_torque: float = math.nan
@@ -92,58 +90,23 @@ class Excitation:
     feasible: bool = False
     history: list[float] = field(default_factory=list)
 
-    @property
-    def duration(self) -> float:
-        return self.period * self.cycles
-
-    def evaluate(self, t: Any) -> tuple[NDArray, NDArray, NDArray]:
-        """(pose, pose_dot, pose_ddot), each (…, 6), at times t (s): the hexa.trajectories convention."""
-        t = np.asarray(t, dtype=float)
-        L = self.a.shape[1]
-        w = 2.0 * math.pi / self.period * np.arange(1, L + 1)
-        ph = t[..., None] * w                                    # (…, L)
-        s, c = np.sin(ph), np.cos(ph)
-        pose = self.q0 + s @ self.a.T + (c - 1.0) @ self.b.T
-        vel = (c * w) @ self.a.T - (s * w) @ self.b.T
-        acc = -(s * w * w) @ self.a.T - (c * w * w) @ self.b.T
-        return pose, vel, acc
-
-    def pose_function(self) -> Callable[[float], NDArray]:
-        return lambda t: self.evaluate(t)[0]
-
-    def write(self, path: str | Path, rate_hz: float = 100.0) -> Path:
+    def write(self, path: str | Path, rate_hz: float = 100.0, title: Sequence[str] = ()) -> Path:
         """Write the trajectory file the trajectory node plays (`--trajectory FILE`: CSV rows t x y z α β γ, SI),
         `cycles` periods long, with the design in `#` comment lines."""
-        p = Path(path)
-        t = np.arange(int(round(self.duration * rate_hz)) + 1) / rate_hz
-        pose = self.evaluate(t)[0]
         head = [f"hexa calibrate excite: {self.cycles} x {self.period:g} s Fourier excitation, "
                 f"{self.a.shape[1]} harmonics, cond {self.condition:.1f}",
                 f"peak |zeta_dot| {self.peak_speed:.3f} rad/s, peak |tau| (nominal model) {self.peak_torque:.3f} N*m, "
                 f"slowest servo below {SLOW_SPEED:g} rad/s for {100 * self.slow:.1f} % of the period",
-                "period " + repr(self.period), "q0 " + " ".join(repr(float(v)) for v in self.q0),
-                "a " + " ".join(repr(float(v)) for v in self.a.ravel()),
-                "b " + " ".join(repr(float(v)) for v in self.b.ravel()),
-                "t x y z alpha beta gamma (s, m, rad)"]
-        np.savetxt(p, np.column_stack([t, pose]), delimiter=",", fmt="%.9g", header="\n".join(head))
-        return p
+                *title]
+        return super().write(path, rate_hz, head)
 
-    @staticmethod
-    def read_design(path: str | Path) -> "Excitation | None":
+    @classmethod
+    def read_design(cls, path: str | Path) -> "Excitation | None":
         """The design in a file written by `write` (None when the file has no design lines)."""
-        vals: dict[str, list[float]] = {}
-        with open(path, encoding="utf-8") as fh:
-            for line in fh:
-                if not line.startswith("#"):
-                    break
-                key, _, rest = line[1:].strip().partition(" ")
-                if key in ("period", "q0", "a", "b"):
-                    vals[key] = [float(v) for v in rest.split()]
-        if set(vals) != {"period", "q0", "a", "b"}:
+        series = FourierTrajectory.read_design(path)
+        if series is None:
             return None
-        a = np.asarray(vals["a"]).reshape(6, -1)
-        return Excitation(q0=np.asarray(vals["q0"]), a=a, b=np.asarray(vals["b"]).reshape(6, -1),
-                          period=vals["period"][0], feasible=True)
+        return cls(q0=series.q0, a=series.a, b=series.b, period=series.period, feasible=True)
 
 
 def _project_rest(a: NDArray) -> NDArray:
@@ -165,17 +128,14 @@ class _Scorer:
 
     def __call__(self, exc: Excitation) -> tuple[float, float, float, float, bool]:
         from hexa.calibration.regressor import regressor
-        from hexa.dynamics.lagrange import DynamicsError, motion_from_plate
-        from hexa.kinematics import hexa6rus as kin
+        from hexa.dynamics.lagrange import DynamicsError
+        from hexa.servo_motion import servo_motion
 
         pose, vel, acc = exc.evaluate(self.t)
         if np.any(np.abs(pose - exc.q0) > np.asarray(BOUNDS) * 1.0001):
             return math.inf, math.nan, math.nan, math.nan, False
         try:
-            zeta = kin.inverse_kinematics_batch(self.desc, pose)
-            V = kin.twist_from_pose_rate(pose, vel)
-            Vd = _twist_rate(pose, vel, acc)
-            state = motion_from_plate(self.prm, zeta, pose, V, Vd)
+            state = servo_motion(self.desc, pose, vel, acc, self.prm)
             reg = regressor(self.prm, state)
         except (ValueError, DynamicsError):
             return math.inf, math.nan, math.nan, math.nan, False
@@ -198,16 +158,6 @@ def _sym(prm: HexaDynamicParameters) -> NDArray:
     from hexa.calibration.regressor import sym_from_params
 
     return sym_from_params(prm)
-
-
-def _twist_rate(pose: NDArray, vel: NDArray, acc: NDArray) -> NDArray:
-    """V̇ = [p̈, ω̇] from Z-Y-X pose derivatives (eq 38)."""
-    from hexa.kinematics import hexa6rus as kin
-
-    out = np.empty_like(acc)
-    out[..., :3] = acc[..., :3]
-    out[..., 3:] = kin.angular_acceleration_zyx(pose[..., 3:], vel[..., 3:], acc[..., 3:])
-    return out
 
 
 def identification_matrix(reg: Any) -> NDArray:

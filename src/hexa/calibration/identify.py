@@ -152,10 +152,10 @@ def prepare(rec: Recording, desc: HexaDescription, prm: HexaDynamicParameters | 
         RecordingError: a stream is missing, short or bad.
         CalibrationError: the run is too short or leaves the workspace.
     """
-    from hexa.calibration.excitation import _twist_rate
     from hexa.calibration.regressor import COULOMB_SPEED
-    from hexa.dynamics.lagrange import DynamicsError, HexaDynamicParameters, MotionState, motion_from_plate
+    from hexa.dynamics.lagrange import DynamicsError, HexaDynamicParameters, MotionState
     from hexa.kinematics import hexa6rus as kin
+    from hexa.servo_motion import servo_motion
 
     rec.check()
     prm = prm or HexaDynamicParameters.from_description(desc)
@@ -190,8 +190,8 @@ def prepare(rec: Recording, desc: HexaDescription, prm: HexaDynamicParameters | 
     if not periodic:
         pose, vel, acc = smooth(fine)
     try:
-        zeta = kin.inverse_kinematics_batch(desc, pose)
-        full = motion_from_plate(prm, zeta, pose, kin.twist_from_pose_rate(pose, vel), _twist_rate(pose, vel, acc))
+        full = servo_motion(desc, pose, vel, acc, prm)
+        zeta = full.zeta
         assert full.zeta_ddot is not None and full.V_dot is not None   # given V̇, motion_from_plate sets both
         state = MotionState(zeta=zeta[::DECIMATE], zeta_dot=full.zeta_dot[::DECIMATE], p=full.p[::DECIMATE],
                             R=full.R[::DECIMATE], V=full.V[::DECIMATE], zeta_ddot=full.zeta_ddot[::DECIMATE],

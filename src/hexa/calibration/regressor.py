@@ -75,7 +75,7 @@ def params_with_sym(prm: HexaDynamicParameters, theta: NDArray, J_a: float | Non
     return dataclasses.replace(prm, **changes)
 
 
-def _free_torques(prm: HexaDynamicParameters, state: MotionState) -> NDArray:
+def free_motion_torques(prm: HexaDynamicParameters, state: MotionState) -> NDArray:
     """τ (N, 6) that moves the model along `state` with no external wrench: W(τ) = W(0) − J_ζᵀ τ = 0 (eqs 21–22)."""
     W0 = inverse_dynamics(prm, state, np.zeros((state.n, 6))).wrench
     j = _Geometry(prm, state.zeta, state.p, state.R).j          # rows j_i: ζ̇_i = j_i·V
@@ -125,13 +125,13 @@ def regressor(prm: HexaDynamicParameters, state: MotionState) -> Regressor:
     base = params_with_sym(prm, sym_from_params(prm), J_a=0.0, ms_a=0.0)
     base = _with_arm_damping(base, 0.0)
     theta0 = sym_from_params(base)
-    tau0 = _free_torques(base, state)
+    tau0 = free_motion_torques(base, state)
     cols = np.empty((state.n, 6, theta0.size))
     for k in range(theta0.size):
         step = 1e-3 * max(abs(theta0[k]), 1e-4)
         th = theta0.copy()
         th[k] += step
-        cols[..., k] = (_free_torques(params_with_sym(base, th, J_a=0.0, ms_a=0.0), state) - tau0) / step
+        cols[..., k] = (free_motion_torques(params_with_sym(base, th, J_a=0.0, ms_a=0.0), state) - tau0) / step
     g = _Geometry(prm, state.zeta, state.p, state.R)
     return Regressor(Y_sym=cols, zeta_ddot=np.asarray(state.zeta_ddot, dtype=float), gravity=-(g.up @ prm.gravity),
                      sign=np.tanh(state.zeta_dot / COULOMB_SPEED), zeta_dot=np.asarray(state.zeta_dot, dtype=float),

@@ -18,7 +18,7 @@ from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
 from dataclasses import asdict, dataclass, field
 from typing import Any, Callable
 
-from hexa.eval.campaign import TRAJECTORIES, run_contact_job, run_free_job
+from hexa.eval.campaign import TRAJECTORIES, kinds_of, run_contact_job, run_free_job
 
 #: free motion is cut into jobs of at most this many seconds (one trajectory each, looped), for the parallel pool
 FREE_CHUNK_S = 60.0
@@ -26,8 +26,10 @@ FREE_CHUNK_S = 60.0
 
 @dataclass(frozen=True)
 class CampaignConfig:
-    """What to run: `cases` random contacts and `free_seconds` of free motion (over the three trajectories) on each
-    robot of `realisms` ("ideal", "realistic"); `seed` draws the contacts and seeds the simulators; `workers`
+    """What to run: `cases` random contacts and `free_seconds` of free motion on each robot of `realisms` ("ideal",
+    "realistic"), over the `trajectories` "paper" (the paper's three), "random" (random smooth reachable ones,
+    hexa.random_trajectory) or "all" (both: contacts alternate, free motion is split in halves); `seed` draws the
+    contacts and the random trajectories and seeds the simulators; `workers`
     processes (default: the CPU count); `identify`: run the force identification (rnea's tracker) in the contact
     cases; `observer`: ObserverConfig fields that replace the node's defaults; `detector`: the live detector
     ("cusum" | "threshold", the node's `detector` parameter) and `cusum`: CusumConfig fields; `scheduler`: None
@@ -44,10 +46,12 @@ class CampaignConfig:
     scheduler: str | None = None
     detector: str = "threshold"
     cusum: dict[str, Any] = field(default_factory=dict)
+    trajectories: str = "all"
 
     def __post_init__(self) -> None:
         from hexa.sim.realism import RealismConfig
 
+        kinds_of(self.trajectories)   # raises ValueError naming the choices
         if self.cases < 0 or not math.isfinite(self.free_seconds) or self.free_seconds < 0:
             raise ValueError(f"cases ({self.cases}) and free_seconds ({self.free_seconds}) must be >= 0")
         if self.cases == 0 and self.free_seconds == 0:
@@ -90,22 +94,29 @@ def local_workers(scheduler: str) -> int | None:
 
 def jobs_of(cfg: CampaignConfig) -> list[tuple[str, dict[str, Any]]]:
     """The campaign's jobs: ("free", job) per free-motion chunk and robot, then ("contact", job) per case and robot
-    (the long jobs first, so that the pool's workers finish together)."""
+    (the long jobs first, so that the pool's workers finish together). Free motion is split evenly over the selected
+    trajectory kinds; chunk k has the simulator seed seed·100003 + 50000 + k and follows, looped, the paper's
+    trajectories in turn or the random trajectory random:<its simulator seed>."""
     jobs: list[tuple[str, dict[str, Any]]] = []
     contacts: list[tuple[str, dict[str, Any]]] = []
+    kinds = kinds_of(cfg.trajectories)
     for realism in cfg.realisms:
         for i in range(cfg.cases):
             contacts.append(("contact", {"campaign_seed": cfg.seed, "index": i, "sim_seed": cfg.seed * 100003 + i,
                                      "realism": realism, "identify": cfg.identify, "observer": cfg.observer,
-                                     "detector": cfg.detector, "cusum": cfg.cusum}))
-        left, k = cfg.free_seconds, 0
-        while left > 1e-9:
-            chunk = min(FREE_CHUNK_S, left)
-            jobs.append(("free", {"trajectory": TRAJECTORIES[k % len(TRAJECTORIES)], "seconds": chunk,
-                                  "sim_seed": cfg.seed * 100003 + 50000 + k, "realism": realism,
-                                  "observer": cfg.observer, "detector": cfg.detector, "cusum": cfg.cusum}))
-            left -= chunk
-            k += 1
+                                     "detector": cfg.detector, "cusum": cfg.cusum,
+                                     "trajectories": cfg.trajectories}))
+        k = 0
+        for kind in kinds:
+            left, j = cfg.free_seconds / len(kinds), 0
+            while left > 1e-9:
+                chunk = min(FREE_CHUNK_S, left)
+                sim_seed = cfg.seed * 100003 + 50000 + k
+                name = TRAJECTORIES[j % len(TRAJECTORIES)] if kind == "paper" else f"random:{sim_seed}"
+                jobs.append(("free", {"trajectory": name, "seconds": chunk, "sim_seed": sim_seed, "realism": realism,
+                                      "observer": cfg.observer, "detector": cfg.detector, "cusum": cfg.cusum}))
+                left -= chunk
+                k, j = k + 1, j + 1
     return jobs + contacts
 
 

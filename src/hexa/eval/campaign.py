@@ -38,6 +38,10 @@ if TYPE_CHECKING:
 
 LINKS = ("plate", "arm", "rod")
 TRAJECTORIES = ("circle", "helix", "ellipse")
+#: the kinds of trajectory: the paper's three, and random smooth reachable ones (hexa.random_trajectory)
+TRAJECTORY_KINDS = ("paper", "random")
+#: what `--trajectories` may select: one kind, or "all" (both, alternating)
+TRAJECTORY_CHOICES = ("paper", "random", "all")
 #: s of rest at the start pose before the trajectory (the estimator and the observer settle), as `hexa demo`
 LEAD_IN = 1.0
 #: s simulated after a contact's end
@@ -81,16 +85,40 @@ def detectors(observer_config: ObserverConfig, cusum: CusumConfig | None = None)
             DetectorSpec("paper", PAPER_THRESHOLDS, (0.0,) * 6))
 
 
-def draw_contact(seed: int, index: int) -> ScriptedCollision:
+def kinds_of(trajectories: str) -> tuple[str, ...]:
+    """The trajectory kinds a `--trajectories` choice selects ("all": both).
+
+    Raises:
+        ValueError: not one of TRAJECTORY_CHOICES.
+    """
+    if trajectories not in TRAJECTORY_CHOICES:
+        raise ValueError(f"trajectories must be one of {TRAJECTORY_CHOICES}, got {trajectories!r}")
+    return TRAJECTORY_KINDS if trajectories == "all" else (trajectories,)
+
+
+def trajectory_kind(name: str) -> str:
+    """"random" for a random trajectory's name (random:SEED), "paper" for the paper's three."""
+    from hexa.trajectories import RANDOM_PREFIX
+
+    return "random" if name.startswith(RANDOM_PREFIX) else "paper"
+
+
+def draw_contact(seed: int, index: int, trajectories: str = "all") -> ScriptedCollision:
     """Contact `index` of a campaign `seed`: link (plate/arm/rod), chain, point on the link, direction, peak force
-    1–10 N, rise 0.1–0.5 s, hold 0–0.5 s, release 0.1–0.4 s, onset 1.5–8 s into a trajectory of the paper's three."""
+    1–10 N, rise 0.1–0.5 s, hold 0–0.5 s, release 0.1–0.4 s, onset 1.5–8 s into a trajectory: one of the paper's
+    three, or (`trajectories` "random", or "all" at odd indices) the random trajectory random:N with N the case's
+    simulator seed (seed·100003 + index). Every other draw is the same whatever `trajectories` selects."""
+    kinds = kinds_of(trajectories)
     rng = np.random.default_rng([int(seed), 7, int(index)])
     link = LINKS[int(rng.integers(3))]
     chain = 0 if link == "plate" else int(rng.integers(1, 7))
     position = (float(rng.uniform(-np.pi, np.pi)) if link == "plate"
                 else float(rng.uniform(0.3, 0.9) if link == "arm" else rng.uniform(0.2, 0.9)))
+    trajectory = TRAJECTORIES[int(rng.integers(3))]
+    if kinds[int(index) % len(kinds)] == "random":
+        trajectory = f"random:{int(seed) * 100003 + int(index)}"
     return ScriptedCollision(
-        name=f"case{index}", trajectory=TRAJECTORIES[int(rng.integers(3))], link=link, chain=chain,
+        name=f"case{index}", trajectory=trajectory, link=link, chain=chain,
         onset=float(rng.uniform(1.5, 8.0)), rise_time=float(rng.uniform(0.1, 0.5)),
         release_time=float(rng.uniform(0.1, 0.4)), peak_force=float(rng.uniform(1.0, 10.0)), position=position,
         elevation=float(np.radians(rng.uniform(-80.0, 30.0))), azimuth=float(np.radians(rng.uniform(-40.0, 40.0))),
@@ -168,10 +196,10 @@ def simulate(collision: ScriptedCollision | None, trajectory: str, duration: flo
         while sim.time < t_end - 1e-9:
             now = sim.time
             if now >= next_cmd - 1e-12:
-                # sim time stands for wall time too: the campaign's clock never stalls
-                status = watch.evaluate(now, now)
-                if status is not None:
-                    runner.on_monitoring(status.level, status.reason, now)
+                # sim time stands for wall time too: the campaign's clock never stalls. The runner gets the current
+                # state at every tick, as the observer node re-publishes it every 50 ms: it takes silence as LOST
+                watch.evaluate(now, now)
+                runner.on_monitoring(watch.status.level, watch.status.reason, now)
                 tick = runner.tick(now)
                 if tick.zeta is not None:
                     seq = (seq + 1) & 0xFF
@@ -307,12 +335,13 @@ def run_contact_job(job: dict[str, Any]) -> dict[str, Any]:
     realism = RealismConfig.named(job["realism"])
     ocfg, kind, ccfg = _detector_settings(job)
     c = (ScriptedCollision(**job["collision"]) if "collision" in job
-         else draw_contact(job["campaign_seed"], job["index"]))
+         else draw_contact(job["campaign_seed"], job["index"], job.get("trajectories", "paper")))
     duration = c.end_time + TAIL
     rec = simulate(c, c.trajectory, duration, realism, seed=job["sim_seed"], observer_config=ocfg,
                    identify=job.get("identify", True), detector=kind, cusum=ccfg)
     out: dict[str, Any] = {"index": job["index"], "realism": job["realism"], "link": c.link, "chain": c.chain,
-                           "trajectory": c.trajectory, "peak_force": c.peak_force, "onset": c.onset + LEAD_IN,
+                           "trajectory": c.trajectory, "trajectory_kind": trajectory_kind(c.trajectory),
+                           "peak_force": c.peak_force, "onset": c.onset + LEAD_IN,
                            "rise_time": c.rise_time, "hold_time": c.hold_time, "release_time": c.release_time,
                            "sim_seconds": rec.sim_seconds, "detector": kind}
     touching = np.linalg.norm(rec.truth_force, axis=1) > 0
@@ -345,7 +374,8 @@ def run_free_job(job: dict[str, Any]) -> dict[str, Any]:
     rec = simulate(None, job["trajectory"], job["seconds"], realism, seed=job["sim_seed"], observer_config=ocfg,
                    identify=False, detector=kind, cusum=ccfg)
     moving = rec.t >= LEAD_IN
-    out: dict[str, Any] = {"trajectory": job["trajectory"], "realism": job["realism"], "seconds": job["seconds"],
+    out: dict[str, Any] = {"trajectory": job["trajectory"], "trajectory_kind": trajectory_kind(job["trajectory"]),
+                           "realism": job["realism"], "seconds": job["seconds"],
                            "sim_seconds": rec.sim_seconds, "live_starts": sum(1 for e in rec.events if e[1] == "START"),
                            "starts": {}, "detector": kind}
     rec_moving = dataclasses.replace(rec, t=rec.t[moving], residual=rec.residual[moving], servo=rec.servo[moving],

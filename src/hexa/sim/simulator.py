@@ -157,8 +157,8 @@ class Simulator:
             default without).
         randomize: draw the scenario's collision from its ranges with `seed` (False: nominal values).
         settle: seconds simulated before t = 0 holding the start targets, so the robot starts at rest under gravity.
-        trajectory: without a scenario, follow this trajectory ("circle", "helix", "ellipse") in free motion for its
-            duration (hexa.trajectories.DURATIONS), then hold its last pose.
+        trajectory: without a scenario, follow this trajectory ("circle", "helix", "ellipse", "random:SEED") in free
+            motion for its duration (hexa.trajectories.trajectory_named), then hold its last pose.
         lead_in: seconds of sim time at rest at the start pose before the trajectory (and the scenario's clock)
             starts, e.g. to let a ROS graph come up and calibrate; collision times are shifted by it.
         contact_model: "scripted" (the scenario's force is applied exactly at the point, mj_applyFT; the object is
@@ -223,14 +223,16 @@ class Simulator:
             from hexa import trajectories
             from hexa.kinematics import hexa6rus as kin
 
-            if self.trajectory not in trajectories.TRAJECTORIES:
-                raise SimulatorError(f"unknown trajectory {self.trajectory!r}; "
-                                     f"known: {sorted(trajectories.TRAJECTORIES)}")
-            fn = trajectories.TRAJECTORIES[self.trajectory]
+            if self.trajectory == "file":
+                raise SimulatorError("the simulator follows a named trajectory, not 'file'")
+            try:
+                fn, run_length = trajectories.trajectory_named(self.trajectory)
+            except ValueError as exc:
+                raise SimulatorError(f"unknown trajectory {self.trajectory!r}: {exc}") from None
             start_pose = np.asarray(fn(0.0)[0], dtype=float)
             if self.drive == "trajectory":
                 dt = self.config.timestep
-                duration = float(getattr(trajectories, "DURATIONS", {}).get(self.trajectory, 10.0)) + self.lead_in
+                duration = float(run_length) + self.lead_in
                 if self.collision is not None:
                     duration = max(duration, self.collision.end_time + 3.0)
                 t = np.arange(int(np.ceil(duration / dt)) + 1) * dt
