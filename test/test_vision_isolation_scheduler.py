@@ -74,8 +74,28 @@ def test_new_frames_during_a_collision_are_queued_every_eval_period_and_stop_aft
     stamps = [p.stamp for p in s.pending]
     assert len(stamps) == 7 and np.all(np.diff(stamps) >= 0.1 - 1e-6)
     s.collision_end(1, 10.7)
-    _frames(s, 10.7, 10)
+    _frames(s, 10.7 + 1 / 30, 10)
     assert len(s.pending) == 7                              # no collision: nothing new queued
+
+
+def test_frames_of_a_collision_that_arrive_after_its_end_are_still_queued() -> None:
+    # at 1× the END (stamped at its sample) can reach the node before the last frames of its collision
+    s = _sched(eval_period=0.1, max_pending=50, max_pose_age=5.0)
+    _frames(s, 10.0, 1)
+    s.collision_start(4, onset=10.0, now=0.0)
+    _frames(s, 10.0 + 1 / 30, 11)                          # up to 10.367 s: pairs 10.0, 10.1, 10.2, 10.3
+    s.collision_end(4, 10.449)
+    _frames(s, 10.0 + 12 / 30, 6)                          # 10.4 (before the END) ... 10.567 (after it)
+    s.add_pose(9.0, _pose())
+    s.add_pose(11.0, _pose())
+    work = s.due(0.1)
+    assert [w.stamp for w in work] == pytest.approx([10.0, 10.1, 10.2, 10.3, 10.4])
+    assert {w.collision_id for w in work} == {4}
+    s.collision_start(5, onset=10.6, now=0.2)              # the onset pair (10.567 s) of the next collision
+    s.collision_end(5, 10.65)
+    _frames(s, 10.6, 1)                                   # within eval_period of it: not queued
+    _frames(s, 10.7, 2)                                   # after its END: not queued
+    assert [(p.collision_id, p.stamp) for p in s.pending] == [(5, pytest.approx(10.567, abs=1e-3))]
 
 
 def test_pairs_stamped_after_the_end_are_skipped() -> None:

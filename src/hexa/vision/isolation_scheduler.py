@@ -19,7 +19,8 @@
   the static offset between the model's and the camera's pose; `Work.coarse`) once the estimate of t has arrived,
   else the nearest camera pose within `max_pose_age`; a pair still without a pose after `pose_expiry` wall seconds
   is dropped;
-- pairs stamped after their collision's END are skipped.
+- pairs stamped after their collision's END are skipped; frames stamped up to the END that reach the node after it
+  (at 1× the END can overtake the last frames of its collision, taken from the readers every 0.05 s) still are.
 
 `ContactLocator` does the work: decodes a pair (`FrameAssembler`), takes backgrounds and isolates the contact with
 the robot drawn at the work's pose (a wider robot mask for a coarse pose).
@@ -118,6 +119,7 @@ class IsolationScheduler:
         self.pending: list[_Pending] = []
         self.ended: dict[int, float] = {}      # collision id → END stamp
         self.active: int | None = None
+        self._last_end: tuple[int, float] | None = None     # the last collision that ended: (id, END stamp)
         self.counters: Counter[str] = Counter()
         self._last_eval = -math.inf
         self._t_first: float | None = None
@@ -146,11 +148,14 @@ class IsolationScheduler:
             self._t_first = frame.stamp
         if cam in self._want_background and frame.stamp - self._t_first >= self.background_delay:
             self._background[cam] = frame
-        if self.active is not None and frame.stamp - self._last_eval >= self.eval_period - 1e-6:
+        collision = self.active
+        if collision is None and self._last_end is not None and frame.stamp <= self._last_end[1] + 1e-3:
+            collision = self._last_end[0]                  # a frame of the collision that came after its END
+        if collision is not None and frame.stamp - self._last_eval >= self.eval_period - 1e-6:
             pair = self._pair(cam, frame)
             if pair is not None:
                 self._last_eval = frame.stamp
-                self._submit(pair, now, onset=False)
+                self._submit(pair, now, onset=False, collision_id=collision)
 
     def add_pose(self, t: float, T: np.ndarray) -> None:
         """A camera plate pose (4x4 in base) of stamp `t`."""
@@ -164,6 +169,7 @@ class IsolationScheduler:
     def collision_start(self, collision_id: int, onset: float, now: float) -> None:
         """Queue the buffered pair nearest `onset` and the buffered pairs after it (every `eval_period`)."""
         self.active = int(collision_id)
+        self._last_end = None
         self.counters["collisions"] += 1
         onset_pair = {c: min(fs, key=lambda f: abs(f.stamp - onset)) for c, fs in self.frames.items() if fs}
         if not onset_pair:
@@ -185,6 +191,7 @@ class IsolationScheduler:
             del self.ended[next(iter(self.ended))]
         if self.active == int(collision_id):
             self.active = None
+            self._last_end = (int(collision_id), float(stamp))
 
     def capture_background(self) -> None:
         """Take the next frame of every camera as its background."""
@@ -269,9 +276,11 @@ class IsolationScheduler:
                 pair[c] = near
         return pair
 
-    def _submit(self, frames: dict[str, Any], now: float, onset: bool) -> None:
+    def _submit(self, frames: dict[str, Any], now: float, onset: bool, collision_id: int | None = None) -> None:
         stamp = max(f.stamp for f in frames.values())
-        self.pending.append(_Pending(now, frames, stamp, onset, self.active if self.active is not None else 0))
+        if collision_id is None:
+            collision_id = self.active if self.active is not None else 0
+        self.pending.append(_Pending(now, frames, stamp, onset, collision_id))
         while len(self.pending) > self.max_pending:
             drop = next((i for i, p in enumerate(self.pending) if not p.onset), 0)
             self.pending.pop(drop)
