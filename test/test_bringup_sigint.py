@@ -71,7 +71,8 @@ def test_sigint_stops_every_node_of_the_sim_graph_with_rc_0_and_no_traceback(pro
     assert sup.returncode == 0, out + err
     rows = [m.groups() for line in out.splitlines() if (m := ROW.match(line))][-8:]   # the table after the stop
     assert len(rows) == 8, out
-    assert all(state == "exited" and restarts == "0" and rc == "0" for _n, state, restarts, rc in rows), rows
+    assert all(state == "exited" and restarts == "0" and rc == "0" for _n, state, restarts, rc in rows), \
+        f"{rows}\n{out[-3000:]}\n{err[-3000:]}"
     for log in logs.glob("*.log"):
         text = log.read_text(errors="replace")
         assert "Traceback" not in text, f"{log.name}:\n{text[-3000:]}"
