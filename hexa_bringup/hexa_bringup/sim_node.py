@@ -163,7 +163,7 @@ def main(argv: list[str] | None = None) -> int:
 
     from hexa.sim.simulator import SimulatorError
     from hexa_ros.env import apply_defaults
-    from hexa_ros.node import install_signal_handlers, stop_requested
+    from hexa_ros.node import install_signal_handlers, stop_on_signal, stop_requested
 
     apply_defaults()
     install_signal_handlers()
@@ -178,8 +178,11 @@ def main(argv: list[str] | None = None) -> int:
             print(f"hexa sim: {exc}", file=sys.stderr)
             return 2
         raise
+    # from now on a signal only requests the stop, checked between steps: a KeyboardInterrupt raised inside
+    # spin_once would interrupt a message being taken and converted and surface as a RuntimeError
+    stop_on_signal()
     try:
-        node.runner.run(node, rclpy.ok)
+        node.runner.run(node, lambda: rclpy.ok() and not stop_requested())
     except KeyboardInterrupt:
         pass
     finally:
