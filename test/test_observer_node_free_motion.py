@@ -1,9 +1,10 @@
 """Free motion in the live simulated graph (target: zero false alarms in 3 × 60 s): the whole graph
-(simulator with no scenario, driver, trajectory, cameras, pose, observer, rnea, ...) runs each of the paper's three
-trajectories at real-time factor 0.3, looping (a trajectory lasts 10 s; the helix cross-fades onto its next cycle);
-the observer must publish no collision event. CI runs 3 × 16 s of trajectory (after the 1 s lead-in at rest); the
-60 s figure is measured with the same function (`python test/test_observer_node_free_motion.py 60`) and reported in
-docs/observer_node.md."""
+(simulator with no scenario, driver, trajectory, cameras, pose, observer, rnea, ...) runs the paper's three
+trajectories at the demo's real-time factor; the observer must publish no collision event. CI runs one graph over the
+three in turn (`circle+helix+ellipse`, a 30 s sequence whose parts cross-fade over 2 s, as a loop restarts: the
+helix's 50 mm rise is taken up into the ellipse), 31 s from its start; the 60 s figure per trajectory is measured
+with the same function, each trajectory looping (`python test/test_observer_node_free_motion.py 60`), and reported
+in docs/observer_node.md."""
 from __future__ import annotations
 
 import sys
@@ -14,10 +15,11 @@ import pytest
 pytest.importorskip("rclpy", reason="ROS 2 Jazzy wheels not installed: run `make test` (it sets them up)")
 
 TRAJECTORIES = ("circle", "helix", "ellipse")
-#: sim seconds per CI run: the trajectory starts at the first monitoring OK (≈ 1.0–1.6 s) and passes its 10 s end, so
-#: the loop's restart is covered (60 s each
-#: takes ≈ 290 s of wall time per trajectory here: measured by hand, docs/observer_node.md)
-CI_DURATION = 13.0
+#: the CI run: the three in turn in one graph (hexa.trajectories.sequence)
+SEQUENCE = "+".join(TRAJECTORIES)
+#: sim seconds of the CI run: the trajectory starts at the first monitoring OK (≈ 1.0–1.6 s) and reaches the
+#: ellipse's second turn, past both junctions
+CI_DURATION = 31.0
 
 
 def free_motion_run(trajectory: str, out_dir, domain: int, duration: float,
@@ -77,11 +79,10 @@ def free_motion_run(trajectory: str, out_dir, domain: int, duration: float,
             "real_time_factor": real_time_factor, "wall_s": round(run.wall_s, 1)}
 
 
-@pytest.mark.parametrize("trajectory", TRAJECTORIES)
-def test_free_motion_on_each_trajectory_raises_no_collision(trajectory, tmp_path, ros_domain_id):
-    r = free_motion_run(trajectory, tmp_path, ros_domain_id, duration=CI_DURATION)
+def test_free_motion_over_the_three_trajectories_in_turn_raises_no_collision(tmp_path, ros_domain_id):
+    r = free_motion_run(SEQUENCE, tmp_path, ros_domain_id, duration=CI_DURATION)
     assert r["residuals"] > 180 * CI_DURATION, r   # the observer ran at the current-sample rate (200 Hz) all along
-    assert r["moving_s"] > CI_DURATION - 1.0 and r["longest_still_s"] < 0.1, r   # it moved all along (looped)
+    assert r["moving_s"] > CI_DURATION - 1.0 and r["longest_still_s"] < 0.1, r   # it moved all along
     assert r["events"] == [], r
     assert r["rc"] == 0, r                   # the supervisor ended the graph normally (the simulator finished)
 

@@ -127,7 +127,13 @@ def test_uno_emulator_latch_report_follows_commands_on_its_20ms_frames():
         _exchange(s, p, fr.encode_frame(fr.GET_STATUS, 7), 1)
         now[0] = 0.1408   # during frame 7 (starts 140 ms): channel 1's slot (1000 us) is running
         s.write(fr.encode_frame(fr.SET_TARGETS, 8, fr.pack_targets(w2)))
-        got = _exchange(s, p, fr.encode_frame(fr.GET_STATUS, 9), 1)   # frame 6 (ended at 127.5 ms) may come first
+        # frame 6's LATCH (ended at 127.5 ms) may come before the STATUS: wait for the STATUS, so that the board
+        # has handled command 8 before its clock moves on
+        got = _exchange(s, p, fr.encode_frame(fr.GET_STATUS, 9), 1)
+        while not any(f.type == fr.STATUS for f in got):
+            more = _exchange(s, p, b"", 1)
+            assert more, "no STATUS reply"
+            got += more
         now[0] = 0.2
         got += _frames_for(s, p, 0.1)
         latches = [fr.unpack_latch(f.payload) for f in got if f.type == fr.LATCH]

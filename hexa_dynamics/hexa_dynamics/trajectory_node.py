@@ -36,8 +36,9 @@ from hexa_ros.conversions import JOINT_NAMES, hexa_pose_from_msg
 from hexa_ros.stamps import to_sec
 
 PARAMETERS = {
-    "trajectory": Param("circle", "seed 000 eqs 37, 40, 41, or a pose file", choices=("circle", "helix", "ellipse",
-                                                                                     "file")),
+    "trajectory": Param("circle", "circle | helix | ellipse (seed 000 eqs 37, 40, 41), random:SEED (the random "
+                                  "trajectory of hexa eval), file (the pose file `file`), or names joined by '+' "
+                                  "played in turn (circle+helix+ellipse)"),
     "file": Param("", "CSV of t x y z alpha beta gamma (SI) for trajectory=file"),
     "rate_hz": Param(100.0, "joint_commands per second", range=(1.0, 1000.0)),
     "start_delay": Param(1.0, "s after the first clock reading before the trajectory starts", range=(0.0, 3600.0)),

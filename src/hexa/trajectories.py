@@ -6,7 +6,8 @@ Each trajectory maps time t (s, scalar or array) to `(pose, pose_dot, pose_ddot)
 Z-Y-X Tait–Bryan angles α β γ (rad) of eq 38, then their first and second time derivatives. The paper gives the
 formulas in mm and degrees; they are converted here. All three share ω = 0.4π rad/s (period 5 s) and start at
 (x, y) = (a, 0) with non-zero velocity, as in the paper; `DURATIONS` is the run length used by the demo (two turns).
-`trajectory_named` resolves a name: the paper's three, "random:SEED" (the random trajectory of SEED) or "file".
+`trajectory_named` resolves a name: the paper's three, "random:SEED" (the random trajectory of SEED), "file", or
+names joined by "+" (a `sequence`: "circle+helix+ellipse" plays the three in turn).
 """
 from __future__ import annotations
 
@@ -194,9 +195,73 @@ def random_seed_of(name: str) -> int | None:
     return int(tail)
 
 
+#: s: the cross-fade from one trajectory of a sequence onto the next (as the trajectory player's loop blend)
+SEQUENCE_BLEND = 2.0
+#: joins the names of a sequence: "circle+helix+ellipse" plays the three in turn
+SEQUENCE_SEPARATOR = "+"
+
+
+def _smoothstep3(u: np.ndarray, blend: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """s = 3u² − 2u³ of u = x / blend clipped to 0..1, and its first and second derivatives in x."""
+    inside = (u > 0.0) & (u < 1.0)
+    v = np.clip(u, 0.0, 1.0)
+    s = v * v * (3.0 - 2.0 * v)
+    ds = np.where(inside, 6.0 * v * (1.0 - v) / blend, 0.0)
+    dds = np.where(inside, (6.0 - 12.0 * v) / (blend * blend), 0.0)
+    return s, ds, dds
+
+
+def sequence(parts: Sequence[tuple[Trajectory, float]], blend: float = SEQUENCE_BLEND) -> tuple[Trajectory, float]:
+    """The trajectories `parts` ((trajectory, duration s) each) played in turn, and the total duration (s).
+
+    Part k starts at the sum of the earlier durations. Over its first `blend` seconds it cross-fades from part k−1
+    continued past its end onto part k with a smoothstep s: pose (1 − s)·a + s·b, its rate and acceleration the
+    product rule's, so pose and rate stay continuous across each junction (the trajectory player's loop restart
+    does the same). Away from the junctions each part is played as it is.
+
+    Raises:
+        ValueError: no part, a duration not > blend (the cross-fade must end inside its part), a blend < 0.
+    """
+    if not parts:
+        raise ValueError("a sequence needs at least one trajectory")
+    if not (math.isfinite(blend) and blend >= 0):
+        raise ValueError(f"blend must be >= 0 s, got {blend}")
+    durations = [float(d) for _, d in parts]
+    if any(not (d > blend) for d in durations):
+        raise ValueError(f"every trajectory of a sequence must last longer than its {blend:g} s blend: {durations}")
+    starts = np.concatenate([[0.0], np.cumsum(durations)[:-1]])
+    fns = [fn for fn, _ in parts]
+
+    def traj(t: float | np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        tt = np.asarray(t, dtype=float)
+        flat = tt.reshape(-1)
+        k = np.clip(np.searchsorted(starts, flat, side="right") - 1, 0, len(fns) - 1)
+        out = [np.zeros((flat.size, 6)) for _ in range(3)]
+        for i, fn in enumerate(fns):
+            idx = np.flatnonzero(k == i)
+            if not idx.size:
+                continue
+            x = flat[idx] - starts[i]
+            b = [np.asarray(v, dtype=float).reshape(-1, 6) for v in fn(x)]
+            if i > 0 and blend > 0:
+                a = [np.asarray(v, dtype=float).reshape(-1, 6) for v in fns[i - 1](x + durations[i - 1])]
+                s, ds, dds = (v[:, None] for v in _smoothstep3(x / blend, blend))
+                b = [(1 - s) * a[0] + s * b[0],
+                     (1 - s) * a[1] + s * b[1] + ds * (b[0] - a[0]),
+                     (1 - s) * a[2] + s * b[2] + 2 * ds * (b[1] - a[1]) + dds * (b[0] - a[0])]
+            for o, v in zip(out, b):
+                o[idx] = v
+        shape = tt.shape + (6,)
+        pose, vel, acc = (o.reshape(shape) for o in out)
+        return pose, vel, acc
+
+    return traj, float(sum(durations))
+
+
 def trajectory_named(name: str, path: str | Path = "") -> tuple[Trajectory, float]:
     """(trajectory, duration s) of `name`: one of TRAJECTORIES, "random:SEED" (hexa.random_trajectory, for the
-    packaged description) or "file" for the pose file at `path`.
+    packaged description), "file" for the pose file at `path`, or such names (not "file") joined by "+", played in
+    turn (`sequence`).
 
     Raises:
         ValueError: an unknown name, or a bad file (see load_pose_file).
@@ -204,6 +269,11 @@ def trajectory_named(name: str, path: str | Path = "") -> tuple[Trajectory, floa
     """
     if name == "file":
         return load_pose_file(path)
+    if SEQUENCE_SEPARATOR in name:
+        names = name.split(SEQUENCE_SEPARATOR)
+        if "file" in names:
+            raise ValueError(f"a sequence names trajectories, not 'file': {name!r}")
+        return sequence([trajectory_named(n) for n in names])
     seed = random_seed_of(name)
     if seed is not None:
         from hexa.random_trajectory import random_trajectory
@@ -211,5 +281,6 @@ def trajectory_named(name: str, path: str | Path = "") -> tuple[Trajectory, floa
         traj = random_trajectory(seed)
         return traj, traj.duration
     if name not in TRAJECTORIES:
-        raise ValueError(f"trajectory must be one of {sorted(TRAJECTORIES)}, 'random:SEED' or 'file', got {name!r}")
+        raise ValueError(f"trajectory must be one of {sorted(TRAJECTORIES)}, 'random:SEED', 'file' or such names "
+                         f"joined by '+', got {name!r}")
     return TRAJECTORIES[name], DURATIONS[name]

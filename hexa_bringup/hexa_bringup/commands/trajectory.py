@@ -16,7 +16,8 @@ def register(sub: argparse._SubParsersAction) -> None:
                                    "pose file the trajectory node plays: `hexa bringup sim --trajectory FILE`. "
                                    "random:SEED is the random smooth reachable trajectory `hexa eval` runs under "
                                    "that name (its report lists them).")
-    p.add_argument("name", help="circle | helix | ellipse (seed 000) | random:SEED (hexa.random_trajectory)")
+    p.add_argument("name", help="circle | helix | ellipse (seed 000) | random:SEED (hexa.random_trajectory), or "
+                                "names joined by '+' played in turn, cross-faded over 2 s (circle+helix+ellipse)")
     p.add_argument("--out", default=None, metavar="FILE", help="write the pose file (CSV t x y z alpha beta gamma, "
                                                                  "SI) here")
     p.add_argument("--cycles", type=int, default=None,
@@ -38,7 +39,8 @@ def run(args: argparse.Namespace) -> int:
     from hexa.robots.hexa_description import load_hexa
     from hexa.robots.schema import RobotDescriptionError
     from hexa.servo_motion import motion_peaks
-    from hexa.trajectories import OMEGA, TRAJECTORIES, random_seed_of, write_pose_file
+    from hexa.trajectories import (OMEGA, SEQUENCE_SEPARATOR, TRAJECTORIES, random_seed_of, trajectory_named,
+                                   write_pose_file)
 
     if not (math.isfinite(args.rate) and args.rate > 0):
         raise SystemExit(f"--rate must be > 0, got {args.rate}")
@@ -46,19 +48,26 @@ def run(args: argparse.Namespace) -> int:
         raise SystemExit(f"--cycles must be >= 1, got {args.cycles}")
     try:
         desc = load_hexa(args.description)
-        seed = random_seed_of(args.name)
-        if seed is None and args.name not in TRAJECTORIES:
-            raise ValueError(f"trajectory must be one of {sorted(TRAJECTORIES)} or random:SEED, got {args.name!r}")
-        if seed is not None:
+        seed = None if SEQUENCE_SEPARATOR in args.name else random_seed_of(args.name)
+        traj: Any
+        if SEQUENCE_SEPARATOR in args.name:
+            if args.cycles not in (None, 1):
+                raise ValueError("--cycles: a sequence is played once (its parts' own lengths)")
+            traj, duration = trajectory_named(args.name)
+            period = duration
+        elif seed is not None:
             settings = RandomTrajectorySettings()
             if args.cycles is not None:
                 settings = dataclasses.replace(settings, cycles=args.cycles)
-            traj: Any = random_trajectory(seed, desc, settings)
+            traj = random_trajectory(seed, desc, settings)
             period, duration = traj.period, traj.duration
-        else:
+        elif args.name in TRAJECTORIES:
             traj = TRAJECTORIES[args.name]
             period = 2.0 * math.pi / OMEGA
             duration = period * (args.cycles or 2)
+        else:
+            raise ValueError(f"trajectory must be one of {sorted(TRAJECTORIES)}, random:SEED or such names joined "
+                             f"by '+', got {args.name!r}")
     except (RobotDescriptionError, RandomTrajectoryError, ValueError) as exc:
         raise SystemExit(f"{exc}") from None
     t = np.arange(int(round(duration * args.rate)) + 1) / args.rate
@@ -71,7 +80,7 @@ def run(args: argparse.Namespace) -> int:
                 path = traj.write(args.out, args.rate)
             else:
                 path = write_pose_file(args.out, traj, duration, args.rate,
-                                       [f"hexa trajectory {args.name}: seed 000, {duration:g} s"])
+                                       [f"hexa trajectory {args.name}: seed 000, {duration:g} s"])  # one or a sequence
         except OSError as exc:
             raise SystemExit(f"cannot write {args.out}: {exc}") from None
         out["file"] = str(path)
