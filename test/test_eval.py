@@ -209,6 +209,18 @@ def test_a_contact_run_follows_the_trajectory_until_its_contact():
     assert np.linalg.norm(np.diff(path, axis=0), axis=1).sum() > 0.02, "the trajectory was held"
 
 
+def test_rendered_isolation_runs_the_isolation_node_with_its_parameter_defaults():
+    """The eval's scheduler and locator take their classes' defaults: they are the isolation node's parameters."""
+    import inspect
+
+    from hexa.vision.isolation_scheduler import ContactLocator, IsolationScheduler
+    from hexa_vision.isolation_params import PARAMETERS, SCHEDULER
+
+    sched = inspect.signature(IsolationScheduler).parameters
+    assert {k: sched[k].default for k in SCHEDULER} == {k: p.default for k, p in SCHEDULER.items()}
+    assert inspect.signature(ContactLocator).parameters["coarse_margin"].default == PARAMETERS["coarse_margin"].default
+
+
 #: draw_contact(2, index, "paper") of a plate, an arm and a rod contact, each detected on the ideal robot
 RENDERED_CASES = ((8, "plate", 0), (33, "arm", 6), (44, "rod", 5))
 
