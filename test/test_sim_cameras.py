@@ -143,3 +143,25 @@ def test_a_skipped_frame_advances_the_noise_as_a_rendered_one(sim):
     np.testing.assert_array_equal(depth_skip, depth)
     gen.state = start
     assert not np.array_equal(sim.render("cam_top")[0], rgb)     # the noise does move from frame to frame
+
+
+def test_a_kept_frame_state_renders_later_as_its_instant_did():
+    """`frame_state` keeps an instant (joints, the pushing object) that `render_frame` renders later exactly as
+    `render` did then, while the robot has moved on; keeping it leaves the physics untouched."""
+    from hexa.eval.campaign import draw_contact
+
+    c = draw_contact(2, 8, "paper")                       # a plate push: the object is in view at its peak
+    with Simulator(load_hexa(), seed=3, scenario=c) as sim, Simulator(load_hexa(), seed=3, scenario=c,
+                                                                      cameras=False) as plain:
+        sim.run_until(c.peak_time)
+        plain.run_until(c.peak_time)
+        kept = sim.frame_state()
+        then = {cam: sim.render(cam, noise=False) for cam in ("cam_top", "cam_side")}
+        sim.run_until(c.peak_time + 0.5)
+        plain.run_until(c.peak_time + 0.5)
+        np.testing.assert_array_equal(sim.state().zeta, plain.state().zeta)
+        for cam, (rgb, depth) in then.items():
+            rgb_later, depth_later = sim.render_frame(cam, kept, noise=False)
+            np.testing.assert_array_equal(rgb_later, rgb)
+            np.testing.assert_array_equal(depth_later, depth)
+            assert np.abs(sim.render(cam, noise=False)[1].astype(int) - depth.astype(int)).max() > 20   # moved on

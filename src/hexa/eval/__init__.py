@@ -15,10 +15,10 @@ import os
 import sys
 import time
 from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass, field, replace
 from typing import Any, Callable
 
-from hexa.eval.campaign import TRAJECTORIES, kinds_of, run_contact_job, run_free_job
+from hexa.eval.campaign import ISOLATION_MODES, TRAJECTORIES, kinds_of, run_contact_job, run_free_job
 
 #: free motion is cut into jobs of at most this many seconds (one trajectory each, looped), for the parallel pool
 FREE_CHUNK_S = 60.0
@@ -34,7 +34,9 @@ class CampaignConfig:
     cases; `observer`: ObserverConfig fields that replace the node's defaults; `detector`: the live detector
     ("cusum" | "threshold", the node's `detector` parameter) and `cusum`: CusumConfig fields; `scheduler`: None
     (the local process pool), "local:N" (a Dask LocalCluster of N single-threaded worker processes) or a Dask
-    scheduler's address ("tcp://host:8786"; its workers need hexa installed)."""
+    scheduler's address ("tcp://host:8786"; its workers need hexa installed); `isolation`: "rendered" (the
+    isolation node's core on rendered frames, the default; the oracle when this machine cannot render, see
+    `isolation_mode`) or "oracle" (the true contact at the START: isolation not measured)."""
 
     cases: int = 6
     free_seconds: float = 20.0
@@ -47,11 +49,14 @@ class CampaignConfig:
     detector: str = "threshold"
     cusum: dict[str, Any] = field(default_factory=dict)
     trajectories: str = "all"
+    isolation: str = "rendered"
 
     def __post_init__(self) -> None:
         from hexa.sim.realism import RealismConfig
 
         kinds_of(self.trajectories)   # raises ValueError naming the choices
+        if self.isolation not in ISOLATION_MODES:
+            raise ValueError(f"isolation must be one of {ISOLATION_MODES}, got {self.isolation!r}")
         if self.cases < 0 or not math.isfinite(self.free_seconds) or self.free_seconds < 0:
             raise ValueError(f"cases ({self.cases}) and free_seconds ({self.free_seconds}) must be >= 0")
         if self.cases == 0 and self.free_seconds == 0:
@@ -70,6 +75,19 @@ class CampaignConfig:
             CusumConfig(**self.cusum)   # raises naming a bad value
         except TypeError as exc:
             raise ValueError(f"cusum settings: {exc}") from exc
+
+
+def isolation_mode(requested: str) -> tuple[str, str]:
+    """(mode, note): "rendered" when requested and this process can render headless, else "oracle" with a note
+    saying why ("" when the oracle was asked for)."""
+    if requested != "rendered":
+        return requested, ""
+    from hexa.sim.camera import rendering_unavailable
+
+    why = rendering_unavailable()
+    if why is None:
+        return "rendered", ""
+    return "oracle", f"isolation on rendered frames needs a headless renderer ({why}); the oracle isolation runs"
 
 
 def local_workers(scheduler: str) -> int | None:
@@ -105,7 +123,7 @@ def jobs_of(cfg: CampaignConfig) -> list[tuple[str, dict[str, Any]]]:
             contacts.append(("contact", {"campaign_seed": cfg.seed, "index": i, "sim_seed": cfg.seed * 100003 + i,
                                      "realism": realism, "identify": cfg.identify, "observer": cfg.observer,
                                      "detector": cfg.detector, "cusum": cfg.cusum,
-                                     "trajectories": cfg.trajectories}))
+                                     "trajectories": cfg.trajectories, "isolation": cfg.isolation}))
         k = 0
         for kind in kinds:
             left, j = cfg.free_seconds / len(kinds), 0
@@ -175,7 +193,11 @@ def _run_on_dask(cfg: CampaignConfig, jobs: list[tuple[str, dict[str, Any]]],
 def run_campaign(cfg: CampaignConfig, progress: Callable[[float], Any] | None = None) -> dict[str, Any]:
     """Run every job of `cfg` on a process pool (`cfg.workers`; 1 = in this process) or on Dask distributed
     (`cfg.scheduler`) and collect the results: {"config", "contacts": [...], "free": [...], "wall_s", "sim_s",
-    "workers", "engine"}. `progress(sim_seconds)` is called after each job."""
+    "workers", "engine", "isolation_note"}. `progress(sim_seconds)` is called after each job. Rendered isolation
+    falls back to the oracle when this machine cannot render (`isolation_mode`; the note says why)."""
+    mode, note = isolation_mode(cfg.isolation) if cfg.cases else (cfg.isolation, "")
+    if mode != cfg.isolation:
+        cfg = replace(cfg, isolation=mode)
     jobs = jobs_of(cfg)
     workers = cfg.workers or os.cpu_count() or 1
     results: list[tuple[str, dict[str, Any]]] = []
@@ -205,4 +227,5 @@ def run_campaign(cfg: CampaignConfig, progress: Callable[[float], Any] | None = 
     contacts = sorted((r for k, r in results if k == "contact"), key=lambda r: (r["realism"], r["index"]))
     free = sorted((r for k, r in results if k == "free"), key=lambda r: (r["realism"], r["trajectory"]))
     return {"config": asdict(cfg), "contacts": contacts, "free": free, "workers": workers, "engine": engine,
-            "wall_s": time.monotonic() - t0, "sim_s": sum(r.get("sim_seconds", 0.0) for _, r in results)}
+            "isolation_note": note, "wall_s": time.monotonic() - t0,
+            "sim_s": sum(r.get("sim_seconds", 0.0) for _, r in results)}

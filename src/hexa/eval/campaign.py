@@ -10,10 +10,15 @@ A run drives the simulator like the live graph does and feeds the same classes t
   by the driver's sensor model; host stamps carry the jitter;
   the joint_states position is each servo's set-point (what the driver gives it with the latch report);
 - the observer node's `CollisionMonitor` (ζ estimator → residual observer → detector) takes both streams and the
-  plate pose at 30 Hz (the true pose with σ = 0.5 mm / 0.1° of noise, standing in for the pose node — the vision is
-  not run here);
-- the rnea node's `ContactForceTracker` identifies the force from the observer's ζ̂, ζ̂̇ and τ; its contact is the
-  true link, chain and point at the START (an oracle isolation: the isolation on rendered frames is not run).
+  plate pose at 30 Hz (the true pose with σ = 0.5 mm / 0.1° of noise, standing in for the pose node — the marker
+  fit is not run here);
+- in a contact run, the isolation node's `IsolationScheduler` and `ContactLocator` take both cameras' frames,
+  rendered from the simulator as the sim node renders them (30 Hz from t = 0; only the frames the scheduler hands
+  out are rendered: the backgrounds and the pairs from the START's onset on, every `eval_period`, until END), the
+  same plate poses and the START / END (`hexa.eval.rendered_isolation`); isolation "oracle" replaces them with the
+  true link, chain, point and force direction at the START;
+- the rnea node's `ContactForceTracker` identifies the force from the observer's ζ̂, ζ̂̇ and τ at each contact the
+  isolation hands it (as the node takes the isolation node's `contact`).
 
 The recorded arrays become a `hexa.report.collision_demo.CaseData`, and `compute_metrics` — the demo's own — gives
 delay, RMSE and false STARTs. The residual is also replayed at scaled thresholds (the DET curve) through the CUSUM
@@ -23,6 +28,8 @@ only, r_low = 2 N / 0.2 N·m, no servo criterion).
 from __future__ import annotations
 
 import dataclasses
+import functools
+import time
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any
 
@@ -55,6 +62,8 @@ PAPER_THRESHOLDS = (2.0, 2.0, 2.0, 0.2, 0.2, 0.2)
 R_LOW = 2.0
 #: truth samples between two plate-equivalent wrenches of the observer-lag figure (5 ms at the 1 kHz physics)
 PLATE_EQUIVALENT_STRIDE = 5
+#: the isolation of a contact run: the isolation node's core on rendered frames, or the truth at the START
+ISOLATION_MODES = ("rendered", "oracle")
 
 
 @dataclass(frozen=True)
@@ -129,7 +138,8 @@ def draw_contact(seed: int, index: int, trajectories: str = "all") -> ScriptedCo
 class RunRecord:
     """Arrays of one run (SI): at the monitor's sample times `t`, residual (N,6) on the plate axes and servo (N,6) as
     servo torques; the live events; the simulator's truth at every physics step (`truth_t`, 1 kHz); the identified
-    forces."""
+    forces and their points; the isolation that ran ("rendered", "oracle"; "none" in free motion), its isolated pairs
+    (`hexa.eval.rendered_isolation.Evaluation`) and their cost."""
 
     t: np.ndarray
     residual: np.ndarray
@@ -146,18 +156,27 @@ class RunRecord:
     wrench_force: np.ndarray
     sim_seconds: float
     zeta_dot: np.ndarray = field(default_factory=lambda: np.zeros((0, 6)))
+    wrench_point: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)))   # where each force was identified
     counters: dict[str, Any] = field(default_factory=dict)
+    isolation: str = "oracle"
+    evaluations: list[Any] = field(default_factory=list)     # rendered isolation: every isolated pair (Evaluation)
+    isolation_cost: dict[str, float] = field(default_factory=dict)
 
 
 def simulate(collision: ScriptedCollision | None, trajectory: str, duration: float, realism: RealismConfig,
              seed: int, observer_config: ObserverConfig | None = None, identify: bool = True,
              desc: HexaDescription | None = None, detector: str = "threshold",
-             cusum: CusumConfig | None = None) -> RunRecord:
+             cusum: CusumConfig | None = None, isolation: str = "rendered") -> RunRecord:
     """Run the robot `duration` s of trajectory time (after LEAD_IN) with an optional scripted contact (its onset in
     trajectory time); see the module docstring for what runs. Free motion (no contact) loops the trajectory and
-    ignores STARTs (it keeps moving, to count false alarms); with a contact a START holds the trajectory, as the
-    trajectory node's default policy does. `detector` and `cusum`: the monitor's detector (the node's default:
-    "threshold"; "cusum" with CusumConfig())."""
+    ignores STARTs (it keeps moving, to count false alarms) and runs no isolation; with a contact a START holds the
+    trajectory, as the trajectory node's default policy does. `detector` and `cusum`: the monitor's detector (the
+    node's default: "threshold"; "cusum" with CusumConfig()). `isolation`: "rendered" (the isolation node's core on
+    rendered frames; needs EGL) or "oracle" (ISOLATION_MODES).
+
+    Raises:
+        ValueError: an unknown isolation; hexa.sim.camera.RenderError: "rendered" without a GL context.
+    """
     from hexa.dynamics.contact_force import ContactForceConfig, ContactForceTracker, LocatedContact
     from hexa.dynamics.monitor import CollisionMonitor, MonitorConfig
     from hexa.dynamics.observer import ObserverConfig
@@ -167,10 +186,18 @@ def simulate(collision: ScriptedCollision | None, trajectory: str, duration: flo
     from hexa.dynamics.monitoring import MonitoringWatch
     from hexa.trajectory_runner import TrajectoryRunner, TrajectorySettings
 
+    if isolation not in ISOLATION_MODES:
+        raise ValueError(f"isolation must be one of {ISOLATION_MODES}, got {isolation!r}")
     desc = desc or load_hexa()
     ocfg = observer_config or ObserverConfig()
-    sim = Simulator(desc, seed=seed, scenario=collision, cameras=False, drive="external", lead_in=LEAD_IN,
+    render = collision is not None and isolation == "rendered"
+    sim = Simulator(desc, seed=seed, scenario=collision, cameras=render, drive="external", lead_in=LEAD_IN,
                     trajectory=None if collision is not None else trajectory, realism=realism)
+    vision = None
+    if render:
+        from hexa.eval.rendered_isolation import RenderedIsolation
+
+        vision = RenderedIsolation(sim, desc)
     rng = np.random.default_rng([int(seed), 11])
     jitter = realism.jitter
     readout = CurrentReadout(sim, seed)
@@ -186,13 +213,28 @@ def simulate(collision: ScriptedCollision | None, trajectory: str, duration: flo
     command_period = 1.0 / TrajectorySettings().rate_hz
     pending: list[tuple[float, np.ndarray, int]] = []
     next_cmd, next_cam, seq = 0.0, 0.0, 0
-    rec: dict[str, list] = {k: [] for k in ("t", "res", "servo", "zd", "wt", "wf")}
+    rec: dict[str, list] = {k: [] for k in ("t", "res", "servo", "zd", "wt", "wf", "wp")}
     events: list[tuple[float, str, int, str]] = []
 
     t_end = LEAD_IN + duration
     steps_per_sample = max(1, int(round(1.0 / (float(driver_cfg["stream_rate_hz"]) * sim.timestep))))
     k = 0
+
+    def keep(forces: list[Any]) -> None:
+        for f in forces:
+            rec["wt"].append(f.time)
+            rec["wf"].append(f.force)
+            rec["wp"].append(f.point)
+
+    def located(contacts: list[LocatedContact]) -> None:
+        """The isolation's contacts to the rnea node's tracker, as the node takes `contact`."""
+        for c in contacts:
+            if tracker is not None:
+                keep(tracker.on_contact(c))
+
     try:
+        if vision is not None:
+            located(vision.step(sim.time))           # the sim node's first frame, at t = 0
         while sim.time < t_end - 1e-9:
             now = sim.time
             if now >= next_cmd - 1e-12:
@@ -213,6 +255,8 @@ def simulate(collision: ScriptedCollision | None, trajectory: str, duration: flo
                     sim.set_servo_targets(zeta_cmd, tag=tag)
             sim.step(1)
             k += 1
+            if vision is not None:
+                located(vision.step(sim.time))
             if k % steps_per_sample:
                 continue
             s = sim.state()
@@ -226,6 +270,8 @@ def simulate(collision: ScriptedCollision | None, trajectory: str, duration: flo
                 out += watch.push_pose(t, pose)
                 if tracker is not None:
                     tracker.on_pose(t, pose)
+                if vision is not None:
+                    located(vision.add_pose(t, pose, t))
                 next_cam += CAMERA_PERIOD
             for m in out:
                 r = m.residual
@@ -233,23 +279,21 @@ def simulate(collision: ScriptedCollision | None, trajectory: str, duration: flo
                 rec["res"].append(r.wrench)
                 rec["servo"].append(r.servo_torque)
                 rec["zd"].append(m.zeta_dot if m.zeta_dot is not None else np.full(6, np.nan))
-                forces = []
                 if tracker is not None and m.zeta_dot is not None:
-                    forces += tracker.step_state(m.time, m.zeta, m.zeta_dot, m.tau)
+                    keep(tracker.step_state(m.time, m.zeta, m.zeta_dot, m.tau))
                 for e in r.events:
                     events.append((e.time, e.kind, e.id, e.axis_name))
                     if e.kind == "START":
                         runner.collision(now, r.wrench[:3])
                     if tracker is not None:
-                        forces += tracker.on_collision(e.kind, e.id, e.time)
+                        keep(tracker.on_collision(e.kind, e.id, e.time))
+                    if vision is not None:
+                        located(vision.collision(e.kind, e.id, e.onset, e.time, t))
+                    elif e.kind == "START" and collision is not None:
                         g = sim.ground_truth()
-                        if e.kind == "START" and g.in_contact:   # the oracle isolation's contact
-                            forces += tracker.on_contact(LocatedContact(
-                                e.time, e.id, g.link, g.chain or 1, g.point.copy(),
-                                g.force / np.linalg.norm(g.force)))
-                for f in forces:
-                    rec["wt"].append(f.time)
-                    rec["wf"].append(f.force)
+                        if g.in_contact:   # the oracle isolation's contact
+                            located([LocatedContact(e.time, e.id, g.link, g.chain or 1, g.point.copy(),
+                                                    g.force / np.linalg.norm(g.force))])
         log = sim.truth_log()
     finally:
         sim.close()
@@ -263,8 +307,12 @@ def simulate(collision: ScriptedCollision | None, trajectory: str, duration: flo
                      truth_t=log["time"], truth_force=log["force"], truth_point=log["point"],
                      truth_link=log["link"].astype(int), truth_chain=log["chain"].astype(int),
                      truth_pose=log["plate_pose"], truth_zeta=log["zeta"], wrench_t=arr("wt")[order],
-                     wrench_force=arr("wf", 3)[order], sim_seconds=t_end, zeta_dot=arr("zd", 6),
-                     counters={**mon.counters(), "monitoring_lost": watch.lost_count})
+                     wrench_force=arr("wf", 3)[order], wrench_point=arr("wp", 3)[order], sim_seconds=t_end,
+                     zeta_dot=arr("zd", 6),
+                     counters={**mon.counters(), "monitoring_lost": watch.lost_count},
+                     isolation=isolation if collision is not None else "none",
+                     evaluations=vision.evaluations if vision is not None else [],
+                     isolation_cost=vision.cost.as_dict() if vision is not None else {})
 
 
 def replay(rec: RunRecord, spec: DetectorSpec, base_config: ObserverConfig, scale: float = 1.0
@@ -289,6 +337,7 @@ def case_data(name: str, rec: RunRecord, events: list, thresholds: Any, servo_th
               with_outputs: bool = True) -> Any:
     """The demo's CaseData of a run (`with_outputs` False: truth and events only, for the replays)."""
     from hexa.report.collision_demo import CaseData
+    from hexa.vision.isolation import LINK_UNKNOWN
 
     d = CaseData(case=name, truth_t=rec.truth_t, truth_force=rec.truth_force, truth_point=rec.truth_point,
                  truth_link=rec.truth_link, truth_chain=rec.truth_chain, events=events,
@@ -297,7 +346,29 @@ def case_data(name: str, rec: RunRecord, events: list, thresholds: Any, servo_th
         d.truth_pose, d.truth_zeta = rec.truth_pose, rec.truth_zeta
         d.residual_t, d.residual, d.residual_servo = rec.t, rec.residual, rec.servo
         d.wrench_t, d.wrench_force = rec.wrench_t, rec.wrench_force
+        found = [e for e in rec.evaluations if e.link != LINK_UNKNOWN]   # what the node publishes on `contact`
+        d.contact_t = np.array([e.stamp for e in found], float)
+        d.contact_link = np.array([e.link for e in found], int)
+        d.contact_chain = np.array([e.chain for e in found], int)
+        d.contact_point = np.array([e.point for e in found], float).reshape(len(found), 3)
     return d
+
+
+def isolation_evaluations(rec: RunRecord) -> list[dict[str, Any]]:
+    """Every isolated pair of a rendered-isolation run with the truth at the truth sample nearest its stamp: the
+    true link and chain ("none" when nothing touches) and the point error (mm; NaN when either side has none)."""
+    from hexa.report.collision_demo import LINK_NAMES
+    from hexa.vision.isolation import LINK_UNKNOWN
+
+    out = []
+    for e in rec.evaluations:
+        k = int(np.argmin(np.abs(rec.truth_t - e.stamp)))
+        touching = bool(np.linalg.norm(rec.truth_force[k]) > 0)
+        err = (float(np.linalg.norm(e.point - rec.truth_point[k]) * 1e3) if touching and e.link != LINK_UNKNOWN
+               else float("nan"))
+        out.append({**e.as_dict(), "true_link": LINK_NAMES.get(int(rec.truth_link[k]), "none") if touching
+                    else "none", "true_chain": int(rec.truth_chain[k]) if touching else 0, "error_mm": err})
+    return out
 
 
 def plate_equivalent_every(d: Any, stride: int) -> np.ndarray:
@@ -328,22 +399,33 @@ def run_contact_job(job: dict[str, Any]) -> dict[str, Any]:
 
     job: campaign_seed and index (the drawn contact) or collision (ScriptedCollision fields), sim_seed, realism
     ("ideal" | "realistic"), optional identify (bool), observer (ObserverConfig fields), detector ("cusum" |
-    "threshold": the live one) and cusum (CusumConfig fields)."""
+    "threshold": the live one), cusum (CusumConfig fields) and isolation ("rendered", the default, or "oracle";
+    rendered falls back to the oracle, saying why in `isolation.note`, when this process cannot render)."""
     from hexa.report.collision_demo import compute_metrics
+    from hexa.sim.camera import RenderError
     from hexa.sim.realism import RealismConfig
 
+    t0 = time.perf_counter()
     realism = RealismConfig.named(job["realism"])
     ocfg, kind, ccfg = _detector_settings(job)
     c = (ScriptedCollision(**job["collision"]) if "collision" in job
          else draw_contact(job["campaign_seed"], job["index"], job.get("trajectories", "paper")))
     duration = c.end_time + TAIL
-    rec = simulate(c, c.trajectory, duration, realism, seed=job["sim_seed"], observer_config=ocfg,
-                   identify=job.get("identify", True), detector=kind, cusum=ccfg)
+    run = functools.partial(simulate, c, c.trajectory, duration, realism, seed=job["sim_seed"],
+                            observer_config=ocfg, identify=job.get("identify", True), detector=kind, cusum=ccfg)
+    note = ""
+    try:
+        rec = run(isolation=job.get("isolation", "rendered"))
+    except RenderError as exc:
+        note = f"rendering unavailable ({exc}): oracle isolation"
+        rec = run(isolation="oracle")
     out: dict[str, Any] = {"index": job["index"], "realism": job["realism"], "link": c.link, "chain": c.chain,
                            "trajectory": c.trajectory, "trajectory_kind": trajectory_kind(c.trajectory),
                            "peak_force": c.peak_force, "onset": c.onset + LEAD_IN,
                            "rise_time": c.rise_time, "hold_time": c.hold_time, "release_time": c.release_time,
-                           "sim_seconds": rec.sim_seconds, "detector": kind}
+                           "sim_seconds": rec.sim_seconds, "detector": kind, "identify": job.get("identify", True),
+                           "isolation": {"mode": rec.isolation, "note": note, "cost": rec.isolation_cost,
+                                         "evaluations": isolation_evaluations(rec)}}
     touching = np.linalg.norm(rec.truth_force, axis=1) > 0
     if not touching.any():   # cannot happen with a scripted contact unless the run ended before it
         out["error"] = "no contact in the ground truth"
@@ -361,6 +443,7 @@ def run_contact_job(job: dict[str, Any]) -> dict[str, Any]:
             rows.append({"scale": scale, "detect_time": mm.detect_time, "delay_ms": mm.delay_ms,
                          "false_starts": mm.false_starts})
         out["detect"][spec.name] = rows
+    out["wall_s"] = time.perf_counter() - t0
     return out
 
 

@@ -23,6 +23,22 @@ class RenderError(RuntimeError):
     """Rendering failed (no GL context, unknown camera)."""
 
 
+def rendering_unavailable() -> str | None:
+    """Why this process cannot render headless (the GL back-end's error, MUJOCO_GL named), or None when it can: a
+    small offscreen GL context is made and freed."""
+    try:
+        gl = mujoco.GLContext(16, 16)
+    except Exception as exc:  # noqa: BLE001 - any GL back-end failure
+        return f"no headless GL context (MUJOCO_GL={os.environ.get('MUJOCO_GL')}): {exc}"
+    try:
+        gl.make_current()
+    except Exception as exc:  # noqa: BLE001
+        return f"the headless GL context cannot be made current (MUJOCO_GL={os.environ.get('MUJOCO_GL')}): {exc}"
+    finally:
+        gl.free()
+    return None
+
+
 def camera_model_of(cfg: CameraConfig) -> CameraModel:
     """The pinhole CameraModel (hexa.vision.camera) of a validated camera configuration."""
     return CameraModel(K=cfg.K, width=cfg.width, height=cfg.height, T_base_camera=cfg.T_base_camera, name=cfg.name,

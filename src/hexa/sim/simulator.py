@@ -84,6 +84,17 @@ class GroundTruth:
         return self.link != "none" and float(np.linalg.norm(self.force)) > 0.0
 
 
+@dataclass(frozen=True)
+class FrameState:
+    """What the cameras see at one instant, kept to render later (`Simulator.render_frame`): sim time (s), the joint
+    positions and every mocap body's placement (the pushing object placed as `render` places it)."""
+
+    time: float
+    qpos: np.ndarray
+    mocap_pos: np.ndarray
+    mocap_quat: np.ndarray
+
+
 @dataclass
 class _Contact:
     link: str
@@ -319,6 +330,7 @@ class Simulator:
         self._step_once(use_schedule=True, advance=False)
 
         self._renderer: RGBDRenderer | None = None
+        self._scratch: Any = None                 # MjData for frame_state / render_frame (made on first use)
         self._noise: dict[str, NoiseBank] = {}
         self.rgb_noise_sigma = self.config.rgb_noise_sigma      # image noise (hexa.sim.randomize changes them)
         self.depth_noise_rel = self.config.depth_noise_rel
@@ -706,14 +718,15 @@ class Simulator:
             raise SimulatorError(f"unknown camera {camera!r}; cameras: {list(self.config.cameras)}")
         return camera_model_of(self.config.cameras[camera])
 
-    def _place_object(self) -> None:
-        d = self.data
-        mujoco.mj_kinematics(self.model, d)
+    def _object_placement(self, d: Any, t: float) -> tuple[np.ndarray, np.ndarray]:
+        """Position and quaternion of the scripted contact's object at time `t`, from the link poses in `d` (its
+        kinematics current): the capsule's tip `object_distance(t)` from the contact point along the push direction;
+        parked out of view when no object is near or the contact model is the physical pusher."""
         c = self.collision
         pos, quat = np.array(PARK_POS, float), np.array([1.0, 0, 0, 0])
         if (c is not None and self._pusher is None and self._scripted is not None
                 and self._scripted_dir is not None):
-            dist = c.object_distance(self.time)
+            dist = c.object_distance(t)
             if dist is not None:
                 sc = self._scripted
                 R = d.xmat[sc.body].reshape(3, 3)
@@ -726,12 +739,66 @@ class Simulator:
                 Rm = np.column_stack([x, np.cross(z, x), z])
                 mujoco.mju_mat2Quat(quat, Rm.ravel())
                 pos = tip
-        d.mocap_pos[self._object_mocap] = pos
-        d.mocap_quat[self._object_mocap] = quat
+        return pos, quat
+
+    def _place_object(self) -> None:
+        d = self.data
         mujoco.mj_kinematics(self.model, d)
+        d.mocap_pos[self._object_mocap], d.mocap_quat[self._object_mocap] = self._object_placement(d, self.time)
+        mujoco.mj_kinematics(self.model, d)
+
+    def _scratch_data(self) -> Any:
+        """A second MjData of the model for kinematics and rendering off the physics' own (made once)."""
+        if self._scratch is None:
+            self._scratch = mujoco.MjData(self.model)
+        return self._scratch
+
+    def frame_state(self) -> FrameState:
+        """What the cameras would see now (`render` of this instant), kept for `render_frame`: the physics' data is
+        not touched, so a run that keeps frame states steps exactly as one that does not."""
+        with self._lock:
+            s = self._scratch_data()
+            s.qpos[:] = self.data.qpos
+            s.mocap_pos[:] = self.data.mocap_pos
+            s.mocap_quat[:] = self.data.mocap_quat
+            mujoco.mj_kinematics(self.model, s)
+            pos, quat = self._object_placement(s, self.time)
+            s.mocap_pos[self._object_mocap], s.mocap_quat[self._object_mocap] = pos, quat
+            return FrameState(self.time, s.qpos.copy(), s.mocap_pos.copy(), s.mocap_quat.copy())
 
     def render(self, camera: str, noise: bool = True) -> tuple[np.ndarray, np.ndarray]:
         """Colour (H,W,3 uint8) and aligned depth (H,W uint16 mm, 0 = invalid) of `camera` at the current time.
+
+        Raises:
+            SimulatorError: unknown camera; RenderError: the simulator was built with cameras=False.
+        """
+        renderer, cam_id = self._renderer_of(camera)
+        with self._lock:
+            self._place_object()
+            rgb, depth = renderer.render(self.data, cam_id)
+        return self._camera_images(camera, rgb, depth, noise)
+
+    def render_frame(self, camera: str, frame: FrameState, noise: bool = True) -> tuple[np.ndarray, np.ndarray]:
+        """`render` of an earlier instant kept by `frame_state`: the same colour and depth images (the noise is the
+        camera's next draw), rendered off the physics' data.
+
+        Raises:
+            SimulatorError: unknown camera; RenderError: the simulator was built with cameras=False.
+        """
+        renderer, cam_id = self._renderer_of(camera)
+        with self._lock:
+            s = self._scratch_data()
+            s.time = frame.time
+            s.qpos[:] = frame.qpos
+            s.mocap_pos[:] = frame.mocap_pos
+            s.mocap_quat[:] = frame.mocap_quat
+            mujoco.mj_kinematics(self.model, s)
+            mujoco.mj_camlight(self.model, s)          # the cameras' and lights' poses (a fresh MjData has none)
+            rgb, depth = renderer.render(s, cam_id)
+        return self._camera_images(camera, rgb, depth, noise)
+
+    def _renderer_of(self, camera: str) -> tuple[RGBDRenderer, int]:
+        """The renderer and the MuJoCo id of `camera`.
 
         Raises:
             SimulatorError: unknown camera; RenderError: the simulator was built with cameras=False.
@@ -740,10 +807,12 @@ class Simulator:
             raise SimulatorError(f"unknown camera {camera!r}; cameras: {list(self._cam_ids)}")
         if self._renderer is None:
             raise RenderError("this Simulator was built with cameras=False")
+        return self._renderer, self._cam_ids[camera]
+
+    def _camera_images(self, camera: str, rgb: np.ndarray, depth: np.ndarray, noise: bool
+                       ) -> tuple[np.ndarray, np.ndarray]:
+        """The rendered buffers cut to the camera's size, with its image noise: uint8 colour, uint16 depth (mm)."""
         cfg = self.config.cameras[camera]
-        with self._lock:
-            self._place_object()
-            rgb, depth = self._renderer.render(self.data, self._cam_ids[camera])
         rgb = rgb[:cfg.height, :cfg.width]
         depth = depth[:cfg.height, :cfg.width]
         bank = self._noise.get(camera) if noise else None
