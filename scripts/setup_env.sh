@@ -1,7 +1,7 @@
 #!/usr/bin/env bash
 # One idempotent set-up for `make test` and `make demo`: venv, pinned wheels, CMake export repair, hexa_msgs and
-# tf2_msgs builds, hexa Python packages, AVR toolchain. Each step is skipped when its inputs have not changed (stamps in
-# .venv/.stamps).
+# tf2_msgs builds (kept in a build cache under ~/.cache/hexa-build), hexa Python packages, AVR toolchain. Each step is
+# skipped when its inputs have not changed (stamps in .venv/.stamps).
 set -euo pipefail
 cd "$(dirname "$0")/.."
 ROOT=$(pwd)
@@ -72,18 +72,53 @@ fi
 MSG_PKGS=(hexa_msgs third_party/tf2_msgs)
 h=$(for p in "${MSG_PKGS[@]}"; do cat "$p/CMakeLists.txt" "$p/package.xml" "$p"/msg/* "$p"/srv/* "$p"/action/* \
       2>/dev/null; done | cat - colcon.meta | sha256sum | cut -c1-16)
-if ! fresh msgs "$h" || ! "$VENV/bin/python" -c 'import hexa_msgs.msg, tf2_msgs.msg' 2>/dev/null; then
-  log "building ${MSG_PKGS[*]} (colcon)"
-  mkdir -p build
-  (
-    export AMENT_PREFIX_PATH="$VENV" CMAKE_PREFIX_PATH="$VENV" PATH="$VENV/bin:$PATH"
-    export PYTHONPATH="$VENV/lib/python3.11/site-packages"
-    "$VENV/bin/colcon" --log-base build/log build --base-paths "${MSG_PKGS[@]}" --build-base build/colcon \
-      --install-base "$VENV" --merge-install --metas colcon.meta --event-handlers console_cohesion- summary- \
-      > build/colcon-msgs.log 2>&1 || { tail -40 build/colcon-msgs.log >&2; exit 1; }
-  )
-  "$VENV/bin/python" -c 'import hexa_msgs.msg, tf2_msgs.msg' \
-    || { echo "setup: hexa_msgs/tf2_msgs built but not importable" >&2; exit 1; }
+#    The built files are kept in a build cache outside the checkout (like mypy's), keyed by those sources, the pinned
+#    wheels and the Python: a fresh clone with the same inputs restores them instead of compiling again (≈ 1–2 min).
+#    HEXA_BUILD_CACHE="" turns the cache off; removing the directory forces a build.
+CACHE_DIR=${HEXA_BUILD_CACHE-$HOME/.cache/hexa-build}
+CACHE_TAR=""
+if [ -n "$CACHE_DIR" ]; then
+  CACHE_TAR="$CACHE_DIR/msgs-$(printf '%s' "$h" "$(hash_of requirements/*.txt)" "$("$VENV/bin/python" -VV)" \
+    | sha256sum | cut -c1-16).tar"
+fi
+importable() { "$VENV/bin/python" -c 'import hexa_msgs.msg, tf2_msgs.msg, hexa_msgs.srv' 2>/dev/null; }
+if ! fresh msgs "$h" || ! importable; then
+  restored=0
+  if [ -n "$CACHE_TAR" ] && [ -f "$CACHE_TAR" ]; then
+    log "restoring ${MSG_PKGS[*]} from the build cache ($CACHE_TAR)"
+    if tar -xf "$CACHE_TAR" -C "$VENV" 2>/dev/null && old=$(cat "$VENV/.msgs-build-prefix" 2>/dev/null); then
+      # the few text files that name the prefix they were built for (CMake exports, setup scripts)
+      if [ "$old" != "$VENV" ]; then
+        tar -tf "$CACHE_TAR" | while read -r f; do
+          if [ -f "$VENV/$f" ] && grep -qIF "$old" "$VENV/$f" 2>/dev/null; then sed -i "s#$old#$VENV#g" "$VENV/$f"; fi
+        done
+      fi
+      importable && restored=1
+    fi
+    rm -f "$VENV/.msgs-build-prefix"
+    [ $restored = 1 ] || log "the cached build does not import here: building"
+  fi
+  if [ $restored = 0 ]; then
+    log "building ${MSG_PKGS[*]} (colcon)"
+    mkdir -p build
+    (
+      export AMENT_PREFIX_PATH="$VENV" CMAKE_PREFIX_PATH="$VENV" PATH="$VENV/bin:$PATH"
+      export PYTHONPATH="$VENV/lib/python3.11/site-packages"
+      "$VENV/bin/colcon" --log-base build/log build --base-paths "${MSG_PKGS[@]}" --build-base build/colcon \
+        --install-base "$VENV" --merge-install --metas colcon.meta --event-handlers console_cohesion- summary- \
+        > build/colcon-msgs.log 2>&1 || { tail -40 build/colcon-msgs.log >&2; exit 1; }
+    )
+    importable || { echo "setup: hexa_msgs/tf2_msgs built but not importable" >&2; exit 1; }
+    if [ -n "$CACHE_TAR" ]; then
+      # every installed file (colcon's install manifests), relative to the venv, and the prefix they were built for
+      mkdir -p "$CACHE_DIR" && echo "$VENV" > "$VENV/.msgs-build-prefix"
+      { echo .msgs-build-prefix; for p in "${MSG_PKGS[@]}"; do
+          sed "s#^$VENV/##" "build/colcon/$(basename "$p")/install_manifest.txt"; done; } > build/msgs-files.txt
+      tar -cf "$CACHE_TAR.tmp.$$" -C "$VENV" -T build/msgs-files.txt 2>/dev/null \
+        && mv "$CACHE_TAR.tmp.$$" "$CACHE_TAR" || rm -f "$CACHE_TAR.tmp.$$"
+      rm -f "$VENV/.msgs-build-prefix"
+    fi
+  fi
   mark msgs "$h"
 fi
 

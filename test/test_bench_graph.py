@@ -142,7 +142,7 @@ def short_bag(tmp_path_factory):
 def bench_run(short_bag, tmp_path_factory, module_ros_domain_id):
     cache = tmp_path_factory.mktemp("bench_graph_cache")
     out = cache / "result.json"
-    proc = subprocess.run([PY, "-m", "hexa_bringup.cli", "bench", "graph", str(short_bag), "--rate", "0.25",
+    proc = subprocess.run([PY, "-m", "hexa_bringup.cli", "bench", "graph", str(short_bag), "--rate", "0.5",
                            "--no-reference", "--robot-duration", "1.5", "--cache", str(cache), "--json",
                            "--out", str(out), "--domain-id", str(module_ros_domain_id)],
                           capture_output=True, text=True, timeout=900, cwd=str(REPO))
