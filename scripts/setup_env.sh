@@ -112,8 +112,9 @@ if ! fresh msgs "$h" || ! importable; then
     if [ -n "$CACHE_TAR" ]; then
       # every installed file (colcon's install manifests), relative to the venv, and the prefix they were built for
       mkdir -p "$CACHE_DIR" && echo "$VENV" > "$VENV/.msgs-build-prefix"
-      { echo .msgs-build-prefix; for p in "${MSG_PKGS[@]}"; do
-          sed "s#^$VENV/##" "build/colcon/$(basename "$p")/install_manifest.txt"; done; } > build/msgs-files.txt
+      { echo .msgs-build-prefix; for p in "${MSG_PKGS[@]}"; do   # (a manifest's last line has no newline)
+          { cat "build/colcon/$(basename "$p")/install_manifest.txt"; echo; } | sed -n "s#^$VENV/##p"; done
+      } > build/msgs-files.txt
       tar -cf "$CACHE_TAR.tmp.$$" -C "$VENV" -T build/msgs-files.txt 2>/dev/null \
         && mv "$CACHE_TAR.tmp.$$" "$CACHE_TAR" || rm -f "$CACHE_TAR.tmp.$$"
       rm -f "$VENV/.msgs-build-prefix"
