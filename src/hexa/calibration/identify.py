@@ -202,10 +202,13 @@ def prepare(rec: Recording, desc: HexaDescription, prm: HexaDynamicParameters | 
     # Coulomb's column switches sign at each reversal: it gets the currents' low-pass too (parallel filtering)
     reg.sign = _lowpass(np.tanh(full.zeta_dot / COULOMB_SPEED), ANALYSIS_RATE_HZ)[::DECIMATE]
     zeta, pose = zeta[::DECIMATE], pose[::DECIMATE]
-    # currents: zero-phase low-pass on their own grid, then at the instants
+    # currents: zero-phase low-pass at their own rate, then on the analysis grid. The analysis grid (100 Hz) is a
+    # multiple of the servos' 50 Hz pulse frame: resampled there before the low-pass, the frame's torque ripple would
+    # alias to a steady error (frame_locked) whatever the rate the currents were recorded at
+    rate_c = 1.0 / float(np.median(np.diff(rec.t_current)))
+    cur_native = _lowpass(rec.currents, rate_c)
     tc = np.arange(rec.t_current[0], rec.t_current[-1], 1.0 / ANALYSIS_RATE_HZ)
-    cur_f = _lowpass(np.stack([np.interp(tc, rec.t_current, rec.currents[:, k]) for k in range(6)], 1),
-                     ANALYSIS_RATE_HZ)
+    cur_f = np.stack([np.interp(tc, rec.t_current, cur_native[:, k]) for k in range(6)], 1)
     cur = np.stack([np.interp(t, tc, cur_f[:, k]) for k in range(6)], 1)
     # horn offsets at the camera instants (raw poses: no filter), inside the window
     inside = (rec.t_pose >= t0) & (rec.t_pose <= t1)
