@@ -17,7 +17,8 @@ is then only as good as that value).
 Motion comes from the camera's plate poses: a zero-phase low-pass per pose coordinate gives pose, rate and
 acceleration, IK gives the true horn angles ζ (not the servo set-points), J_ζ the arm rates and accelerations; a
 periodic excitation's Fourier series over its moving window replaces the low-pass (Swevers: the camera noise
-averages out over the periods). Currents go through a zero-phase low-pass, and so does the Coulomb column.
+averages out over the periods). Currents go through a zero-phase low-pass at their own rate (before the analysis
+grid, which is locked to the servos' pulse frame), and so does the Coulomb column.
 Output-error least squares (the current is the measured output, so its noise biases nothing), weighted by each
 servo's noise from a first pass, with a prior on the zero offsets (`OFFSET_PRIOR`); 95 % confidence intervals from
 the covariance σ²(JᵀJ)⁻¹ at the solution; physical
