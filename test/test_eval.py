@@ -256,3 +256,34 @@ def test_rendered_isolation_finds_the_link_chain_and_point_of_a_plate_arm_and_ro
             assert np.all(gap < 1e-12)                       # every force at a point the isolation handed over
             truth = rec.truth_point[np.clip(np.searchsorted(rec.truth_t, rec.wrench_t), 0, len(rec.truth_t) - 1)]
             assert np.linalg.norm(rec.wrench_point - truth, axis=1).min() > 1e-4   # not the oracle's true point
+
+
+def test_the_nodes_model_of_a_run_is_its_own_description_the_simulated_robot_stays(tmp_path):
+    """`nodes_desc` (what `--calibrate` gives each job: a calibration overlay) is the model the observer runs; the
+    simulated robot stays the description's. A model with twice the plate's mass sees its missing weight in free
+    motion's Fz residual; a campaign config carries the excitation file and the currents' rate into every job."""
+    import numpy as np
+
+    from hexa.eval.campaign import simulate
+    from hexa.robots.hexa_description import load_hexa
+    from hexa.sim.realism import RealismConfig
+
+    desc = load_hexa()
+    overlay = tmp_path / "heavy.yaml"
+    overlay.write_text(f"calibration_of: ''\ninertia:\n  plate:\n    mass: {2.0 * desc.plate.mass}\n",
+                       encoding="utf-8")
+    runs = {name: simulate(None, "circle", 2.0, RealismConfig.ideal(), 1, identify=False, nodes_desc=d,
+                           stream_rate_hz=143.0)
+            for name, d in (("same", None), ("heavy", load_hexa(overlay)))}
+    fz = {k: float(np.median(r.residual[r.t > 1.5, 2])) for k, r in runs.items()}
+    weight = desc.plate.mass * 9.81
+    assert abs(fz["same"]) < 0.2 * weight, fz
+    assert abs(abs(fz["heavy"]) - weight) < 0.3 * weight, fz
+    dt = np.median(np.diff(runs["same"].t))
+    assert dt == pytest.approx(0.007, abs=5e-4)     # 143 Hz: one sample every 7 physics steps
+    exc = tmp_path / "excitation.csv"
+    exc.write_text("0,0,0,-0.55,0,0,0\n", encoding="utf-8")
+    jobs = jobs_of(CampaignConfig(cases=1, free_seconds=10.0, calibrate=str(exc), stream_rate_hz=143.0))
+    assert all(j["calibrate"] == str(exc) and j["stream_rate_hz"] == 143.0 for _, j in jobs)
+    with pytest.raises(ValueError, match="no excitation file"):
+        CampaignConfig(calibrate=str(tmp_path / "missing.csv"))

@@ -9,8 +9,7 @@ import sys
 from pathlib import Path
 from typing import Any
 
-#: kg, m: the known mass of the simulated payload run (`--simulate`), at the plate's origin
-SIM_PAYLOAD = 0.5
+from hexa.calibration.simulated import SIM_PAYLOAD   # kg: the simulated payload run's known mass (`--simulate`)
 #: s of held-out motion `validate --simulate` records (two turns of the paper's circle)
 SIM_VALIDATE_SECONDS = 20.0
 
@@ -201,12 +200,10 @@ def _sim_realism(horn: float) -> Any:
 
 # ------------------------------------------------------------------------------------------------ identify
 def run_identify(args: argparse.Namespace) -> int:
-    import numpy as np
-
     from hexa.calibration.excitation import Excitation
     from hexa.calibration.identify import CalibrationError, identify, prepare
     from hexa.calibration.overlay import write_overlay
-    from hexa.calibration.recording import RecordingError, simulate_recording
+    from hexa.calibration.recording import RecordingError
 
     desc = _desc(args.description)
     traj = Path(args.trajectory)
@@ -215,23 +212,16 @@ def run_identify(args: argparse.Namespace) -> int:
     exc = Excitation.read_design(traj)
     if exc is None:
         raise SystemExit(f"{traj} holds no excitation design (not written by `hexa calibrate excite`)")
-    from hexa.trajectories import load_pose_file
-
-    duration = load_pose_file(traj)[1]
     truth = None
     if args.simulate is not None:
         if args.bag or args.payload_bag:
             raise SystemExit("give either bags or --simulate SEED, not both")
+        from hexa.calibration.simulated import simulate_excitation_runs
+
         mass = SIM_PAYLOAD if args.payload is None else args.payload
-        pose_of = load_pose_file(traj)[0]
-        recs = []
-        for k, m in enumerate((0.0, mass) if mass > 0 else (0.0,)):
-            rec, truth = simulate_recording(lambda t: pose_of(t)[0], duration, seed=args.simulate,
-                                            realism=_sim_realism(args.horn_tolerance), desc=desc, payload=m,
-                                            payload_point=np.asarray(args.payload_point),
-                                            progress=_progress(f"simulating run {k + 1} (payload {m:g} kg)"),
-                                            current_rate_hz=args.stream_rate)
-            recs.append(rec)
+        recs, truth = simulate_excitation_runs(traj, args.simulate, _sim_realism(args.horn_tolerance), desc,
+                                               payload=mass, payload_point=args.payload_point,
+                                               current_rate_hz=args.stream_rate, progress=_progress)
     else:
         if not args.bag:
             raise SystemExit("give the BAG of a run of the excitation (or --simulate SEED)")

@@ -41,6 +41,12 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="rendered: the isolation node's core on both cameras' frames rendered from the simulator "
                         "(default; needs a headless renderer, MUJOCO_GL=egl, else the oracle runs and says so); "
                         "oracle: the true contact at the START (isolation not measured)")
+    p.add_argument("--calibrate", metavar="EXCITATION", default=None,
+                   help="run each robot's nodes on a calibration overlay identified in-process on that robot from "
+                        "this excitation file (`hexa calibrate excite`; two runs of it per job, ≈ 10 s each); "
+                        "default: the description's nominal model")
+    p.add_argument("--stream-rate", type=float, default=None, metavar="HZ",
+                   help="the currents' rate (the driver's stream_rate_hz; default its 200 Hz)")
     p.add_argument("--no-identify", action="store_true", help="skip the force identification (no RMSE)")
     p.add_argument("--no-plots", action="store_true", help="no PNG figures")
     p.add_argument("--out", default="out/eval", help="output folder (default out/eval)")
@@ -59,7 +65,8 @@ def run(args: argparse.Namespace) -> int:
             raise ValueError(f"free motion must be >= 0, got {hours} h")
         cfg = CampaignConfig(cases=args.cases, free_seconds=hours * 3600.0, realisms=realisms, seed=args.seed,
                              workers=args.workers, identify=not args.no_identify, scheduler=args.scheduler,
-                             detector=args.detector, trajectories=args.trajectories, isolation=args.isolation)
+                             detector=args.detector, trajectories=args.trajectories, isolation=args.isolation,
+                             calibrate=args.calibrate, stream_rate_hz=args.stream_rate)
     except ValueError as exc:
         print(f"hexa eval: {exc}", file=sys.stderr)
         return 2

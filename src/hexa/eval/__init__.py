@@ -36,7 +36,10 @@ class CampaignConfig:
     (the local process pool), "local:N" (a Dask LocalCluster of N single-threaded worker processes) or a Dask
     scheduler's address ("tcp://host:8786"; its workers need hexa installed); `isolation`: "rendered" (the
     isolation node's core on rendered frames, the default; the oracle when this machine cannot render, see
-    `isolation_mode`) or "oracle" (the true contact at the START: isolation not measured)."""
+    `isolation_mode`) or "oracle" (the true contact at the START: isolation not measured); `calibrate`: an
+    excitation file (`hexa calibrate excite`): each job's nodes run the calibration overlay identified in-process on
+    that job's own simulated robot (two runs of the file, hexa.calibration.simulated; ≈ 10 s a job) instead of the
+    description; `stream_rate_hz`: the currents' rate (default the driver's `stream_rate_hz`, 200 Hz)."""
 
     cases: int = 6
     free_seconds: float = 20.0
@@ -50,6 +53,8 @@ class CampaignConfig:
     cusum: dict[str, Any] = field(default_factory=dict)
     trajectories: str = "all"
     isolation: str = "rendered"
+    calibrate: str | None = None
+    stream_rate_hz: float | None = None
 
     def __post_init__(self) -> None:
         from hexa.sim.realism import RealismConfig
@@ -65,6 +70,11 @@ class CampaignConfig:
             raise ValueError(f"workers must be >= 1, got {self.workers}")
         for r in self.realisms:
             RealismConfig.named(r)   # raises ValueError naming the presets
+        if self.calibrate is not None and not os.path.isfile(self.calibrate):
+            raise ValueError(f"no excitation file {self.calibrate} (write one with `hexa calibrate excite --out "
+                             f"{self.calibrate}`)")
+        if self.stream_rate_hz is not None and not (math.isfinite(self.stream_rate_hz) and self.stream_rate_hz > 0):
+            raise ValueError(f"stream_rate_hz must be > 0, got {self.stream_rate_hz}")
         if self.scheduler is not None:
             local_workers(self.scheduler)   # raises ValueError naming a bad "local:N"
         from hexa.dynamics.cusum import DETECTORS, CusumConfig
@@ -123,7 +133,8 @@ def jobs_of(cfg: CampaignConfig) -> list[tuple[str, dict[str, Any]]]:
             contacts.append(("contact", {"campaign_seed": cfg.seed, "index": i, "sim_seed": cfg.seed * 100003 + i,
                                      "realism": realism, "identify": cfg.identify, "observer": cfg.observer,
                                      "detector": cfg.detector, "cusum": cfg.cusum,
-                                     "trajectories": cfg.trajectories, "isolation": cfg.isolation}))
+                                     "trajectories": cfg.trajectories, "isolation": cfg.isolation,
+                                     **_model_fields(cfg)}))
         k = 0
         for kind in kinds:
             left, j = cfg.free_seconds / len(kinds), 0
@@ -132,10 +143,21 @@ def jobs_of(cfg: CampaignConfig) -> list[tuple[str, dict[str, Any]]]:
                 sim_seed = cfg.seed * 100003 + 50000 + k
                 name = TRAJECTORIES[j % len(TRAJECTORIES)] if kind == "paper" else f"random:{sim_seed}"
                 jobs.append(("free", {"trajectory": name, "seconds": chunk, "sim_seed": sim_seed, "realism": realism,
-                                      "observer": cfg.observer, "detector": cfg.detector, "cusum": cfg.cusum}))
+                                      "observer": cfg.observer, "detector": cfg.detector, "cusum": cfg.cusum,
+                                      **_model_fields(cfg)}))
                 left -= chunk
                 k, j = k + 1, j + 1
     return jobs + contacts
+
+
+def _model_fields(cfg: CampaignConfig) -> dict[str, Any]:
+    """A job's optional calibration (excitation file, absolute: workers may run elsewhere) and currents' rate."""
+    out: dict[str, Any] = {}
+    if cfg.calibrate:
+        out["calibrate"] = os.path.abspath(cfg.calibrate)
+    if cfg.stream_rate_hz:
+        out["stream_rate_hz"] = float(cfg.stream_rate_hz)
+    return out
 
 
 def _run_job(kind: str, job: dict[str, Any]) -> dict[str, Any]:

@@ -166,13 +166,16 @@ class RunRecord:
 def simulate(collision: ScriptedCollision | None, trajectory: str, duration: float, realism: RealismConfig,
              seed: int, observer_config: ObserverConfig | None = None, identify: bool = True,
              desc: HexaDescription | None = None, detector: str = "threshold",
-             cusum: CusumConfig | None = None, isolation: str = "rendered") -> RunRecord:
+             cusum: CusumConfig | None = None, isolation: str = "rendered", nodes_desc: HexaDescription | None = None,
+             stream_rate_hz: float | None = None) -> RunRecord:
     """Run the robot `duration` s of trajectory time (after LEAD_IN) with an optional scripted contact (its onset in
     trajectory time); see the module docstring for what runs. Free motion (no contact) loops the trajectory and
     ignores STARTs (it keeps moving, to count false alarms) and runs no isolation; with a contact a START holds the
     trajectory, as the trajectory node's default policy does. `detector` and `cusum`: the monitor's detector (the
     node's default: "threshold"; "cusum" with CusumConfig()). `isolation`: "rendered" (the isolation node's core on
-    rendered frames; needs EGL) or "oracle" (ISOLATION_MODES).
+    rendered frames; needs EGL) or "oracle" (ISOLATION_MODES). `nodes_desc`: the description the observer and the
+    rnea tracker use (a calibration overlay of this robot; default `desc`, which builds the simulated robot);
+    `stream_rate_hz`: the currents' rate (default the driver's `stream_rate_hz`).
 
     Raises:
         ValueError: an unknown isolation; hexa.sim.camera.RenderError: "rendered" without a GL context.
@@ -203,10 +206,11 @@ def simulate(collision: ScriptedCollision | None, trajectory: str, duration: flo
     readout = CurrentReadout(sim, seed)
     driver_cfg = readout.driver_config
     punctual = jitter.sample_sigma <= 0 and jitter.spike_rate <= 0
-    mon = CollisionMonitor(desc, MonitorConfig(sim_clock=punctual), ocfg, detector=detector, cusum=cusum)
+    nodes_desc = nodes_desc or desc
+    mon = CollisionMonitor(nodes_desc, MonitorConfig(sim_clock=punctual), ocfg, detector=detector, cusum=cusum)
     # the observer node's monitoring contract: the runner starts on its first OK and holds on LOST, as live
     watch = MonitoringWatch(mon, now=0.0)
-    tracker = ContactForceTracker(desc, ContactForceConfig()) if identify else None
+    tracker = ContactForceTracker(nodes_desc, ContactForceConfig()) if identify else None
     runner = TrajectoryRunner.from_settings(desc, TrajectorySettings(
         trajectory=trajectory, start_time=LEAD_IN, loop=collision is None,
         collision_policy="ignore" if collision is None else "hold"))
@@ -217,7 +221,8 @@ def simulate(collision: ScriptedCollision | None, trajectory: str, duration: flo
     events: list[tuple[float, str, int, str]] = []
 
     t_end = LEAD_IN + duration
-    steps_per_sample = max(1, int(round(1.0 / (float(driver_cfg["stream_rate_hz"]) * sim.timestep))))
+    rate = float(stream_rate_hz or driver_cfg["stream_rate_hz"])
+    steps_per_sample = max(1, int(round(1.0 / (rate * sim.timestep))))
     k = 0
 
     def keep(forces: list[Any]) -> None:
@@ -384,6 +389,22 @@ def plate_equivalent_every(d: Any, stride: int) -> np.ndarray:
     return np.stack([np.interp(d.truth_t, sub.truth_t, W[:, k]) for k in range(6)], axis=1)
 
 
+def _nodes_description(job: dict[str, Any], realism: RealismConfig) -> HexaDescription | None:
+    """The description the job's nodes use: with `calibrate` (an excitation file of `hexa calibrate excite`), an
+    overlay identified in-process on the job's own simulated robot (hexa.calibration.simulated); else None (the
+    description itself)."""
+    if not job.get("calibrate"):
+        return None
+    import tempfile
+
+    from hexa.calibration.simulated import calibrate_simulated_robot
+    from hexa.robots.hexa_description import load_hexa
+
+    with tempfile.TemporaryDirectory() as tmp:
+        return calibrate_simulated_robot(job["calibrate"], job["sim_seed"], realism, load_hexa(),
+                                         f"{tmp}/calibration.yaml")[0]
+
+
 def _detector_settings(job: dict[str, Any]) -> tuple[Any, str, Any]:
     """(ObserverConfig, detector kind, CusumConfig) of a job's optional observer, detector and cusum fields."""
     from hexa.dynamics.cusum import CusumConfig
@@ -412,7 +433,8 @@ def run_contact_job(job: dict[str, Any]) -> dict[str, Any]:
          else draw_contact(job["campaign_seed"], job["index"], job.get("trajectories", "paper")))
     duration = c.end_time + TAIL
     run = functools.partial(simulate, c, c.trajectory, duration, realism, seed=job["sim_seed"],
-                            observer_config=ocfg, identify=job.get("identify", True), detector=kind, cusum=ccfg)
+                            observer_config=ocfg, identify=job.get("identify", True), detector=kind, cusum=ccfg,
+                            nodes_desc=_nodes_description(job, realism), stream_rate_hz=job.get("stream_rate_hz"))
     note = ""
     try:
         rec = run(isolation=job.get("isolation", "rendered"))
@@ -455,7 +477,8 @@ def run_free_job(job: dict[str, Any]) -> dict[str, Any]:
     realism = RealismConfig.named(job["realism"])
     ocfg, kind, ccfg = _detector_settings(job)
     rec = simulate(None, job["trajectory"], job["seconds"], realism, seed=job["sim_seed"], observer_config=ocfg,
-                   identify=False, detector=kind, cusum=ccfg)
+                   identify=False, detector=kind, cusum=ccfg, nodes_desc=_nodes_description(job, realism),
+                   stream_rate_hz=job.get("stream_rate_hz"))
     moving = rec.t >= LEAD_IN
     out: dict[str, Any] = {"trajectory": job["trajectory"], "trajectory_kind": trajectory_kind(job["trajectory"]),
                            "realism": job["realism"], "seconds": job["seconds"],

@@ -378,6 +378,9 @@ def write_report(result: dict[str, Any], out_dir: str | Path, plots: bool = True
              f"{cfg['seed']}; {result['sim_s']:.0f} s simulated in "
              f"{result['wall_s']:.0f} s wall on {result['workers']} workers ({result.get('engine', 'process pool')}) "
              f"({result['sim_s'] / max(result['wall_s'], 1e-9):.1f}× real time).", "",
+             "Nodes' model: " + (f"a calibration overlay identified on each robot from {cfg['calibrate']}"
+                                 if cfg.get("calibrate") else "the description's (nominal)")
+             + f"; currents at {cfg.get('stream_rate_hz') or 200:g} Hz.", "",
              "Detection: a START from the observer's live detector no later than "
              f"{DETECT_GRACE * 1e3:.0f} ms after the contact's end. Delay: from the first instant a true force "
              "component exceeds r_low = 2 N (hexa.report.collision_demo.compute_metrics, as `hexa demo`). "
