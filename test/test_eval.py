@@ -64,6 +64,7 @@ def test_a_strong_plate_push_is_detected_within_100_ms_and_its_force_identified(
     assert np.isfinite(m["exceed_time"]) and 0.0 <= m["delay_ms"] <= 100.0
     rmse = np.asarray(m["force_rmse"])
     assert np.all(np.isfinite(rmse)) and np.all(rmse < 2.0)        # the identification ran on the contact
+    assert r["rejected_draws"] == 0 and 0.0 <= r["servo_saturated_s"] <= 0.6   # stalled s within the contact
     # the replays at scale 1 see what the live detector (the node's default, the threshold detector) saw
     assert r["detector"] == "threshold"
     node = {row["scale"]: row for row in r["detect"]["threshold"]}
@@ -96,6 +97,10 @@ def test_smoke_campaign_on_two_worker_processes_writes_the_report(tmp_path):
     s = data["summary"]["ideal"]
     assert s["cases"] == 6 and all(len(s["det"][n]) == len(THRESHOLD_SCALES) for n in DETECTOR_NAMES)
     assert set(s["targets"]) >= {"fa_per_10h", "det_plate_3n", "delay_median_ms", "rmse_below_paper"}
+    split = s["rmse_by_servos"]          # every case with an RMSE counted once: servos held or some stalled
+    assert split["held"]["cases"] + split["stalled"]["cases"] == s["rmse_cases"]
+    assert s["rmse_cases"] > 0 and (split["held"]["below"] + split["stalled"]["below"]
+                                    == pytest.approx(s["targets"]["rmse_below_paper"] * s["rmse_cases"]))
     assert s["live_false_starts_free"] == 0                    # ideal free motion raises no false alarm
     assert sum(f["starts"]["threshold"][THRESHOLD_SCALES.index(1.0)] for f in result["free"]) == 0
     assert s["vs_paper"]["detector"] == "cusum" and "delay_vs_paper" in s["targets"]
