@@ -16,19 +16,37 @@ from hexa.eval.report import summarize, write_report
 pytestmark = pytest.mark.slow   # a campaign on worker processes: left out of `make check`
 
 
-def test_contacts_are_drawn_reproducibly_within_their_ranges():
-    cs = [draw_contact(3, i) for i in range(60)]
-    assert [dataclasses.asdict(c) for c in cs[:5]] == [dataclasses.asdict(draw_contact(3, i)) for i in range(5)]
+def test_contacts_are_drawn_reproducibly_within_their_ranges_and_feasible():
+    """Contacts are reproducible per (seed, index), within their ranges, on the paper's and random trajectories in
+    turn, and feasible: an infeasible first draw (the pushing object within 3 mm of another link) is redrawn with
+    the same link and chain."""
+    from hexa.eval.campaign import _draw, draw_contact_counted, kinds_of
+    from hexa.robots.hexa_description import load_hexa
+    from hexa.vision.evaluation import MIN_CLEARANCE, contact_clearance
+
+    drawn = [draw_contact_counted(3, i) for i in range(24)]
+    cs = [c for c, _ in drawn]
+    assert [dataclasses.asdict(c) for c in cs[:3]] == [dataclasses.asdict(draw_contact(3, i)) for i in range(3)]
     assert dataclasses.asdict(draw_contact(4, 0)) != dataclasses.asdict(cs[0])
     assert {c.link for c in cs} == {"plate", "arm", "rod"}
-    # the paper's trajectories and random ones, alternating; every other draw is the same with either kind
-    paper = [draw_contact(3, i, "paper") for i in range(60)]
+    desc = load_hexa()
+    assert any(n > 0 for _, n in drawn)
+    for i, (c, n) in enumerate(drawn):
+        assert contact_clearance(desc, c) >= MIN_CLEARANCE
+        first = _draw(3, i, kinds_of("all"), 0)
+        assert (c.link, c.chain) == (first.link, first.chain)
+        assert (n == 0) == (c == first)
+        if n:
+            assert contact_clearance(desc, first) < MIN_CLEARANCE
+    # the paper's trajectories and random ones, alternating; every other first draw is the same with either kind
+    paper = [draw_contact(3, i, "paper") for i in range(12)]
     assert {c.trajectory for c in paper} == {"circle", "helix", "ellipse"}
-    assert [c.trajectory for c in cs[1::2]] == [f"random:{3 * 100003 + i}" for i in range(1, 60, 2)]
-    assert [c.trajectory for c in cs[::2]] == [c.trajectory for c in paper[::2]]
-    assert [dataclasses.replace(c, trajectory="") for c in cs] == [dataclasses.replace(c, trajectory="")
-                                                                    for c in paper]
-    assert all(c.trajectory.startswith("random:") for c in (draw_contact(3, i, "random") for i in range(4)))
+    assert [c.trajectory for c in cs[1::2]] == [f"random:{3 * 100003 + i}" for i in range(1, 24, 2)]
+    assert [c.trajectory for c in cs[:12:2]] == [c.trajectory for c in paper[::2]]
+    firsts = [dataclasses.replace(_draw(3, i, kinds_of(k), 0), trajectory="") for k in ("all", "paper")
+              for i in range(12)]
+    assert firsts[:12] == firsts[12:]
+    assert all(c.trajectory.startswith("random:") for c in (draw_contact(3, i, "random") for i in range(2)))
     for c in cs:
         assert 1.0 <= c.peak_force <= 10.0 and 1.5 <= c.onset <= 8.0
         assert (c.chain == 0) == (c.link == "plate") and 0 <= c.chain <= 6
@@ -46,6 +64,7 @@ def test_a_strong_plate_push_is_detected_within_100_ms_and_its_force_identified(
     assert np.isfinite(m["exceed_time"]) and 0.0 <= m["delay_ms"] <= 100.0
     rmse = np.asarray(m["force_rmse"])
     assert np.all(np.isfinite(rmse)) and np.all(rmse < 2.0)        # the identification ran on the contact
+    assert r["rejected_draws"] == 0 and 0.0 <= r["servo_saturated_s"] <= 0.6   # stalled s within the contact
     # the replays at scale 1 see what the live detector (the node's default, the threshold detector) saw
     assert r["detector"] == "threshold"
     node = {row["scale"]: row for row in r["detect"]["threshold"]}
@@ -78,6 +97,10 @@ def test_smoke_campaign_on_two_worker_processes_writes_the_report(tmp_path):
     s = data["summary"]["ideal"]
     assert s["cases"] == 6 and all(len(s["det"][n]) == len(THRESHOLD_SCALES) for n in DETECTOR_NAMES)
     assert set(s["targets"]) >= {"fa_per_10h", "det_plate_3n", "delay_median_ms", "rmse_below_paper"}
+    split = s["rmse_by_servos"]          # every case with an RMSE counted once: servos held or some stalled
+    assert split["held"]["cases"] + split["stalled"]["cases"] == s["rmse_cases"]
+    assert s["rmse_cases"] > 0 and (split["held"]["below"] + split["stalled"]["below"]
+                                    == pytest.approx(s["targets"]["rmse_below_paper"] * s["rmse_cases"]))
     assert s["live_false_starts_free"] == 0                    # ideal free motion raises no false alarm
     assert sum(f["starts"]["threshold"][THRESHOLD_SCALES.index(1.0)] for f in result["free"]) == 0
     assert s["vs_paper"]["detector"] == "cusum" and "delay_vs_paper" in s["targets"]

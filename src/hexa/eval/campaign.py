@@ -112,15 +112,18 @@ def trajectory_kind(name: str) -> str:
     return "random" if name.startswith(RANDOM_PREFIX) else "paper"
 
 
-def draw_contact(seed: int, index: int, trajectories: str = "all") -> ScriptedCollision:
-    """Contact `index` of a campaign `seed`: link (plate/arm/rod), chain, point on the link, direction, peak force
-    1–10 N, rise 0.1–0.5 s, hold 0–0.5 s, release 0.1–0.4 s, onset 1.5–8 s into a trajectory: one of the paper's
-    three, or (`trajectories` "random", or "all" at odd indices) the random trajectory random:N with N the case's
-    simulator seed (seed·100003 + index). Every other draw is the same whatever `trajectories` selects."""
-    kinds = kinds_of(trajectories)
+#: draws of a case before it gives up on a feasible contact (`draw_contact`)
+MAX_DRAWS = 100
+
+
+def _draw(seed: int, index: int, kinds: tuple[str, ...], attempt: int) -> ScriptedCollision:
+    """Draw `attempt` of contact `index` (see draw_contact): the link and chain of the first draw, the rest from
+    (seed, index, attempt)."""
     rng = np.random.default_rng([int(seed), 7, int(index)])
     link = LINKS[int(rng.integers(3))]
     chain = 0 if link == "plate" else int(rng.integers(1, 7))
+    if attempt:
+        rng = np.random.default_rng([int(seed), 7, int(index), int(attempt)])
     position = (float(rng.uniform(-np.pi, np.pi)) if link == "plate"
                 else float(rng.uniform(0.3, 0.9) if link == "arm" else rng.uniform(0.2, 0.9)))
     trajectory = TRAJECTORIES[int(rng.integers(3))]
@@ -132,6 +135,37 @@ def draw_contact(seed: int, index: int, trajectories: str = "all") -> ScriptedCo
         release_time=float(rng.uniform(0.1, 0.4)), peak_force=float(rng.uniform(1.0, 10.0)), position=position,
         elevation=float(np.radians(rng.uniform(-80.0, 30.0))), azimuth=float(np.radians(rng.uniform(-40.0, 40.0))),
         approach_time=0.6, approach_distance=0.25, hold_time=float(rng.uniform(0.0, 0.5)))
+
+
+def draw_contact_counted(seed: int, index: int, trajectories: str = "all") -> tuple[ScriptedCollision, int]:
+    """(contact `index` of a campaign `seed`, draws rejected before it); see draw_contact.
+
+    Raises:
+        RuntimeError: no feasible draw in MAX_DRAWS.
+    """
+    from hexa.robots.hexa_description import load_hexa
+    from hexa.vision.evaluation import MIN_CLEARANCE, contact_clearance
+
+    kinds = kinds_of(trajectories)
+    desc = load_hexa()
+    for attempt in range(MAX_DRAWS):
+        c = _draw(seed, index, kinds, attempt)
+        if contact_clearance(desc, c) >= MIN_CLEARANCE:
+            return c, attempt
+    raise RuntimeError(f"no feasible contact in {MAX_DRAWS} draws of case {index}, seed {seed}")
+
+
+def draw_contact(seed: int, index: int, trajectories: str = "all") -> ScriptedCollision:
+    """Contact `index` of a campaign `seed`: link (plate/arm/rod), chain, point on the link, direction, peak force
+    1–10 N, rise 0.1–0.5 s, hold 0–0.5 s, release 0.1–0.4 s, onset 1.5–8 s into a trajectory: one of the paper's
+    three, or (`trajectories` "random", or "all" at odd indices) the random trajectory random:N with N the case's
+    simulator seed (seed·100003 + index); the first draw of every other field is the same whatever `trajectories`
+    selects (a redraw depends on the trajectory). Only feasible contacts: a draw whose pushing object would come
+    closer than `hexa.vision.evaluation.MIN_CLEARANCE` to another link (or pass through the plate) on its approach
+    or hold (`contact_clearance`, the vision evaluation's rule) is rejected and drawn again (the same link and
+    chain, the rest from (seed, index, attempt)), so an index always gives the same contact and the links stay
+    equally likely."""
+    return draw_contact_counted(seed, index, trajectories)[0]
 
 
 @dataclass
@@ -161,6 +195,7 @@ class RunRecord:
     isolation: str = "oracle"
     evaluations: list[Any] = field(default_factory=list)     # rendered isolation: every isolated pair (Evaluation)
     isolation_cost: dict[str, float] = field(default_factory=dict)
+    truth_tau: np.ndarray = field(default_factory=lambda: np.zeros((0, 6)))   # servo torques (N·m), at truth_t
 
 
 def simulate(collision: ScriptedCollision | None, trajectory: str, duration: float, realism: RealismConfig,
@@ -313,7 +348,7 @@ def simulate(collision: ScriptedCollision | None, trajectory: str, duration: flo
                      truth_link=log["link"].astype(int), truth_chain=log["chain"].astype(int),
                      truth_pose=log["plate_pose"], truth_zeta=log["zeta"], wrench_t=arr("wt")[order],
                      wrench_force=arr("wf", 3)[order], wrench_point=arr("wp", 3)[order], sim_seconds=t_end,
-                     zeta_dot=arr("zd", 6),
+                     zeta_dot=arr("zd", 6), truth_tau=log["tau"],
                      counters={**mon.counters(), "monitoring_lost": watch.lost_count},
                      isolation=isolation if collision is not None else "none",
                      evaluations=vision.evaluations if vision is not None else [],
@@ -414,6 +449,22 @@ def _detector_settings(job: dict[str, Any]) -> tuple[Any, str, Any]:
             CusumConfig(**job.get("cusum", {})))
 
 
+#: a servo torque at least this fraction of the stall torque counts as saturated
+SATURATION = 0.98
+
+
+def saturated_seconds(rec: RunRecord, during: np.ndarray) -> float:
+    """Seconds of the truth samples selected by `during` at which some servo is at its stall torque (the
+    description's `torque_max`, × SATURATION): the contact overpowers the servos and back-drives the robot."""
+    from hexa.robots.hexa_description import load_hexa
+
+    if len(rec.truth_tau) != len(rec.truth_t) or len(rec.truth_t) < 2:
+        return float("nan")
+    limit = SATURATION * load_hexa().torque_max
+    hit = during & (np.abs(rec.truth_tau).max(axis=1) >= limit)
+    return float(hit.sum() * np.median(np.diff(rec.truth_t)))
+
+
 def run_contact_job(job: dict[str, Any]) -> dict[str, Any]:
     """Worker: one contact case → its metrics (the demo's) with the live detector, and the detection of every
     replayed detector (`detectors`) at every scale.
@@ -429,8 +480,8 @@ def run_contact_job(job: dict[str, Any]) -> dict[str, Any]:
     t0 = time.perf_counter()
     realism = RealismConfig.named(job["realism"])
     ocfg, kind, ccfg = _detector_settings(job)
-    c = (ScriptedCollision(**job["collision"]) if "collision" in job
-         else draw_contact(job["campaign_seed"], job["index"], job.get("trajectories", "paper")))
+    c, rejected = ((ScriptedCollision(**job["collision"]), 0) if "collision" in job
+                   else draw_contact_counted(job["campaign_seed"], job["index"], job.get("trajectories", "paper")))
     duration = c.end_time + TAIL
     run = functools.partial(simulate, c, c.trajectory, duration, realism, seed=job["sim_seed"],
                             observer_config=ocfg, identify=job.get("identify", True), detector=kind, cusum=ccfg,
@@ -445,13 +496,15 @@ def run_contact_job(job: dict[str, Any]) -> dict[str, Any]:
                            "trajectory": c.trajectory, "trajectory_kind": trajectory_kind(c.trajectory),
                            "peak_force": c.peak_force, "onset": c.onset + LEAD_IN,
                            "rise_time": c.rise_time, "hold_time": c.hold_time, "release_time": c.release_time,
-                           "sim_seconds": rec.sim_seconds, "detector": kind, "identify": job.get("identify", True),
+                           "rejected_draws": rejected, "sim_seconds": rec.sim_seconds, "detector": kind,
+                           "identify": job.get("identify", True),
                            "isolation": {"mode": rec.isolation, "note": note, "cost": rec.isolation_cost,
                                          "evaluations": isolation_evaluations(rec)}}
     touching = np.linalg.norm(rec.truth_force, axis=1) > 0
     if not touching.any():   # cannot happen with a scripted contact unless the run ended before it
         out["error"] = "no contact in the ground truth"
         return out
+    out["servo_saturated_s"] = saturated_seconds(rec, touching)
     d = case_data(c.name, rec, rec.events, ocfg.thresholds, ocfg.servo_thresholds)
     m = compute_metrics(d, r_low=R_LOW, plate_equivalent=plate_equivalent_every(d, PLATE_EQUIVALENT_STRIDE))
     out["metrics"] = m.as_dict()

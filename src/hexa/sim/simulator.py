@@ -28,7 +28,7 @@ from hexa.sim.config import CAMERA_NAMES, SimConfig, sim_config_of
 from hexa.sim.mjcf import HOME_POSE, PARK_POS, build_mjcf
 from hexa.sim.realism import RealismConfig, RobotTruth, ServoMechanics, draw_truth, nominal_truth
 from hexa.vision.camera import CameraModel
-from hexa.sim.scenarios import ScenarioSpec, ScriptedCollision, draw_collision, load_scenario
+from hexa.sim.scenarios import ScenarioSpec, ScriptedCollision, draw_collision, load_scenario, push_direction
 
 import mujoco  # noqa: E402  (after hexa.sim.camera set MUJOCO_GL)
 
@@ -636,17 +636,7 @@ class Simulator:
             local_axis = np.array([c.position * length, 0.0, 0.0])
             radius = ap["arm_radius" if c.link == "arm" else "rod_radius"]
             axis = R[:, 0]
-        p_world = o + R @ local_axis
-        inward = -np.array([p_world[0], p_world[1], 0.0])
-        if np.linalg.norm(inward) < 1e-9:
-            inward = np.array([1.0, 0.0, 0.0])
-        inward /= np.linalg.norm(inward)
-        ca, sa = np.cos(c.azimuth), np.sin(c.azimuth)
-        inward = np.array([ca * inward[0] - sa * inward[1], sa * inward[0] + ca * inward[1], 0.0])
-        direction = np.cos(c.elevation) * inward + np.array([0.0, 0.0, np.sin(c.elevation)])
-        if axis is not None:
-            direction = direction - (direction @ axis) * axis
-        direction /= np.linalg.norm(direction)
+        direction = push_direction(c, o + R @ local_axis, axis)
         surface_local = local_axis - radius * (R.T @ direction)
         self._scripted_dir = direction
         self._scripted = _Contact(c.link, c.chain, body, surface_local, np.zeros(3))

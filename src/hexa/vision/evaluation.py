@@ -83,6 +83,10 @@ def draw_contacts(n: int, seed: int = 0, links: tuple[str, ...] = ("plate", "arm
 
 
 OBJECT_RADIUS, OBJECT_LENGTH = 0.015, 0.25   # the simulator's pushing capsule (hexa.sim.mjcf)
+#: m of gap the pushing capsule keeps from every other link for a contact to count as feasible
+MIN_CLEARANCE = 0.003
+#: s between the poses `contact_clearance` checks
+CLEARANCE_STEP = 0.05
 
 
 def object_clearance(desc: HexaDescription, pose: np.ndarray, zeta: np.ndarray, link: str, chain: int,
@@ -108,6 +112,45 @@ def object_clearance(desc: HexaDescription, pose: np.ndarray, zeta: np.ndarray, 
         far = np.linalg.norm(axis - c0, axis=1) > 2 * OBJECT_RADIUS
         gap = min(gap, float(plate_distance(axis[far], geom).min()) - OBJECT_RADIUS)
     return gap
+
+
+def contact_clearance(desc: HexaDescription, collision: Any, step: float = CLEARANCE_STEP) -> float:
+    """Smallest `object_clearance` (m) of a scripted contact over its approach and hold, on the poses of its
+    trajectory every `step` s from the approach's start to the release's end (trajectory time, clamped to the
+    trajectory; the robot is kinematic here: IK of each pose). The point on the link and the push direction are
+    fixed at the approach's start, as the simulator fixes them (`push_direction`); the capsule's tip is
+    `object_distance` from the point. A robot that holds on a START only takes poses of earlier instants, so every
+    pose it passes through during the contact is one of these."""
+    from hexa.kinematics import hexa6rus as kin
+    from hexa.sim.mjcf import _plate_outline
+    from hexa.sim.scenarios import push_direction
+    from hexa.sim.simulator import _hexagon_border_point
+    from hexa.trajectories import trajectory_named
+
+    traj, duration = trajectory_named(collision.trajectory)
+    t0 = collision.onset - collision.approach_time
+    times = np.r_[np.arange(t0, collision.end_time, step), collision.end_time]
+    local = (_hexagon_border_point(_plate_outline(desc), collision.position) if collision.link == "plate"
+             else None)
+    direction, gap = None, np.inf
+    for t in times:
+        pose = np.asarray(traj(float(np.clip(t, 0.0, duration)))[0], float)
+        zeta = kin.inverse_kinematics(desc, pose)
+        geom = RobotGeometry.from_state(desc, pose, zeta)
+        if local is not None:
+            axis, point = None, geom.T_plate[:3, :3] @ local + geom.T_plate[:3, 3]
+        else:
+            seg = (geom.arms if collision.link == "arm" else geom.rods)[collision.chain - 1]
+            axis = (seg[1] - seg[0]) / np.linalg.norm(seg[1] - seg[0])
+            point = seg[0] + collision.position * np.linalg.norm(seg[1] - seg[0]) * axis
+        if direction is None:
+            direction = push_direction(collision, point, axis)
+        if axis is not None:
+            point = point - (geom.arm_radius if collision.link == "arm" else geom.rod_radius) * direction
+        dist = collision.object_distance(float(t)) or 0.0
+        gap = min(gap, object_clearance(desc, pose, zeta, collision.link, collision.chain,
+                                        point - dist * direction, direction))
+    return float(gap)
 
 
 def render_contact(collision: Any, seed: int = 0, desc: HexaDescription | None = None,
@@ -202,7 +245,7 @@ def _label(link: str | int, chain: int) -> str:
     return "plate" if name == "plate" else ("none" if name == "none" else f"{name} {chain}")
 
 
-def contact_samples(n: int, seed: int = 0, min_clearance: float = 0.003, desc: HexaDescription | None = None,
+def contact_samples(n: int, seed: int = 0, min_clearance: float = MIN_CLEARANCE, desc: HexaDescription | None = None,
                     stats: dict[str, int] | None = None) -> Iterator[ContactSample]:
     """n feasible contact samples (see draw_contacts, render_contact); infeasible draws are replaced and counted
     in `stats` ("drawn <link>", "infeasible <link>")."""

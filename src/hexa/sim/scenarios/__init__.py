@@ -104,6 +104,22 @@ class ScriptedCollision:
         return self.approach_distance * float(s * s * (3 - 2 * s))
 
 
+def push_direction(collision: ScriptedCollision, point: np.ndarray, axis: np.ndarray | None = None) -> np.ndarray:
+    """Unit force direction (base) of a scripted contact at `point` (base, m): the horizontal normal towards the
+    base axis turned by the azimuth, raised by the elevation and, on an arm or a rod (`axis`: the link's unit axis),
+    made normal to the link."""
+    inward = -np.array([point[0], point[1], 0.0])
+    if np.linalg.norm(inward) < 1e-9:
+        inward = np.array([1.0, 0.0, 0.0])
+    inward /= np.linalg.norm(inward)
+    ca, sa = np.cos(collision.azimuth), np.sin(collision.azimuth)
+    inward = np.array([ca * inward[0] - sa * inward[1], sa * inward[0] + ca * inward[1], 0.0])
+    direction = np.cos(collision.elevation) * inward + np.array([0.0, 0.0, np.sin(collision.elevation)])
+    if axis is not None:
+        direction = direction - (direction @ axis) * axis
+    return direction / np.linalg.norm(direction)
+
+
 def _range(d: dict[str, Any], key: str, scale: float = 1.0) -> Range:
     v = d.get(key)
     if isinstance(v, (int, float)) and not isinstance(v, bool):
