@@ -336,13 +336,12 @@ def _system(motions: Sequence[Motion], theta_fixed: NDArray) -> tuple[NDArray, N
 
 
 def _bounds(nb: int) -> tuple[NDArray, NDArray]:
-    """Bounds of u = [1/K (6), b (6), θ_base (nb), J, ms, f_c, f_v, ms_y (6 each)]: physical consistency."""
+    """Bounds of v = [1/K (6), b (6), L (10), K_r, J, ms, f_c, f_v, ms_y (6 each)]: physical consistency (the
+    plate's by J = L Lᵀ, unbounded)."""
     lo = np.full(12 + nb + 30, -np.inf)
     hi = np.full_like(lo, np.inf)
     lo[:6] = 0.1                        # K_i < 10 N·m/A
     hi[:6] = 100.0                      # K_i > 0.01 N·m/A
-    lo[12] = 1e-3                       # m_p > 0
-    lo[16:19] = 0.0                     # I_xx, I_yy, I_zz ≥ 0 (about P)
     lo[12 + nb - 1] = 0.0               # K_r ≥ 0
     lo[12 + nb:12 + nb + 6] = 0.0       # J_i ≥ 0
     lo[12 + nb + 12:12 + nb + 24] = 0.0  # Coulomb and viscous friction ≥ 0
@@ -354,11 +353,74 @@ def _valid_inertia(I: NDArray) -> bool:
     return bool(w[0] >= 0 and w[0] + w[1] >= w[2] * (1 - 1e-9))
 
 
-def _project_inertia(I: NDArray) -> NDArray:
-    """The nearest inertia (eigenvalues clipped) that is positive and satisfies the triangle inequality."""
-    w, V = np.linalg.eigh(0.5 * (I + I.T))
-    s = np.maximum(0.5 * (w.sum() - 2 * w), 1e-9)        # second moments Σ_ii ≥ 0 ⇔ a valid inertia
-    return V @ np.diag(s.sum() - s) @ V.T
+#: the 10 entries of a lower-triangular 4×4 L (row-major), the plate's unknowns in the solver (J = L Lᵀ)
+_TRIL = np.tril_indices(4)
+
+
+def pseudo_inertia(theta_plate: NDArray) -> NDArray:
+    """The plate's 4×4 pseudo-inertia J = [[Σ, h], [hᵀ, m]] (Wensing, Kim & Slotine 2017, eq. 6) of its 10
+    barycentric parameters [m, h = m c, I_xx, I_yy, I_zz, I_xy, I_xz, I_yz] about P: Σ = ½ tr(I_P) 1 − I_P, the
+    second moment ∫ r rᵀ dm. J ≻ 0 ⇔ m > 0 and a COM inertia that is positive and obeys the triangle inequality."""
+    m, h, I_P = float(theta_plate[0]), np.asarray(theta_plate[1:4], dtype=float), _inertia_matrix(theta_plate[4:10])
+    J = np.empty((4, 4))
+    J[:3, :3] = 0.5 * np.trace(I_P) * np.eye(3) - I_P
+    J[:3, 3] = J[3, :3] = h
+    J[3, 3] = m
+    return J
+
+
+def _inertia_matrix(i6: Any) -> NDArray:
+    xx, yy, zz, xy, xz, yz = (float(v) for v in i6)
+    return np.array([[xx, xy, xz], [xy, yy, yz], [xz, yz, zz]])
+
+
+def plate_of_pseudo_inertia(J: NDArray) -> NDArray:
+    """The 10 barycentric parameters of a pseudo-inertia (the inverse of `pseudo_inertia`; linear in J)."""
+    S = 0.5 * (J[:3, :3] + J[:3, :3].T)
+    I_P = np.trace(S) * np.eye(3) - S
+    return np.array([J[3, 3], *J[:3, 3], I_P[0, 0], I_P[1, 1], I_P[2, 2], I_P[0, 1], I_P[0, 2], I_P[1, 2]])
+
+
+def _plate_of_cholesky(ell: NDArray) -> tuple[NDArray, NDArray]:
+    """θ_plate(J = L Lᵀ) of the entries `ell` of L and its Jacobian ∂θ/∂ell (10 × 10): dJ = E Lᵀ + L Eᵀ."""
+    L = np.zeros((4, 4))
+    L[_TRIL] = ell
+    D = np.empty((10, 10))
+    for k, (i, j) in enumerate(zip(*_TRIL)):
+        E = np.zeros((4, 4))
+        E[i, j] = 1.0
+        D[:, k] = plate_of_pseudo_inertia(E @ L.T + L @ E.T)
+    return plate_of_pseudo_inertia(L @ L.T), D
+
+
+def _cholesky_of_plate(theta_plate: NDArray, floor: float) -> NDArray:
+    """The entries of L with L Lᵀ the pseudo-inertia of `theta_plate`, its eigenvalues raised to ≥ `floor` first
+    (a start for the solver when the unconstrained least squares leaves J ⊁ 0)."""
+    w, V = np.linalg.eigh(pseudo_inertia(theta_plate))
+    return np.linalg.cholesky(V @ np.diag(np.maximum(w, floor)) @ V.T)[_TRIL]
+
+
+class _CholeskyPlate:
+    """An `_OutputError` in v = u with the plate's θ (u[12:22]) replaced by the entries of L, J = L Lᵀ (chain rule
+    through `_plate_of_cholesky`)."""
+
+    def __init__(self, prob: _OutputError) -> None:
+        self.prob = prob
+
+    def u(self, v: NDArray) -> NDArray:
+        u = v.copy()
+        u[12:22] = _plate_of_cholesky(v[12:22])[0]
+        return u
+
+    def residual(self, v: NDArray) -> NDArray:
+        return self.prob.residual(self.u(v))
+
+    def jacobian(self, v: NDArray) -> NDArray:
+        u = v.copy()
+        u[12:22], D = _plate_of_cholesky(v[12:22])
+        Jm = self.prob.jacobian(u)
+        Jm[:, 12:22] = Jm[:, 12:22] @ D
+        return Jm
 
 
 class _OutputError:
@@ -429,12 +491,21 @@ def identify(motions: Sequence[Motion], desc: HexaDescription) -> Calibration:
     lo, hi = _bounds(nb)
     u = np.concatenate([np.full(6, 1.0 / float(desc.K_t)), y0[:6] / float(desc.K_t), y0[6:]])
     u = np.clip(u, lo + 1e-12, np.where(np.isfinite(hi), hi - 1e-12, np.inf))
+    # the plate's 10 parameters enter the solver as the Cholesky factor L of its pseudo-inertia J = L Lᵀ (Wensing et
+    # al. 2017): every iterate, hence the solution, is a physically valid rigid body, with no correction afterwards.
+    # The linear fit's plate starts it, its J's eigenvalues raised to a thousandth of the nominal plate's smallest
+    J_start = np.linalg.eigvalsh(pseudo_inertia(u[12:22]))
+    valid_unconstrained = bool(J_start[0] > 0)
+    v = u.copy()
+    v[12:22] = _cholesky_of_plate(u[12:22], 1e-3 * float(np.linalg.eigvalsh(pseudo_inertia(theta_nom[:10]))[0]))
     w = np.ones(I.size)
     for _ in range(2):                   # unweighted, then each servo's rows weighted by 1/σ of its residual
         prob = _OutputError(I, M, tau0, servo, w, float(desc.K_t), not with_payload)
-        sol = least_squares(prob.residual, u, jac=prob.jacobian, bounds=(lo, hi), method="trf", x_scale="jac",
+        fit = _CholeskyPlate(prob)
+        sol = least_squares(fit.residual, v, jac=fit.jacobian, bounds=(lo, hi), method="trf", x_scale="jac",
                             max_nfev=200)
-        u = sol.x
+        v = sol.x
+        u = fit.u(v)
         r = prob.residual(u)[:I.size] / w
         sig = np.array([np.sqrt(np.mean(r[servo == i] ** 2)) for i in range(6)])
         w = 1.0 / np.maximum(sig[servo], 1e-6)
@@ -454,10 +525,10 @@ def identify(motions: Sequence[Motion], desc: HexaDescription) -> Calibration:
     theta[list(BASE_SYM)] = x[:nb]
     cal_prm = params_with_sym(prm, theta)
     I_p = cal_prm.I_p
-    consistency = "bounded" if active else "free"
-    if not _valid_inertia(I_p):
-        I_p = _project_inertia(I_p)
-        consistency = "projected"
+    # what shaped the solution: "free" (no bound active, and the linear fit's plate was already valid), "bounded"
+    # (a bound on K, friction, J_i, K_r active), "pseudo-inertia" (the linear fit's plate had J ⊁ 0: J = L Lᵀ kept it
+    # valid)
+    consistency = "bounded" if active else ("free" if valid_unconstrained else "pseudo-inertia")
     K = 1.0 / g
     J, ms, fc, fv, ms_y = (x[nb + 6 * k:nb + 6 * (k + 1)] for k in range(5))
     rod_share = _rod_share_at_B(prm)
