@@ -58,6 +58,9 @@ PERIODIC_MISS = 0.002       # m RMS: a run whose poses miss the periodic fit by 
 EDGE = 1.0                  # s dropped at both ends of a run (filter edges)
 FIXED_SYM = tuple(k for k in range(len(SYM_NAMES)) if k not in BASE_SYM)
 Z95 = 1.959963984540054
+#: the plate's pseudo-inertia J counts as on the edge of physical validity (the constraint J ≻ 0 active) when its
+#: smallest eigenvalue is below this fraction of the largest second moment (the nominal 10 mm disc: 2.7e-3)
+EDGE_RATIO = 1e-3
 
 
 class CalibrationError(ValueError):
@@ -272,8 +275,9 @@ class Calibration:
     along and across the arm), `horn_offset` (rad); the plate's `plate_mass`, `plate_com` ({P}, m), `plate_inertia`
     (about the COM, {P}); the rods' `rod_K`; `ci95` of each
     (same keys, arrays); `scale`: "payload" or "nominal K_t" (what fixed the torque scale); `consistency`: "free",
-    "bounded" or "projected"; `rms` per servo of the fit (N·m) and the number of `samples`; `notes`: what
-    limits the result (a run's currents locked to the servos' pulse frame)."""
+    or what shaped the solution: "pseudo-inertia" (the plate's J ≻ 0 active), "bounded" (another bound active);
+    `rms` per servo of the fit (N·m) and the number of `samples`; `notes`: what limits the result (a run's
+    currents locked to the servos' pulse frame)."""
 
     k_t: NDArray
     current_offset: NDArray
@@ -525,10 +529,13 @@ def identify(motions: Sequence[Motion], desc: HexaDescription) -> Calibration:
     theta[list(BASE_SYM)] = x[:nb]
     cal_prm = params_with_sym(prm, theta)
     I_p = cal_prm.I_p
-    # what shaped the solution: "free" (no bound active, and the linear fit's plate was already valid), "bounded"
-    # (a bound on K, friction, J_i, K_r active), "pseudo-inertia" (the linear fit's plate had J ⊁ 0: J = L Lᵀ kept it
-    # valid)
-    consistency = "bounded" if active else ("free" if valid_unconstrained else "pseudo-inertia")
+    # what shaped the solution: "pseudo-inertia" (J = L Lᵀ held the plate valid: the linear fit's J ⊁ 0, or the
+    # solution's J on the edge, its smallest eigenvalue < EDGE_RATIO of its largest second moment), "bounded" (a
+    # bound on K, friction, J_i or K_r active), or "free" (neither)
+    J_plate = pseudo_inertia(x[:10])
+    on_edge = (not valid_unconstrained
+               or np.linalg.eigvalsh(J_plate)[0] < EDGE_RATIO * float(np.linalg.eigvalsh(J_plate[:3, :3])[-1]))
+    consistency = ", ".join([k for k, on in (("pseudo-inertia", on_edge), ("bounded", active)) if on]) or "free"
     K = 1.0 / g
     J, ms, fc, fv, ms_y = (x[nb + 6 * k:nb + 6 * (k + 1)] for k in range(5))
     rod_share = _rod_share_at_B(prm)
