@@ -21,9 +21,16 @@ averages out over the periods). Currents go through a zero-phase low-pass at the
 grid, which is locked to the servos' pulse frame), and so does every regressor column (parallel filtering).
 Output-error least squares (the current is the measured output, so its noise biases nothing), weighted by each
 servo's noise from a first pass, with a prior on the zero offsets (`OFFSET_PRIOR`); 95 % confidence intervals from
-the covariance σ²(JᵀJ)⁻¹ at the solution; physical
-consistency (positive masses, inertias and friction) by the bounds of the solver, and an eigenvalue projection of
-the plate inertia when it breaks the triangle inequality (reported as `consistency`).
+the covariance σ²(JᵀJ)⁻¹ at the solution.
+
+Physical consistency by construction: the plate's 10 parameters are solved as the Cholesky factor L of its 4×4
+pseudo-inertia J = L Lᵀ (Wensing, Kim & Slotine, "Linear matrix inequalities for physically consistent inertial
+parameter identification", IEEE RA-L 2017: J ≻ 0 ⇔ positive mass and a COM inertia that obeys the triangle
+inequality), so every iterate and the solution is a rigid body; the per-servo J_i, friction, K_i and the rods' K_r
+are bounded. The constraint matters because the Hexa's plate is a flat disc: its second moment across the plate,
+m t²/12, is 0.3 % of the in-plane ones, so the truth sits on the triangle inequality's edge, and the plate's
+rotational inertia is weakly excited (95 % half-widths of the same size as the inertia itself): an unconstrained
+fit lands outside the valid set. `consistency` says whether the constraint was active.
 
 Horn offsets: the horn angle from IK of the camera pose minus the set-point the servo acts on (joint_states), per
 servo by least squares on [1, I_i, ζ̇_i] after the servo's dead band (`horn_offsets`).
