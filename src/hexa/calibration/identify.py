@@ -359,11 +359,6 @@ def _bounds(nb: int) -> tuple[NDArray, NDArray]:
     return lo, hi
 
 
-def _valid_inertia(I: NDArray) -> bool:
-    w = np.linalg.eigvalsh(0.5 * (I + I.T))
-    return bool(w[0] >= 0 and w[0] + w[1] >= w[2] * (1 - 1e-9))
-
-
 #: the 10 entries of a lower-triangular 4×4 L (row-major), the plate's unknowns in the solver (J = L Lᵀ)
 _TRIL = np.tril_indices(4)
 
@@ -504,11 +499,10 @@ def identify(motions: Sequence[Motion], desc: HexaDescription) -> Calibration:
     u = np.clip(u, lo + 1e-12, np.where(np.isfinite(hi), hi - 1e-12, np.inf))
     # the plate's 10 parameters enter the solver as the Cholesky factor L of its pseudo-inertia J = L Lᵀ (Wensing et
     # al. 2017): every iterate, hence the solution, is a physically valid rigid body, with no correction afterwards.
-    # The linear fit's plate starts it, its J's eigenvalues raised to a thousandth of the nominal plate's smallest
-    J_start = np.linalg.eigvalsh(pseudo_inertia(u[12:22]))
-    valid_unconstrained = bool(J_start[0] > 0)
+    # The linear fit's plate starts it, its J's eigenvalues raised to at least the nominal plate's smallest (a
+    # strictly inner start: from the edge, where L is singular, the solve can stall there)
     v = u.copy()
-    v[12:22] = _cholesky_of_plate(u[12:22], 1e-3 * float(np.linalg.eigvalsh(pseudo_inertia(theta_nom[:10]))[0]))
+    v[12:22] = _cholesky_of_plate(u[12:22], float(np.linalg.eigvalsh(pseudo_inertia(theta_nom[:10]))[0]))
     w = np.ones(I.size)
     for _ in range(2):                   # unweighted, then each servo's rows weighted by 1/σ of its residual
         prob = _OutputError(I, M, tau0, servo, w, float(desc.K_t), not with_payload)
@@ -536,12 +530,11 @@ def identify(motions: Sequence[Motion], desc: HexaDescription) -> Calibration:
     theta[list(BASE_SYM)] = x[:nb]
     cal_prm = params_with_sym(prm, theta)
     I_p = cal_prm.I_p
-    # what shaped the solution: "pseudo-inertia" (J = L Lᵀ held the plate valid: the linear fit's J ⊁ 0, or the
-    # solution's J on the edge, its smallest eigenvalue < EDGE_RATIO of its largest second moment), "bounded" (a
-    # bound on K, friction, J_i or K_r active), or "free" (neither)
+    # what shaped the solution: "pseudo-inertia" (J ≻ 0 active: the solution's J on the edge, its smallest
+    # eigenvalue < EDGE_RATIO of its largest second moment), "bounded" (a bound on K, friction, J_i or K_r active),
+    # or "free" (neither)
     J_plate = pseudo_inertia(x[:10])
-    on_edge = (not valid_unconstrained
-               or np.linalg.eigvalsh(J_plate)[0] < EDGE_RATIO * float(np.linalg.eigvalsh(J_plate[:3, :3])[-1]))
+    on_edge = bool(np.linalg.eigvalsh(J_plate)[0] < EDGE_RATIO * float(np.linalg.eigvalsh(J_plate[:3, :3])[-1]))
     consistency = ", ".join([k for k, on in (("pseudo-inertia", on_edge), ("bounded", active)) if on]) or "free"
     K = 1.0 / g
     J, ms, fc, fv, ms_y = (x[nb + 6 * k:nb + 6 * (k + 1)] for k in range(5))
