@@ -364,7 +364,7 @@ _TRIL = np.tril_indices(4)
 
 
 def pseudo_inertia(theta_plate: NDArray) -> NDArray:
-    """The plate's 4×4 pseudo-inertia J = [[Σ, h], [hᵀ, m]] (Wensing, Kim & Slotine 2017, eq. 6) of its 10
+    """The plate's 4×4 pseudo-inertia J = [[Σ, h], [hᵀ, m]] (Wensing, Kim & Slotine 2017) of its 10
     barycentric parameters [m, h = m c, I_xx, I_yy, I_zz, I_xy, I_xz, I_yz] about P: Σ = ½ tr(I_P) 1 − I_P, the
     second moment ∫ r rᵀ dm. J ≻ 0 ⇔ m > 0 and a COM inertia that is positive and obeys the triangle inequality."""
     m, h, I_P = float(theta_plate[0]), np.asarray(theta_plate[1:4], dtype=float), _inertia_matrix(theta_plate[4:10])
@@ -401,7 +401,7 @@ def _plate_of_cholesky(ell: NDArray) -> tuple[NDArray, NDArray]:
 
 def _cholesky_of_plate(theta_plate: NDArray, floor: float) -> NDArray:
     """The entries of L with L Lᵀ the pseudo-inertia of `theta_plate`, its eigenvalues raised to ≥ `floor` first
-    (a start for the solver when the unconstrained least squares leaves J ⊁ 0)."""
+    (the solver's start: strictly inside the valid set)."""
     w, V = np.linalg.eigh(pseudo_inertia(theta_plate))
     return np.linalg.cholesky(V @ np.diag(np.maximum(w, floor)) @ V.T)[_TRIL]
 
