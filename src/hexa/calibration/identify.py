@@ -21,9 +21,16 @@ averages out over the periods). Currents go through a zero-phase low-pass at the
 grid, which is locked to the servos' pulse frame), and so does every regressor column (parallel filtering).
 Output-error least squares (the current is the measured output, so its noise biases nothing), weighted by each
 servo's noise from a first pass, with a prior on the zero offsets (`OFFSET_PRIOR`); 95 % confidence intervals from
-the covariance σ²(JᵀJ)⁻¹ at the solution; physical
-consistency (positive masses, inertias and friction) by the bounds of the solver, and an eigenvalue projection of
-the plate inertia when it breaks the triangle inequality (reported as `consistency`).
+the covariance σ²(JᵀJ)⁻¹ at the solution.
+
+Physical consistency by construction: the plate's 10 parameters are solved as the Cholesky factor L of its 4×4
+pseudo-inertia J = L Lᵀ (Wensing, Kim & Slotine, "Linear matrix inequalities for physically consistent inertial
+parameter identification", IEEE RA-L 2017: J ≻ 0 ⇔ positive mass and a COM inertia that obeys the triangle
+inequality), so every iterate and the solution is a rigid body; the per-servo J_i, friction, K_i and the rods' K_r
+are bounded. The constraint matters because the Hexa's plate is a flat disc: its second moment across the plate,
+m t²/12, is 0.3 % of the in-plane ones, so the truth sits on the triangle inequality's edge, and the plate's
+rotational inertia is weakly excited (95 % half-widths of the same size as the inertia itself): an unconstrained
+fit lands outside the valid set. `consistency` says whether the constraint was active.
 
 Horn offsets: the horn angle from IK of the camera pose minus the set-point the servo acts on (joint_states), per
 servo by least squares on [1, I_i, ζ̇_i] after the servo's dead band (`horn_offsets`).
@@ -58,6 +65,9 @@ PERIODIC_MISS = 0.002       # m RMS: a run whose poses miss the periodic fit by 
 EDGE = 1.0                  # s dropped at both ends of a run (filter edges)
 FIXED_SYM = tuple(k for k in range(len(SYM_NAMES)) if k not in BASE_SYM)
 Z95 = 1.959963984540054
+#: the plate's pseudo-inertia J counts as on the edge of physical validity (the constraint J ≻ 0 active) when its
+#: smallest eigenvalue is below this fraction of the largest second moment (the nominal 10 mm disc: 2.7e-3)
+EDGE_RATIO = 1e-3
 
 
 class CalibrationError(ValueError):
@@ -272,8 +282,9 @@ class Calibration:
     along and across the arm), `horn_offset` (rad); the plate's `plate_mass`, `plate_com` ({P}, m), `plate_inertia`
     (about the COM, {P}); the rods' `rod_K`; `ci95` of each
     (same keys, arrays); `scale`: "payload" or "nominal K_t" (what fixed the torque scale); `consistency`: "free",
-    "bounded" or "projected"; `rms` per servo of the fit (N·m) and the number of `samples`; `notes`: what
-    limits the result (a run's currents locked to the servos' pulse frame)."""
+    or what shaped the solution: "pseudo-inertia" (the plate's J ≻ 0 active), "bounded" (another bound active);
+    `rms` per servo of the fit (N·m) and the number of `samples`; `notes`: what limits the result (a run's
+    currents locked to the servos' pulse frame)."""
 
     k_t: NDArray
     current_offset: NDArray
@@ -336,29 +347,86 @@ def _system(motions: Sequence[Motion], theta_fixed: NDArray) -> tuple[NDArray, N
 
 
 def _bounds(nb: int) -> tuple[NDArray, NDArray]:
-    """Bounds of u = [1/K (6), b (6), θ_base (nb), J, ms, f_c, f_v, ms_y (6 each)]: physical consistency."""
+    """Bounds of v = [1/K (6), b (6), L (10), K_r, J, ms, f_c, f_v, ms_y (6 each)]: physical consistency (the
+    plate's by J = L Lᵀ, unbounded)."""
     lo = np.full(12 + nb + 30, -np.inf)
     hi = np.full_like(lo, np.inf)
     lo[:6] = 0.1                        # K_i < 10 N·m/A
     hi[:6] = 100.0                      # K_i > 0.01 N·m/A
-    lo[12] = 1e-3                       # m_p > 0
-    lo[16:19] = 0.0                     # I_xx, I_yy, I_zz ≥ 0 (about P)
     lo[12 + nb - 1] = 0.0               # K_r ≥ 0
     lo[12 + nb:12 + nb + 6] = 0.0       # J_i ≥ 0
     lo[12 + nb + 12:12 + nb + 24] = 0.0  # Coulomb and viscous friction ≥ 0
     return lo, hi
 
 
-def _valid_inertia(I: NDArray) -> bool:
-    w = np.linalg.eigvalsh(0.5 * (I + I.T))
-    return bool(w[0] >= 0 and w[0] + w[1] >= w[2] * (1 - 1e-9))
+#: the 10 entries of a lower-triangular 4×4 L (row-major), the plate's unknowns in the solver (J = L Lᵀ)
+_TRIL = np.tril_indices(4)
 
 
-def _project_inertia(I: NDArray) -> NDArray:
-    """The nearest inertia (eigenvalues clipped) that is positive and satisfies the triangle inequality."""
-    w, V = np.linalg.eigh(0.5 * (I + I.T))
-    s = np.maximum(0.5 * (w.sum() - 2 * w), 1e-9)        # second moments Σ_ii ≥ 0 ⇔ a valid inertia
-    return V @ np.diag(s.sum() - s) @ V.T
+def pseudo_inertia(theta_plate: NDArray) -> NDArray:
+    """The plate's 4×4 pseudo-inertia J = [[Σ, h], [hᵀ, m]] (Wensing, Kim & Slotine 2017) of its 10
+    barycentric parameters [m, h = m c, I_xx, I_yy, I_zz, I_xy, I_xz, I_yz] about P: Σ = ½ tr(I_P) 1 − I_P, the
+    second moment ∫ r rᵀ dm. J ≻ 0 ⇔ m > 0 and a COM inertia that is positive and obeys the triangle inequality."""
+    m, h, I_P = float(theta_plate[0]), np.asarray(theta_plate[1:4], dtype=float), _inertia_matrix(theta_plate[4:10])
+    J = np.empty((4, 4))
+    J[:3, :3] = 0.5 * np.trace(I_P) * np.eye(3) - I_P
+    J[:3, 3] = J[3, :3] = h
+    J[3, 3] = m
+    return J
+
+
+def _inertia_matrix(i6: Any) -> NDArray:
+    xx, yy, zz, xy, xz, yz = (float(v) for v in i6)
+    return np.array([[xx, xy, xz], [xy, yy, yz], [xz, yz, zz]])
+
+
+def plate_of_pseudo_inertia(J: NDArray) -> NDArray:
+    """The 10 barycentric parameters of a pseudo-inertia (the inverse of `pseudo_inertia`; linear in J)."""
+    S = 0.5 * (J[:3, :3] + J[:3, :3].T)
+    I_P = np.trace(S) * np.eye(3) - S
+    return np.array([J[3, 3], *J[:3, 3], I_P[0, 0], I_P[1, 1], I_P[2, 2], I_P[0, 1], I_P[0, 2], I_P[1, 2]])
+
+
+def _plate_of_cholesky(ell: NDArray) -> tuple[NDArray, NDArray]:
+    """θ_plate(J = L Lᵀ) of the entries `ell` of L and its Jacobian ∂θ/∂ell (10 × 10): dJ = E Lᵀ + L Eᵀ."""
+    L = np.zeros((4, 4))
+    L[_TRIL] = ell
+    D = np.empty((10, 10))
+    for k, (i, j) in enumerate(zip(*_TRIL)):
+        E = np.zeros((4, 4))
+        E[i, j] = 1.0
+        D[:, k] = plate_of_pseudo_inertia(E @ L.T + L @ E.T)
+    return plate_of_pseudo_inertia(L @ L.T), D
+
+
+def _cholesky_of_plate(theta_plate: NDArray, floor: float) -> NDArray:
+    """The entries of L with L Lᵀ the pseudo-inertia of `theta_plate`, its eigenvalues raised to ≥ `floor` first
+    (the solver's start: strictly inside the valid set)."""
+    w, V = np.linalg.eigh(pseudo_inertia(theta_plate))
+    return np.linalg.cholesky(V @ np.diag(np.maximum(w, floor)) @ V.T)[_TRIL]
+
+
+class _CholeskyPlate:
+    """An `_OutputError` in v = u with the plate's θ (u[12:22]) replaced by the entries of L, J = L Lᵀ (chain rule
+    through `_plate_of_cholesky`)."""
+
+    def __init__(self, prob: _OutputError) -> None:
+        self.prob = prob
+
+    def u(self, v: NDArray) -> NDArray:
+        u = v.copy()
+        u[12:22] = _plate_of_cholesky(v[12:22])[0]
+        return u
+
+    def residual(self, v: NDArray) -> NDArray:
+        return self.prob.residual(self.u(v))
+
+    def jacobian(self, v: NDArray) -> NDArray:
+        u = v.copy()
+        u[12:22], D = _plate_of_cholesky(v[12:22])
+        Jm = self.prob.jacobian(u)
+        Jm[:, 12:22] = Jm[:, 12:22] @ D
+        return Jm
 
 
 class _OutputError:
@@ -429,12 +497,20 @@ def identify(motions: Sequence[Motion], desc: HexaDescription) -> Calibration:
     lo, hi = _bounds(nb)
     u = np.concatenate([np.full(6, 1.0 / float(desc.K_t)), y0[:6] / float(desc.K_t), y0[6:]])
     u = np.clip(u, lo + 1e-12, np.where(np.isfinite(hi), hi - 1e-12, np.inf))
+    # the plate's 10 parameters enter the solver as the Cholesky factor L of its pseudo-inertia J = L Lᵀ (Wensing et
+    # al. 2017): every iterate, hence the solution, is a physically valid rigid body, with no correction afterwards.
+    # The linear fit's plate starts it, its J's eigenvalues raised to at least the nominal plate's smallest (a
+    # strictly inner start: from the edge, where L is singular, the solve can stall there)
+    v = u.copy()
+    v[12:22] = _cholesky_of_plate(u[12:22], float(np.linalg.eigvalsh(pseudo_inertia(theta_nom[:10]))[0]))
     w = np.ones(I.size)
     for _ in range(2):                   # unweighted, then each servo's rows weighted by 1/σ of its residual
         prob = _OutputError(I, M, tau0, servo, w, float(desc.K_t), not with_payload)
-        sol = least_squares(prob.residual, u, jac=prob.jacobian, bounds=(lo, hi), method="trf", x_scale="jac",
+        fit = _CholeskyPlate(prob)
+        sol = least_squares(fit.residual, v, jac=fit.jacobian, bounds=(lo, hi), method="trf", x_scale="jac",
                             max_nfev=200)
-        u = sol.x
+        v = sol.x
+        u = fit.u(v)
         r = prob.residual(u)[:I.size] / w
         sig = np.array([np.sqrt(np.mean(r[servo == i] ** 2)) for i in range(6)])
         w = 1.0 / np.maximum(sig[servo], 1e-6)
@@ -454,10 +530,12 @@ def identify(motions: Sequence[Motion], desc: HexaDescription) -> Calibration:
     theta[list(BASE_SYM)] = x[:nb]
     cal_prm = params_with_sym(prm, theta)
     I_p = cal_prm.I_p
-    consistency = "bounded" if active else "free"
-    if not _valid_inertia(I_p):
-        I_p = _project_inertia(I_p)
-        consistency = "projected"
+    # what shaped the solution: "pseudo-inertia" (J ≻ 0 active: the solution's J on the edge, its smallest
+    # eigenvalue < EDGE_RATIO of its largest second moment), "bounded" (a bound on K, friction, J_i or K_r active),
+    # or "free" (neither)
+    J_plate = pseudo_inertia(x[:10])
+    on_edge = bool(np.linalg.eigvalsh(J_plate)[0] < EDGE_RATIO * float(np.linalg.eigvalsh(J_plate[:3, :3])[-1]))
+    consistency = ", ".join([k for k, on in (("pseudo-inertia", on_edge), ("bounded", active)) if on]) or "free"
     K = 1.0 / g
     J, ms, fc, fv, ms_y = (x[nb + 6 * k:nb + 6 * (k + 1)] for k in range(5))
     rod_share = _rod_share_at_B(prm)
