@@ -65,6 +65,7 @@ def test_a_strong_plate_push_is_detected_within_100_ms_and_its_force_identified(
     rmse = np.asarray(m["force_rmse"])
     assert np.all(np.isfinite(rmse)) and np.all(rmse < 2.0)        # the identification ran on the contact
     assert r["rejected_draws"] == 0 and 0.0 <= r["servo_saturated_s"] <= 0.6   # stalled s within the contact
+    assert r["type2_crossings"] == 0     # its servos stall for a while, but the plate stays clear of a type II pose
     # the replays at scale 1 see what the live detector (the node's default, the threshold detector) saw
     assert r["detector"] == "threshold"
     node = {row["scale"]: row for row in r["detect"]["threshold"]}
@@ -77,6 +78,14 @@ def test_a_strong_plate_push_is_detected_within_100_ms_and_its_force_identified(
     node = {row["scale"]: row for row in r["detect"]["cusum"]}
     assert node[1.0]["detect_time"] == pytest.approx(m["detect_time"], abs=1e-9)
 
+
+
+def test_a_push_that_stalls_the_servos_can_drive_the_robot_through_a_type_II_singularity():
+    # campaign case 24 (seed 0): a plate push that back-drives the stalled servos until det J_D changes sign
+    r = run_contact_job({"campaign_seed": 0, "index": 24, "sim_seed": 24, "realism": "ideal", "trajectories": "all",
+                         "isolation": "oracle", "identify": False})
+    assert r["link"] == "plate" and r["servo_saturated_s"] > 0.2
+    assert r["type2_crossings"] >= 1
 
 def test_smoke_campaign_on_two_worker_processes_writes_the_report(tmp_path):
     cfg = CampaignConfig(cases=6, free_seconds=20.0, realisms=("ideal",), seed=5, workers=2)
@@ -99,6 +108,7 @@ def test_smoke_campaign_on_two_worker_processes_writes_the_report(tmp_path):
     assert set(s["targets"]) >= {"fa_per_10h", "det_plate_3n", "delay_median_ms", "rmse_below_paper"}
     split = s["rmse_by_servos"]          # every case with an RMSE counted once: servos held or some stalled
     assert split["held"]["cases"] + split["stalled"]["cases"] == s["rmse_cases"]
+    assert 0 <= split["stalled_type2"]["below"] <= split["stalled_type2"]["cases"] <= split["stalled"]["cases"]
     assert s["rmse_cases"] > 0 and (split["held"]["below"] + split["stalled"]["below"]
                                     == pytest.approx(s["targets"]["rmse_below_paper"] * s["rmse_cases"]))
     assert s["live_false_starts_free"] == 0                    # ideal free motion raises no false alarm

@@ -465,6 +465,30 @@ def saturated_seconds(rec: RunRecord, during: np.ndarray) -> float:
     return float(hit.sum() * np.median(np.diff(rec.truth_t)))
 
 
+#: s between the truth samples checked for a type II singularity (type2_crossings)
+TYPE2_STEP = 0.005
+
+
+def type2_crossings(rec: RunRecord, during: np.ndarray) -> int:
+    """How many times det J_D of the true plate pose and arm angles changes sign over the truth samples selected by
+    `during`, every TYPE2_STEP s: the push drove the robot through a type II singularity (J_D t = J_I ζ̇,
+    hexa.kinematics.hexa6rus.constraint_jacobians). There the arm rates do not determine the plate's motion, so the
+    force identification, which takes the plate's twist and acceleration from ζ, ζ̇, ζ̈ through J_ζ⁻¹
+    (hexa.dynamics.lagrange.motion_from_joint_rates), is singular."""
+    from hexa.kinematics.hexa6rus import constraint_jacobians
+    from hexa.robots.hexa_description import load_hexa
+
+    idx = np.nonzero(during)[0]
+    if len(idx) < 2 or len(rec.truth_pose) != len(rec.truth_t) or len(rec.truth_zeta) != len(rec.truth_t):
+        return 0
+    stride = max(1, int(round(TYPE2_STEP / float(np.median(np.diff(rec.truth_t[idx])) or TYPE2_STEP))))
+    desc = load_hexa()
+    signs = [np.sign(np.linalg.det(constraint_jacobians(desc, rec.truth_pose[k], rec.truth_zeta[k])[0]))
+             for k in idx[::stride]]
+    signs = [v for v in signs if v != 0]
+    return int(sum(a != b for a, b in zip(signs, signs[1:])))
+
+
 def run_contact_job(job: dict[str, Any]) -> dict[str, Any]:
     """Worker: one contact case → its metrics (the demo's) with the live detector, and the detection of every
     replayed detector (`detectors`) at every scale.
@@ -505,6 +529,7 @@ def run_contact_job(job: dict[str, Any]) -> dict[str, Any]:
         out["error"] = "no contact in the ground truth"
         return out
     out["servo_saturated_s"] = saturated_seconds(rec, touching)
+    out["type2_crossings"] = type2_crossings(rec, touching)
     d = case_data(c.name, rec, rec.events, ocfg.thresholds, ocfg.servo_thresholds)
     m = compute_metrics(d, r_low=R_LOW, plate_equivalent=plate_equivalent_every(d, PLATE_EQUIVALENT_STRIDE))
     out["metrics"] = m.as_dict()

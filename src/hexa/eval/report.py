@@ -161,7 +161,8 @@ def summarize(result: dict[str, Any]) -> dict[str, Any]:
         all_delays: list[float] = []
         rmse_ok, rmse_n = 0, 0
         # the same split by whether some servo reached its stall torque during the contact (servo_saturated_s)
-        rmse_split = {"held": [0, 0], "stalled": [0, 0]}
+        # and, of the stalled ones, those the push drove through a type II singularity (type2_crossings)
+        rmse_split = {"held": [0, 0], "stalled": [0, 0], "stalled_type2": [0, 0]}
         for link in LINKS:
             lc = [c for c in cases if c["link"] == link]
             det = [detected(c, c["metrics"]["detect_time"]) for c in lc]
@@ -181,6 +182,9 @@ def summarize(result: dict[str, Any]) -> dict[str, Any]:
                         part = rmse_split["stalled" if stalled > 0 else "held"]
                         part[0] += below
                         part[1] += 1
+                        if stalled > 0 and c.get("type2_crossings", 0) > 0:
+                            rmse_split["stalled_type2"][0] += below
+                            rmse_split["stalled_type2"][1] += 1
             per_link[link] = {"cases": len(lc), "detected": int(sum(det)), "strong_cases": len(strong),
                               "strong_detected": int(sum(strong)),
                               "strong_rate": sum(strong) / len(strong) if strong else float("nan"),
@@ -413,9 +417,11 @@ def write_report(result: dict[str, Any], out_dir: str | Path, plots: bool = True
         split = s.get("rmse_by_servos", {})
         if any(v["cases"] for v in split.values()):
             held, stalled = split["held"], split["stalled"]
+            t2 = split.get("stalled_type2", {"below": 0, "cases": 0})
             lines += ["", f"Force RMSE below the paper's on every axis: {held['below']} / {held['cases']} detected "
                       f"cases whose servos held, {stalled['below']} / {stalled['cases']} where some servo reached "
-                      "its stall torque during the contact (the arm angle is then not known well: docs/eval.md)."]
+                      f"its stall torque during the contact; of these, {t2['below']} / {t2['cases']} where the push "
+                      "also drove the robot through a type II singularity (docs/eval.md)."]
         lines += [""] + _isolation_lines(iso) + [
                   "| link | cases | detected | peak ≥ 3 N: detected / cases | delay median / p95 (ms) | "
                   "false STARTs before the contact |", "|---|---|---|---|---|---|"]
