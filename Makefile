@@ -30,14 +30,13 @@ firmware: setup
 	@if [ -f hexa_driver/firmware/Makefile ]; then $(MAKE) --no-print-directory -C hexa_driver/firmware; \
 	else echo "firmware: hexa_driver/firmware/Makefile not present yet"; fi
 
-# Lint first (ruff: pyflakes + pycodestyle; mypy on src/hexa; settings in pyproject.toml), then the tests, with the
-# 15 slowest listed at the end (where the time budget goes).
-# pytest exit code 5 means "no tests collected": that is a failure here, not a pass.
+# Lint first (ruff: pyflakes + pycodestyle; mypy on src/hexa; settings in pyproject.toml), then the tests: those that
+# start no ROS processes on two workers, then the ROS ones one at a time, with the slowest listed at the end of each
+# part (scripts/run_tests.sh; "no tests collected" is a failure there, not a pass).
 test: setup-robot firmware
 	@$(VENV)/bin/ruff check --quiet . || { echo "make test: ruff found problems (see above)" >&2; exit 1; }
 	@$(MYPY) || { echo "make test: mypy found problems in src/hexa (see above)" >&2; exit 1; }
-	@set -o pipefail; $(PY) -m pytest test/ -q -p no:cacheprovider --durations=15 $(PYTEST_ARGS); rc=$$?; \
-	if [ $$rc -eq 5 ]; then echo "make test: pytest collected no tests" >&2; exit 1; fi; exit $$rc
+	@PY=$(PY) bash scripts/run_tests.sh $(PYTEST_ARGS)
 
 # The fast part of the suite while you work (tests not marked `slow`, see test/conftest.py); CI runs everything.
 check: setup

@@ -113,12 +113,15 @@ def plate_demo_bag(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Path]:
     shutil.rmtree(out, ignore_errors=True)          # images: hundreds of MB
 
 
-#: fixtures that start ROS processes or hold a ROS domain: a test using one is `slow` (left out of `make check`)
+#: fixtures that start ROS processes or hold a ROS domain: a test using one is `ros` and `slow` (left out of
+#: `make check`; `make test` runs the `ros` tests one at a time, the others on two workers)
 SLOW_FIXTURES = frozenset({"ros_env", "ros_domain_id", "module_ros_domain_id", "procs", "plate_demo_bag"})
 
 
 def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:
-    """Mark every test that starts ROS processes as `slow`; heavier ROS-free tests carry the marker themselves."""
+    """Mark every test that starts ROS processes as `ros` and `slow`; heavier ROS-free tests carry `slow`
+    themselves."""
     for item in items:
         if SLOW_FIXTURES & set(getattr(item, "fixturenames", ())):
+            item.add_marker(pytest.mark.ros)
             item.add_marker(pytest.mark.slow)
