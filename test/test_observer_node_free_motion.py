@@ -2,7 +2,7 @@
 (simulator with no scenario, driver, trajectory, cameras, pose, observer, rnea, ...) runs the paper's three
 trajectories at the demo's real-time factor; the observer must publish no collision event. CI runs one graph over the
 three in turn (`circle+helix+ellipse`, a 30 s sequence whose parts cross-fade over 2 s, as a loop restarts: the
-helix's 50 mm rise is taken up into the ellipse), 31 s from its start; the 60 s figure per trajectory is measured
+helix's 50 mm rise is taken up into the ellipse), 27 s from its start; the 60 s figure per trajectory is measured
 with the same function, each trajectory looping (`python test/test_observer_node_free_motion.py 60`), and reported
 in docs/observer_node.md."""
 from __future__ import annotations
@@ -17,9 +17,9 @@ pytest.importorskip("rclpy", reason="ROS 2 Jazzy wheels not installed: run `make
 TRAJECTORIES = ("circle", "helix", "ellipse")
 #: the CI run: the three in turn in one graph (hexa.trajectories.sequence)
 SEQUENCE = "+".join(TRAJECTORIES)
-#: sim seconds of the CI run: the trajectory starts at the first monitoring OK (≈ 1.0–1.6 s) and reaches the
-#: ellipse's second turn, past both junctions
-CI_DURATION = 31.0
+#: sim seconds of the CI run: the trajectory starts at the first monitoring OK (≈ 1.0–1.6 s) and runs the whole
+#: circle and helix, both junctions and the ellipse's first turn (5 s)
+CI_DURATION = 27.0
 
 
 def free_motion_run(trajectory: str, out_dir, domain: int, duration: float,

@@ -36,7 +36,7 @@ REPO = Path(__file__).resolve().parents[1]
 README = REPO / "README.md"
 HEXA = [sys.executable, "-m", "hexa_bringup.cli"]
 RUN_TIMEOUT = 240.0
-STREAM_SECONDS = 5.0
+STREAM_SECONDS = 3.0
 
 #: commands parsed, not run: (leading words) → why. Keep this list short.
 CHEAP: dict[tuple[str, ...], str] = {
