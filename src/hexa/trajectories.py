@@ -15,7 +15,7 @@ import math
 from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Callable
+from typing import Any, Callable
 
 import numpy as np
 
@@ -201,14 +201,26 @@ SEQUENCE_BLEND = 2.0
 SEQUENCE_SEPARATOR = "+"
 
 
-def _smoothstep3(u: np.ndarray, blend: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """s = 3u² − 2u³ of u = x / blend clipped to 0..1, and its first and second derivatives in x."""
-    inside = (u > 0.0) & (u < 1.0)
+def smoothstep(u: float | np.ndarray) -> Any:
+    """s = 3u² − 2u³ of u clipped to 0..1 (a float for a scalar u): a blend from 0 to 1 that starts and ends at
+    rest, the trajectory player's and a sequence's cross-fade."""
     v = np.clip(u, 0.0, 1.0)
     s = v * v * (3.0 - 2.0 * v)
-    ds = np.where(inside, 6.0 * v * (1.0 - v) / blend, 0.0)
-    dds = np.where(inside, (6.0 - 12.0 * v) / (blend * blend), 0.0)
-    return s, ds, dds
+    return float(s) if np.ndim(u) == 0 else s
+
+
+def smoothstep_rate(u: float | np.ndarray, duration: float) -> Any:
+    """d/dt of smoothstep(t / duration) at u = t / duration (0 outside 0..1)."""
+    v = np.clip(u, 0.0, 1.0)
+    d = np.where((v > 0.0) & (v < 1.0), 6.0 * v * (1.0 - v) / duration, 0.0)
+    return float(d) if np.ndim(u) == 0 else d
+
+
+def smoothstep_accel(u: float | np.ndarray, duration: float) -> Any:
+    """d²/dt² of smoothstep(t / duration) at u = t / duration (0 outside 0..1, where it steps)."""
+    v = np.clip(u, 0.0, 1.0)
+    d = np.where((v > 0.0) & (v < 1.0), (6.0 - 12.0 * v) / (duration * duration), 0.0)
+    return float(d) if np.ndim(u) == 0 else d
 
 
 def sequence(parts: Sequence[tuple[Trajectory, float]], blend: float = SEQUENCE_BLEND) -> tuple[Trajectory, float]:
@@ -245,7 +257,9 @@ def sequence(parts: Sequence[tuple[Trajectory, float]], blend: float = SEQUENCE_
             b = [np.asarray(v, dtype=float).reshape(-1, 6) for v in fn(x)]
             if i > 0 and blend > 0:
                 a = [np.asarray(v, dtype=float).reshape(-1, 6) for v in fns[i - 1](x + durations[i - 1])]
-                s, ds, dds = (v[:, None] for v in _smoothstep3(x / blend, blend))
+                u = x / blend
+                s, ds, dds = (v[:, None] for v in (smoothstep(u), smoothstep_rate(u, blend),
+                                                   smoothstep_accel(u, blend)))
                 b = [(1 - s) * a[0] + s * b[0],
                      (1 - s) * a[1] + s * b[1] + ds * (b[0] - a[0]),
                      (1 - s) * a[2] + s * b[2] + 2 * ds * (b[1] - a[1]) + dds * (b[0] - a[0])]

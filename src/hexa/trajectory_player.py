@@ -7,6 +7,8 @@ from typing import TYPE_CHECKING, Callable
 
 import numpy as np
 
+from hexa.trajectories import smoothstep, smoothstep_rate
+
 if TYPE_CHECKING:
     from hexa.robots.hexa_description import HexaDescription
 
@@ -26,16 +28,6 @@ class Command:
     pose: np.ndarray
     state: str  # "approaching" | "running" | "held" | "retracting" | "resuming" | "finished"
     trajectory_time: float
-
-
-def _smoothstep(s: float) -> float:
-    s = min(1.0, max(0.0, s))
-    return s * s * (3.0 - 2.0 * s)
-
-
-def _smoothstep_rate(u: float, duration: float) -> float:
-    """d/dt of _smoothstep(t / duration) at u = t / duration (0 outside 0..1)."""
-    return 6.0 * u * (1.0 - u) / duration if 0.0 < u < 1.0 else 0.0
 
 
 class TrajectoryPlayer:
@@ -183,7 +175,7 @@ class TrajectoryPlayer:
             if x < self.loop_blend:  # cross-fade from the previous cycle continued past its end
                 old, old_dot = self._raw_pose(x + self.duration)
                 u = x / self.loop_blend
-                s, ds = _smoothstep(u), _smoothstep_rate(u, self.loop_blend)
+                s, ds = smoothstep(u), smoothstep_rate(u, self.loop_blend)
                 pose_dot = (1.0 - s) * old_dot + s * pose_dot + ds * (pose - old)
                 pose = (1.0 - s) * old + s * pose
             return pose, pose_dot
@@ -198,8 +190,8 @@ class TrajectoryPlayer:
         u = (tt + self.approach_time) / self.approach_time
         start = self._approach_from
         assert start is not None, "an approach is planned before its poses are asked for"
-        return (start + _smoothstep(u) * self._approach_delta,
-                _smoothstep_rate(u, self.approach_time) * self._approach_delta)
+        return (start + smoothstep(u) * self._approach_delta,
+                smoothstep_rate(u, self.approach_time) * self._approach_delta)
 
     def command(self, t: float) -> Command:
         """The command at time t (s, sim or wall clock, monotonic).
@@ -217,7 +209,7 @@ class TrajectoryPlayer:
         if self._held_since is not None:
             base = self._hold_pose if self._hold_pose is not None else self._trajectory_pose(self._held_since
                                                                                             - self._offset)[0]
-            s = _smoothstep((t - self._held_since) / self.retract_time)
+            s = smoothstep((t - self._held_since) / self.retract_time)
             pose = base.copy()
             pose[:3] += self._retract_dir * self.retract_distance * s
             state = "retracting" if self._retract_dir.any() and s < 1.0 else "held"
@@ -233,9 +225,9 @@ class TrajectoryPlayer:
                 state = "finished" if (not self.loop and tt >= self.duration) else "running"
             if self._resume_at is not None and self._resume_from is not None and tt >= self._resume_at:
                 u = (tt - self._resume_at) / self._blend_time
-                s = _smoothstep(u)
+                s = smoothstep(u)
                 if s < 1.0:
-                    ds = _smoothstep_rate(u, self._blend_time)
+                    ds = smoothstep_rate(u, self._blend_time)
                     pose_dot = ds * (pose - self._resume_from) + s * pose_dot
                     pose = self._resume_from + (pose - self._resume_from) * s
                     state = state if self._starting else "resuming"

@@ -55,7 +55,7 @@ def _detect_at(case: dict[str, Any], detector: str, scale: float) -> tuple[bool,
     raise KeyError(f"no replay at scale {scale}")
 
 
-def isolation_mode(case: dict[str, Any]) -> str:
+def case_isolation(case: dict[str, Any]) -> str:
     """"rendered" or "oracle": how a contact case's isolation ran (results without the field: the oracle)."""
     iso = case.get("isolation")
     return iso.get("mode", "oracle") if isinstance(iso, dict) else "oracle"
@@ -72,7 +72,7 @@ def summarize_isolation(cases: list[dict[str, Any]]) -> dict[str, Any]:
     """The rendered isolation over the detected contacts (an oracle case measures nothing): right link + chain
     (`isolation_right`), the same for the onset pair alone, point errors (each case's median over its contacts
     during the true contact) of the right cases, per link and in all, and the cost per case (wall s)."""
-    rendered = [c for c in cases if isolation_mode(c) == "rendered"]
+    rendered = [c for c in cases if case_isolation(c) == "rendered"]
     det = [c for c in rendered if detected(c, c["metrics"]["detect_time"])]
     out: dict[str, Any] = {"rendered_cases": len(rendered), "oracle_cases": len(cases) - len(rendered),
                            "notes": sorted({c["isolation"].get("note", "") for c in cases
