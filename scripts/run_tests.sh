@@ -1,16 +1,17 @@
 #!/usr/bin/env bash
-# The test suite as `make test` runs it, in two parts: the tests that start no ROS processes on two workers
-# (pytest-xdist, one module per worker at a time), then the `ros` tests (test/conftest.py) one at a time, since
-# they measure a live graph that must not share the two cores with other tests. Both parts always run; the exit
+# The test suite as `make test` runs it, in two parts: first, on two workers (pytest-xdist, one module per worker at a
+# time), the tests that start no ROS processes and the `ros_parallel` ones (ROS processes whose graph only has to
+# answer: CLI verbs, bags, README commands); then the other `ros` tests (test/conftest.py) one at a time, since they
+# measure a live graph that must not share the two cores with other tests. Both parts always run; the exit
 # status is the first failure's. pytest's "no tests collected" (5) counts as a failure unless extra arguments
 # (PYTEST_ARGS, e.g. -k) select tests of the other part only.
 set -uo pipefail
 cd "$(dirname "$0")/.."
 PY=${PY:-.venv/bin/python}
 common=(-q -p no:cacheprovider "$@")
-"$PY" -m pytest test/ -m "not ros" -n 2 --dist loadfile --durations=5 "${common[@]}"
+"$PY" -m pytest test/ -m "not ros or ros_parallel" -n 2 --dist loadfile --durations=5 "${common[@]}"
 rc1=$?
-"$PY" -m pytest test/ -m ros --durations=15 "${common[@]}"
+"$PY" -m pytest test/ -m "ros and not ros_parallel" --durations=15 "${common[@]}"
 rc2=$?
 if [ $rc1 -eq 5 ] && [ $rc2 -eq 5 ]; then echo "make test: pytest collected no tests" >&2; exit 1; fi
 if [ $# -eq 0 ] && { [ $rc1 -eq 5 ] || [ $rc2 -eq 5 ]; }; then

@@ -114,7 +114,8 @@ def plate_demo_bag(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Path]:
 
 
 #: fixtures that start ROS processes or hold a ROS domain: a test using one is `ros` and `slow` (left out of
-#: `make check`; `make test` runs the `ros` tests one at a time, the others on two workers)
+#: `make check`; `make test` runs the `ros` tests one at a time, except the modules marked `ros_parallel`, which run on
+#: two workers with the others)
 SLOW_FIXTURES = frozenset({"ros_env", "ros_domain_id", "module_ros_domain_id", "procs", "plate_demo_bag"})
 
 

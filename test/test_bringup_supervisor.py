@@ -9,6 +9,10 @@ import time
 import pytest
 import yaml
 
+# ROS processes that only need the graph to answer, not to keep up with time: `make test` runs these on two
+# workers beside the ROS-free tests (scripts/run_tests.sh)
+pytestmark = pytest.mark.ros_parallel
+
 PY = sys.executable
 
 

@@ -13,7 +13,8 @@ from pathlib import Path
 
 import pytest
 
-pytestmark = pytest.mark.slow   # colcon builds: left out of `make check`
+# colcon builds: left out of `make check`; ROS processes that need no timing: on two workers in `make test`
+pytestmark = [pytest.mark.slow, pytest.mark.ros_parallel]
 
 REPO = Path(__file__).resolve().parents[1]
 VENV = Path(sys.prefix)

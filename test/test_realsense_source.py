@@ -14,6 +14,10 @@ import pytest
 
 from hexa.vision.sources import RealSenseSource
 
+# ROS processes that only need the graph to answer, not to keep up with time: `make test` runs these on two
+# workers beside the ROS-free tests (scripts/run_tests.sh)
+pytestmark = pytest.mark.ros_parallel
+
 try:
     import pyrealsense2 as rs
 except ImportError:   # the recording tests need it (make setup-robot); robot mode without cameras does not

@@ -8,6 +8,10 @@ import time
 
 import pytest
 
+# ROS processes that only need the graph to answer, not to keep up with time: `make test` runs these on two
+# workers beside the ROS-free tests (scripts/run_tests.sh)
+pytestmark = pytest.mark.ros_parallel
+
 pytest.importorskip("rclpy", reason="ROS 2 Jazzy wheels not installed: run `make test` (it sets them up)")
 
 PY = sys.executable

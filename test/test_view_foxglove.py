@@ -16,6 +16,10 @@ pytest.importorskip("websockets")
 
 from hexa.foxglove_client import FoxgloveClient, FoxgloveClientError  # noqa: E402
 
+# ROS processes that only need the graph to answer, not to keep up with time: `make test` runs these on two
+# workers beside the ROS-free tests (scripts/run_tests.sh)
+pytestmark = pytest.mark.ros_parallel
+
 PY = sys.executable
 
 

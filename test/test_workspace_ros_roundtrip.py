@@ -13,6 +13,10 @@ from msg_samples import sample_message  # noqa: E402
 from roundtrip_peer import MESSAGES  # noqa: E402
 from hexa_bringup.msgutil import message_to_dict  # noqa: E402
 
+# ROS processes that only need the graph to answer, not to keep up with time: `make test` runs these on two
+# workers beside the ROS-free tests (scripts/run_tests.sh)
+pytestmark = pytest.mark.ros_parallel
+
 PY = sys.executable
 
 
