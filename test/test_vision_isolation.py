@@ -7,12 +7,12 @@ import numpy as np
 import pytest
 
 from hexa.vision.camera import CameraModel, intrinsics, look_at
+from hexa.robots.plate import hexagon_border_point, plate_outline
 from hexa.vision.isolation import (
     LINK_UNKNOWN,
     CollisionIsolator,
     IsolationError,
     RobotGeometry,
-    hexagon_border_point,
     hexagon_line_entry,
     plate_distance,
     segment_distance,
@@ -80,6 +80,20 @@ def test_hexagon_border_point_and_line_entry() -> None:
     q = hexagon_line_entry(HEX, np.array([0.15, 0.01]), np.array([-1.0, 0.0]))
     assert q is not None and q[1] == pytest.approx(0.01) and np.hypot(*q) <= 0.1 + 1e-9
     assert hexagon_line_entry(HEX, np.array([0.3, 0.3]), np.array([1.0, 0.0])) is None
+    with pytest.raises(ValueError, match="no hexagon border point"):
+        hexagon_border_point(HEX + 1.0, np.array([-1.0, 0.0]))      # the centre outside the polygon
+
+
+def test_the_plate_outline_runs_through_every_plate_joint_by_angle() -> None:
+    from hexa.robots.hexa_description import load_hexa
+
+    desc = load_hexa()
+    hexagon = plate_outline(desc)
+    angles = np.arctan2(hexagon[:, 1], hexagon[:, 0])
+    assert hexagon.shape == (6, 2) and np.all(np.diff(angles) > 0)
+    assert sorted(map(tuple, hexagon.round(12))) == sorted(map(tuple, np.asarray(desc.C)[:, :2].round(12)))
+    for k in range(6):          # the ray towards a vertex meets the border at that vertex
+        np.testing.assert_allclose(hexagon_border_point(hexagon, hexagon[k]), hexagon[k], atol=1e-12)
 
 
 def _isolator() -> tuple[CollisionIsolator, CameraModel]:

@@ -14,6 +14,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from hexa.kinematics import hexa6rus as kin
+from hexa.robots.plate import plate_outline
 from hexa.sim.camera import mjcf_camera
 from hexa.sim.config import SimConfig, sim_config_of
 
@@ -128,7 +129,7 @@ def build_mjcf(desc: HexaDescription, pose: np.ndarray | None = None, config: Si
     w('<default><geom contype="0" conaffinity="0" group="1"/>'
       f'<joint damping="{servo.damping:.9g}" armature="0"/></default>')
     w('<asset>')
-    hexagon = _plate_outline(desc)
+    hexagon = plate_outline(desc)
     t2 = ap["plate_thickness"] / 2
     verts = [(*v, -t2) for v in hexagon] + [(*v, t2) for v in hexagon]
     w(f'<mesh name="plate_hex" vertex="{_f(np.ravel(verts))}"/>')
@@ -240,13 +241,6 @@ def build_mjcf(desc: HexaDescription, pose: np.ndarray | None = None, config: Si
     w('</actuator>')
     w('</mujoco>')
     return "\n".join(out)
-
-
-def _plate_outline(desc: HexaDescription) -> np.ndarray:
-    """Hexagon through the plate joints C_i in {P} (x, y), ordered by angle."""
-    C = np.asarray(desc.C, dtype=float)[:, :2]
-    order = np.argsort(np.arctan2(C[:, 1], C[:, 0]))
-    return C[order]
 
 
 def desc_mass_properties(desc: HexaDescription) -> dict[str, dict[str, Any]]:

@@ -27,6 +27,7 @@ from hexa.sim.camera import NoiseBank, RGBDRenderer, RenderError, camera_model_o
 from hexa.sim.config import CAMERA_NAMES, SimConfig, sim_config_of
 from hexa.sim.mjcf import HOME_POSE, PARK_POS, build_mjcf
 from hexa.sim.realism import RealismConfig, RobotTruth, ServoMechanics, draw_truth, nominal_truth
+from hexa.robots.plate import hexagon_border_point, plate_outline
 from hexa.vision.camera import CameraModel
 from hexa.sim.scenarios import ScenarioSpec, ScriptedCollision, draw_collision, load_scenario, push_direction
 
@@ -628,7 +629,8 @@ class Simulator:
         o = d.xpos[body]
         ap = self.config.appearance
         if c.link == "plate":
-            local_axis = _hexagon_border_point(self._plate_outline(), c.position)
+            border = hexagon_border_point(plate_outline(self.desc), [np.cos(c.position), np.sin(c.position)])
+            local_axis = np.array([border[0], border[1], 0.0])
             radius = 0.0
             axis = None
         else:
@@ -640,11 +642,6 @@ class Simulator:
         surface_local = local_axis - radius * (R.T @ direction)
         self._scripted_dir = direction
         self._scripted = _Contact(c.link, c.chain, body, surface_local, np.zeros(3))
-
-    def _plate_outline(self) -> np.ndarray:
-        from hexa.sim.mjcf import _plate_outline
-
-        return _plate_outline(self.desc)
 
     # ------------------------------------------------------------------ reading
     def _plate_pose_of(self, qpos: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -909,19 +906,3 @@ class Simulator:
 
     def __exit__(self, *exc: object) -> None:
         self.close()
-
-
-def _hexagon_border_point(outline: np.ndarray, angle: float) -> np.ndarray:
-    """Point of the plate's hexagonal border (in {P}, z = 0) hit by the ray from the centre at polar `angle`."""
-    d = np.array([np.cos(angle), np.sin(angle)])
-    n = len(outline)
-    for k in range(n):
-        a, b = outline[k], outline[(k + 1) % n]
-        M = np.column_stack([d, a - b])
-        if abs(np.linalg.det(M)) < 1e-12:
-            continue
-        s, u = np.linalg.solve(M, a)
-        if s > 0 and -1e-9 <= u <= 1 + 1e-9:
-            p = s * d
-            return np.array([p[0], p[1], 0.0])
-    raise SimulatorError(f"no border point of the plate at angle {angle} rad")

@@ -17,6 +17,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from hexa.robots.plate import hexagon_border_point, plate_outline
 from hexa.vision.camera import CameraModel
 from hexa.vision.images import depth_to_meters
 from hexa.vision.isolation import (
@@ -122,16 +123,16 @@ def contact_clearance(desc: HexaDescription, collision: Any, step: float = CLEAR
     `object_distance` from the point. A robot that holds on a START only takes poses of earlier instants, so every
     pose it passes through during the contact is one of these."""
     from hexa.kinematics import hexa6rus as kin
-    from hexa.sim.mjcf import _plate_outline
     from hexa.sim.scenarios import push_direction
-    from hexa.sim.simulator import _hexagon_border_point
     from hexa.trajectories import trajectory_named
 
     traj, duration = trajectory_named(collision.trajectory)
     t0 = collision.onset - collision.approach_time
     times = np.r_[np.arange(t0, collision.end_time, step), collision.end_time]
-    local = (_hexagon_border_point(_plate_outline(desc), collision.position) if collision.link == "plate"
-             else None)
+    local = None
+    if collision.link == "plate":
+        border = hexagon_border_point(plate_outline(desc), [np.cos(collision.position), np.sin(collision.position)])
+        local = np.array([border[0], border[1], 0.0])
     direction, gap = None, np.inf
     for t in times:
         pose = np.asarray(traj(float(np.clip(t, 0.0, duration)))[0], float)

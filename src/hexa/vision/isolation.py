@@ -29,6 +29,7 @@ from typing import TYPE_CHECKING, Any
 import cv2
 import numpy as np
 
+from hexa.robots.plate import hexagon_border_point, plate_outline
 from hexa.vision.camera import CameraModel
 
 if TYPE_CHECKING:
@@ -73,8 +74,7 @@ class RobotGeometry:
         T = np.eye(4)
         T[:3, :3] = kin.rotation_zyx(*pose[3:])
         T[:3, 3] = pose[:3]
-        Cp = np.asarray(desc.C, dtype=float)[:, :2]
-        hexagon = Cp[np.argsort(np.arctan2(Cp[:, 1], Cp[:, 0]))]
+        hexagon = plate_outline(desc)
         ap = _appearance(desc)
         return cls(np.stack([A, B], axis=1), np.stack([B, C], axis=1), T, hexagon, ap["arm_radius"],
                    ap["rod_radius"], ap["plate_thickness"] / 2.0)
@@ -149,25 +149,6 @@ def plate_distance(points: np.ndarray, geom: RobotGeometry) -> np.ndarray:
     d_xy = np.where(inside, 0.0, d_edge.min(axis=0))
     d_z = np.maximum(np.abs(q[:, 2]) - geom.plate_half_thickness, 0.0)
     return np.hypot(d_xy, d_z)
-
-
-def hexagon_border_point(hexagon: np.ndarray, direction_xy: np.ndarray) -> np.ndarray:
-    """Border point (2,) of the hexagon (in {P}) on the ray from the plate centre along `direction_xy` (Fig. 12g)."""
-    d = np.asarray(direction_xy, float)
-    d = d / max(np.linalg.norm(d), 1e-12)
-    n = len(hexagon)
-    best = None
-    for k in range(n):
-        a, b = hexagon[k], hexagon[(k + 1) % n]
-        M = np.column_stack([d, a - b])
-        if abs(np.linalg.det(M)) < 1e-12:
-            continue
-        s, u = np.linalg.solve(M, a)
-        if s > 0 and -1e-9 <= u <= 1 + 1e-9 and (best is None or s < best):
-            best = s
-    if best is None:
-        raise IsolationError(f"no hexagon border point along {d.tolist()}")
-    return best * d
 
 
 def hexagon_line_entry(hexagon: np.ndarray, origin: np.ndarray, direction: np.ndarray,
@@ -568,7 +549,10 @@ class CollisionIsolator:
                 if np.linalg.norm(a[:2]) > 0.2:
                     border = hexagon_line_crossing(geom.hexagon, c[:2], a[:2] / np.linalg.norm(a[:2]), tip[:2])
             if border is None:   # the paper's line through the plate centre
-                border = hexagon_border_point(geom.hexagon, q[:2])
+                try:
+                    border = hexagon_border_point(geom.hexagon, q[:2])
+                except ValueError as exc:
+                    raise IsolationError(str(exc)) from exc
             point = t + R @ np.array([border[0], border[1], 0.0])
         else:
             code, chain, seg, radius = links[best]
