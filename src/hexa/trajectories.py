@@ -223,13 +223,29 @@ def smoothstep_accel(u: float | np.ndarray, duration: float) -> Any:
     return float(d) if np.ndim(u) == 0 else d
 
 
+def cross_fade(a: Sequence[np.ndarray], b: Sequence[np.ndarray], x: float | np.ndarray,
+               blend: float) -> list[np.ndarray]:
+    """Cross-fade from motion `a` onto motion `b` (each [pose, rate] or [pose, rate, acceleration], the same
+    instants) `x` s into a `blend` s fade, with a smoothstep s = smoothstep(x / blend): pose (1 − s)·a + s·b, its
+    rate and acceleration by the product rule, so pose and rate stay continuous from `a` to `b`. Arrays of x run
+    along the first axis of each motion."""
+    u = np.asarray(x, dtype=float) / blend
+    s, ds, dds = smoothstep(u), smoothstep_rate(u, blend), smoothstep_accel(u, blend)
+    if np.ndim(u):
+        s, ds, dds = (np.asarray(v)[:, None] for v in (s, ds, dds))
+    out = [(1 - s) * a[0] + s * b[0], (1 - s) * a[1] + s * b[1] + ds * (b[0] - a[0])]
+    if len(a) > 2:
+        out.append((1 - s) * a[2] + s * b[2] + 2 * ds * (b[1] - a[1]) + dds * (b[0] - a[0]))
+    return out
+
+
 def sequence(parts: Sequence[tuple[Trajectory, float]], blend: float = SEQUENCE_BLEND) -> tuple[Trajectory, float]:
     """The trajectories `parts` ((trajectory, duration s) each) played in turn, and the total duration (s).
 
     Part k starts at the sum of the earlier durations. Over its first `blend` seconds it cross-fades from part k−1
     continued past its end onto part k with a smoothstep s: pose (1 − s)·a + s·b, its rate and acceleration the
-    product rule's, so pose and rate stay continuous across each junction (the trajectory player's loop restart
-    does the same). Away from the junctions each part is played as it is.
+    product rule's (`cross_fade`, which the trajectory player's loop restart uses too), so pose and rate stay
+    continuous across each junction. Away from the junctions each part is played as it is.
 
     Raises:
         ValueError: no part, a duration not > blend (the cross-fade must end inside its part), a blend < 0.
@@ -257,12 +273,7 @@ def sequence(parts: Sequence[tuple[Trajectory, float]], blend: float = SEQUENCE_
             b = [np.asarray(v, dtype=float).reshape(-1, 6) for v in fn(x)]
             if i > 0 and blend > 0:
                 a = [np.asarray(v, dtype=float).reshape(-1, 6) for v in fns[i - 1](x + durations[i - 1])]
-                u = x / blend
-                s, ds, dds = (v[:, None] for v in (smoothstep(u), smoothstep_rate(u, blend),
-                                                   smoothstep_accel(u, blend)))
-                b = [(1 - s) * a[0] + s * b[0],
-                     (1 - s) * a[1] + s * b[1] + ds * (b[0] - a[0]),
-                     (1 - s) * a[2] + s * b[2] + 2 * ds * (b[1] - a[1]) + dds * (b[0] - a[0])]
+                b = cross_fade(a, b, x, blend)
             for o, v in zip(out, b):
                 o[idx] = v
         shape = tt.shape + (6,)

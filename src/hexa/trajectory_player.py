@@ -7,7 +7,7 @@ from typing import TYPE_CHECKING, Callable
 
 import numpy as np
 
-from hexa.trajectories import smoothstep, smoothstep_rate
+from hexa.trajectories import cross_fade, smoothstep, smoothstep_rate
 
 if TYPE_CHECKING:
     from hexa.robots.hexa_description import HexaDescription
@@ -173,11 +173,7 @@ class TrajectoryPlayer:
             x = tt % self.duration
             pose, pose_dot = self._raw_pose(x)
             if x < self.loop_blend:  # cross-fade from the previous cycle continued past its end
-                old, old_dot = self._raw_pose(x + self.duration)
-                u = x / self.loop_blend
-                s, ds = smoothstep(u), smoothstep_rate(u, self.loop_blend)
-                pose_dot = (1.0 - s) * old_dot + s * pose_dot + ds * (pose - old)
-                pose = (1.0 - s) * old + s * pose
+                pose, pose_dot = cross_fade(self._raw_pose(x + self.duration), (pose, pose_dot), x, self.loop_blend)
             return pose, pose_dot
         pose, pose_dot = self._raw_pose(min(max(tt, 0.0), self.duration))
         return pose, (pose_dot if tt <= self.duration else np.zeros(6))   # finished: held at rest
