@@ -30,6 +30,25 @@ def test_folder_pairs_play_in_order_and_loop(tmp_path) -> None:
     assert once.next() is not None and once.next() is not None and once.next() is None
 
 
+def test_a_looped_folder_decodes_each_pair_once_within_its_cache_budget(tmp_path) -> None:
+    _write_pairs(tmp_path, 3)
+    model = CameraModel(intrinsics(8, 6, 1.0), 8, 6)
+    pair_bytes = 6 * 8 * 3 + 6 * 8 * 2
+    src = FolderSource(tmp_path, "cam_top", loop=True, fallback=lambda: model, cache_bytes=2 * pair_bytes)
+    assert FolderSource(tmp_path, "cam_top", loop=False, fallback=lambda: model).cache_bytes == 0   # played once
+    first = [src.next() for _ in range(3)]
+    for f in tmp_path.glob("*_000[01].png"):      # the first two pairs are cached, the third is not
+        f.unlink()
+    again = [src.next() for _ in range(2)]
+    assert [int(d[0, 0]) for _, d in again] == [500, 501]
+    assert all(a is b for a, b in zip(again[0], first[0]))
+    assert not again[0][0].flags.writeable                   # shared with later cycles: read-only
+    assert first[2][0].flags.writeable                       # over the budget: decoded each time
+    (tmp_path / "depth_0002.png").unlink()
+    with pytest.raises(SourceError):
+        src.next()
+
+
 def test_camera_info_yaml_overrides_the_fallback_intrinsics(tmp_path) -> None:
     _write_pairs(tmp_path, 1)
     (tmp_path / "camera_info.yaml").write_text("width: 8\nheight: 6\nk: [5, 0, 4, 0, 5, 3, 0, 0, 1]\n")

@@ -61,6 +61,9 @@ def read_pair(color: Path, depth: Path) -> tuple[np.ndarray, np.ndarray]:
 class FolderSource:
     """The PNG pairs of a folder in order, from the start again when `loop`.
 
+    Decoding a VGA colour + 16-bit depth PNG pair costs ≈ 10 ms of CPU, a third of a core at 30 fps; a looped
+    folder keeps the decoded pairs (read-only arrays) up to `cache_bytes` and serves later cycles from memory.
+
     The intrinsics come from the folder's camera_info.yaml (width, height, k[9], optional d) or, without it, from
     `fallback()` (e.g. the robot description's camera).
 
@@ -69,11 +72,14 @@ class FolderSource:
     """
 
     def __init__(self, path: str | Path, name: str, loop: bool = True,
-                 fallback: Callable[[], CameraModel] | None = None) -> None:
+                 fallback: Callable[[], CameraModel] | None = None, cache_bytes: int = 512 << 20) -> None:
         self.path = Path(path)
         self.pairs = folder_pairs(self.path)
         self.loop = loop
         self.index = 0
+        self.cache_bytes = int(cache_bytes) if loop else 0
+        self._cache: dict[int, tuple[np.ndarray, np.ndarray]] = {}
+        self._cached_bytes = 0
         info = self.path / "camera_info.yaml"
         if info.exists():
             import yaml
@@ -99,9 +105,18 @@ class FolderSource:
             if not self.loop:
                 return None
             self.index = 0
-        c, d = self.pairs[self.index]
+        i = self.index
         self.index += 1
-        return read_pair(c, d)
+        pair = self._cache.get(i)
+        if pair is None:
+            pair = read_pair(*self.pairs[i])
+            size = pair[0].nbytes + pair[1].nbytes
+            if self._cached_bytes + size <= self.cache_bytes:
+                for a in pair:
+                    a.flags.writeable = False
+                self._cache[i] = pair
+                self._cached_bytes += size
+        return pair
 
 
 class BagSource:
