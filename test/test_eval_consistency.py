@@ -27,3 +27,23 @@ def test_agreement_reports_the_time_difference_the_link_match_and_the_rmse_ratio
 def test_the_demo_cases_are_the_live_demos():
     demo_run = pytest.importorskip("hexa_bringup.demo_run")
     assert DEMO_CASES == demo_run.CASES
+
+
+def test_a_campaign_contact_written_as_a_scenario_is_the_scenarios_nominal_collision():
+    """What scripts/live_vs_eval.py --campaign hands the live simulator: the contact itself, hold and azimuth
+    included."""
+    import dataclasses
+
+    import yaml
+
+    from hexa.eval.campaign import draw_contact
+    from hexa.sim.scenarios import ScenarioError, draw_collision, parse_scenario, scenario_data
+
+    contacts = [draw_contact(0, i, "paper") for i in range(4)]
+    assert {c.link for c in contacts} >= {"rod", "arm"} and any(c.hold_time > 0 for c in contacts)
+    for c in contacts:
+        back = draw_collision(parse_scenario(yaml.safe_load(yaml.safe_dump(scenario_data(c)))))
+        assert dataclasses.astuple(back)[:4] == dataclasses.astuple(c)[:4]           # name, trajectory, link, chain
+        assert dataclasses.astuple(back)[4:] == pytest.approx(dataclasses.astuple(c)[4:], abs=1e-12)
+    with pytest.raises(ScenarioError, match="hold_time"):
+        parse_scenario({**scenario_data(contacts[0]), "hold_time": -0.1})

@@ -7,9 +7,13 @@ Both sides are `hexa.report.collision_demo.compute_metrics` dictionaries (`CaseM
 """
 from __future__ import annotations
 
+import dataclasses
 import math
 from dataclasses import dataclass
-from typing import Any
+from typing import TYPE_CHECKING, Any
+
+if TYPE_CHECKING:
+    from hexa.sim.scenarios import ScriptedCollision
 
 #: the demo's cases: scenario, trajectory, sim s after the lead-in (hexa_bringup.demo_run.CASES)
 DEMO_CASES: dict[str, tuple[str, str, float]] = {
@@ -60,26 +64,38 @@ def agreement(case: str, live: dict[str, Any], offline: dict[str, Any]) -> Agree
                      tuple(float(v) for v in offline["force_rmse"]))   # type: ignore[arg-type]
 
 
-def offline_case(case: str, seed: int = 0, realism: str = "ideal", command_phase: float = 0.0,
-                 isolation: str = "rendered", identify: bool = True) -> dict[str, Any]:
-    """The demo case `case` (its nominal scenario, trajectory and duration) through `hexa.eval.campaign.simulate`
-    with simulator seed `seed` on the robot `realism` ("ideal" | "realistic"), the commands going out
-    `command_phase` s after a current sample, with `isolation` ("rendered" | "oracle") and the force identified
-    (`identify`); its `CaseMetrics.as_dict()`.
+def offline_contact(collision: ScriptedCollision, duration: float, seed: int = 0, realism: str = "ideal",
+                    command_phase: float = 0.0, isolation: str = "rendered", identify: bool = True) -> dict[str, Any]:
+    """`collision` on its trajectory for `duration` s after the lead-in through `hexa.eval.campaign.simulate` with
+    simulator seed `seed` on the robot `realism` ("ideal" | "realistic"), the commands going out `command_phase` s
+    after a current sample, with `isolation` ("rendered" | "oracle") and the force identified (`identify`); its
+    `CaseMetrics.as_dict()`.
 
     Raises:
-        KeyError: an unknown case; hexa.sim.camera.RenderError: no GL context for the rendered isolation.
+        hexa.sim.camera.RenderError: no GL context for the rendered isolation.
     """
     from hexa.eval.campaign import R_LOW, case_data, simulate
     from hexa.report.collision_demo import compute_metrics
     from hexa.sim.realism import RealismConfig
+
+    rec = simulate(collision, collision.trajectory, duration, RealismConfig.named(realism), seed, identify=identify,
+                   isolation=isolation, command_phase=command_phase)
+    d = case_data(collision.name, rec, rec.events, (2.0,) * 3 + (0.2,) * 3, (0.35,) * 6)
+    return compute_metrics(d, r_low=R_LOW).as_dict()
+
+
+def offline_case(case: str, seed: int = 0, realism: str = "ideal", command_phase: float = 0.0,
+                 isolation: str = "rendered", identify: bool = True) -> dict[str, Any]:
+    """The demo case `case` (its nominal scenario, trajectory and duration) through `offline_contact`.
+
+    Raises:
+        KeyError: an unknown case; hexa.sim.camera.RenderError: no GL context for the rendered isolation.
+    """
     from hexa.sim.scenarios import draw_collision, load_scenario
 
     scenario, trajectory, duration = DEMO_CASES[case]
-    rec = simulate(draw_collision(load_scenario(scenario)), trajectory, duration, RealismConfig.named(realism), seed,
-                   identify=identify, isolation=isolation, command_phase=command_phase)
-    d = case_data(case, rec, rec.events, (2.0,) * 3 + (0.2,) * 3, (0.35,) * 6)
-    return compute_metrics(d, r_low=R_LOW).as_dict()
+    collision = dataclasses.replace(draw_collision(load_scenario(scenario)), trajectory=trajectory)
+    return offline_contact(collision, duration, seed, realism, command_phase, isolation, identify)
 
 
 #: command phases (s after a current sample; the samples come every 5 ms) the offline detection times span
