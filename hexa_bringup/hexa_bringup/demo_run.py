@@ -94,14 +94,20 @@ def run_case(case: str, out_dir: Path, env: dict[str, str], ns: str = "/hexa", s
              real_time_factor: float = REAL_TIME_FACTOR, record_images: bool = False, duration: float | None = None,
              params: Path = DEFAULT_PARAMS, status_every: float = 5.0, loop: bool = False,
              contact_model: str = "scripted", servo_frame_period: float | None = None,
-             stream_rate_hz: int | None = None, realism: str = "ideal") -> CaseRun:
+             stream_rate_hz: int | None = None, realism: str = "ideal",
+             scenario: tuple[str, str] | None = None) -> CaseRun:
     """Bring up the sim graph for `case`, record a bag until the scenario is over, stop everything.
 
     loop: the trajectory node restarts the trajectory at its end (free-motion runs longer than its 10 s);
     contact_model: the simulator's ("scripted" | "physical", hexa.sim.Simulator); servo_frame_period: the simulated
     servo board's pulse frame (s; None = the description's); stream_rate_hz: the Mega's sample rate (None = the
-    driver's configured one); realism: the simulated robot ("ideal" | "realistic", hexa.sim.realism)."""
-    scenario, trajectory, default_duration = CASES[case]
+    driver's configured one); realism: the simulated robot ("ideal" | "realistic", hexa.sim.realism); scenario:
+    (scenario name or YAML path, trajectory) instead of the case's (`case` then only names the output folder; give
+    `duration`)."""
+    if scenario is None:
+        scenario_name, trajectory, default_duration = CASES[case]
+    else:
+        (scenario_name, trajectory), default_duration = scenario, 0.0
     sim_s = LEAD_IN + (default_duration if duration is None else duration)
     case_dir = out_dir / case
     case_dir.mkdir(parents=True, exist_ok=True)
@@ -111,7 +117,8 @@ def run_case(case: str, out_dir: Path, env: dict[str, str], ns: str = "/hexa", s
 
         shutil.rmtree(bag)
     node_args = {
-        "sim": ["-p", f"scenario:={scenario}", "-p", f"seed:={seed}", "-p", f"real_time_factor:={real_time_factor}",
+        "sim": ["-p", f"scenario:={scenario_name}", "-p", f"seed:={seed}",
+                "-p", f"real_time_factor:={real_time_factor}",
                 "-p", f"duration:={sim_s}", "-p", "use_sim_time:=false", "-p", f"link_dir:=/tmp/hexa_sim_{os.getpid()}",
                 "-p", f"start_delay:={START_DELAY}", "-p", f"lead_in:={LEAD_IN}", "-p", f"trajectory:={trajectory}",
                 "-p", f"contact_model:={contact_model}", "-p", f"realism:={realism}",

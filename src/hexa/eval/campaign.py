@@ -202,7 +202,7 @@ def simulate(collision: ScriptedCollision | None, trajectory: str, duration: flo
              seed: int, observer_config: ObserverConfig | None = None, identify: bool = True,
              desc: HexaDescription | None = None, detector: str = "threshold",
              cusum: CusumConfig | None = None, isolation: str = "rendered", nodes_desc: HexaDescription | None = None,
-             stream_rate_hz: float | None = None) -> RunRecord:
+             stream_rate_hz: float | None = None, command_phase: float = 0.0) -> RunRecord:
     """Run the robot `duration` s of trajectory time (after LEAD_IN) with an optional scripted contact (its onset in
     trajectory time); see the module docstring for what runs. Free motion (no contact) loops the trajectory and
     ignores STARTs (it keeps moving, to count false alarms) and runs no isolation; with a contact a START holds the
@@ -210,7 +210,9 @@ def simulate(collision: ScriptedCollision | None, trajectory: str, duration: flo
     node's default: "threshold"; "cusum" with CusumConfig()). `isolation`: "rendered" (the isolation node's core on
     rendered frames; needs EGL) or "oracle" (ISOLATION_MODES). `nodes_desc`: the description the observer and the
     rnea tracker use (a calibration overlay of this robot; default `desc`, which builds the simulated robot);
-    `stream_rate_hz`: the currents' rate (default the driver's `stream_rate_hz`).
+    `stream_rate_hz`: the currents' rate (default the driver's `stream_rate_hz`); `command_phase` (s, in [0, 1/rate)):
+    the commands go out this long after a current sample (0: each reaches the servos just after a sample, and the
+    next sample is the first to carry it — in the live graph the phase is wherever the host's scheduling puts it).
 
     Raises:
         ValueError: an unknown isolation; hexa.sim.camera.RenderError: "rendered" without a GL context.
@@ -251,13 +253,15 @@ def simulate(collision: ScriptedCollision | None, trajectory: str, duration: flo
         collision_policy="ignore" if collision is None else "hold"))
     command_period = 1.0 / TrajectorySettings().rate_hz
     pending: list[tuple[float, np.ndarray, int]] = []
-    next_cmd, next_cam, seq = 0.0, 0.0, 0
+    next_cmd, next_cam, seq = float(command_phase), 0.0, 0
     rec: dict[str, list] = {k: [] for k in ("t", "res", "servo", "zd", "wt", "wf", "wp")}
     events: list[tuple[float, str, int, str]] = []
 
     t_end = LEAD_IN + duration
     rate = float(stream_rate_hz or driver_cfg["stream_rate_hz"])
     steps_per_sample = max(1, int(round(1.0 / (rate * sim.timestep))))
+    if not 0.0 <= command_phase < 1.0 / rate:
+        raise ValueError(f"command_phase must be in [0, {1.0 / rate:g}) s, got {command_phase!r}")
     k = 0
 
     def keep(forces: list[Any]) -> None:

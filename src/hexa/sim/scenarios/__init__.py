@@ -50,6 +50,8 @@ class ScenarioSpec:
     azimuth_jitter: float     # rad
     approach_time: float
     approach_distance: float
+    azimuth: float = 0.0      # rad: the nominal deviation of the force direction from the inward normal
+    hold_time: float = 0.0    # s at the peak force
 
 
 @dataclass(frozen=True)
@@ -166,7 +168,11 @@ def parse_scenario(data: dict[str, Any]) -> ScenarioSpec:
         azimuth_jitter=float(np.radians(float(data.get("azimuth_jitter_deg", 0.0)))),
         approach_time=float(data.get("approach_time", 0.6)),
         approach_distance=float(data.get("approach_distance", 0.25)),
+        azimuth=float(np.radians(float(data.get("azimuth_deg", 0.0)))),
+        hold_time=float(data.get("hold_time", 0.0)),
     )
+    if not spec.hold_time >= 0:
+        raise ScenarioError(f"scenario key 'hold_time' must be >= 0 s, got {spec.hold_time}")
     if spec.rise_time.lo <= 0 or spec.release_time.lo <= 0:
         raise ScenarioError("scenario keys 'rise_time' and 'release_time' must be > 0")
     if spec.peak_force.lo < 0:
@@ -205,9 +211,21 @@ def scenario_names() -> list[str]:
 def draw_collision(spec: ScenarioSpec, rng: np.random.Generator | None = None) -> ScriptedCollision:
     """A concrete collision from `spec`: nominal values when `rng` is None, else drawn uniformly from the ranges."""
     chain = spec.chains[0] if rng is None else int(rng.choice(spec.chains))
-    az = 0.0 if rng is None else float(rng.uniform(-spec.azimuth_jitter, spec.azimuth_jitter))
+    az = spec.azimuth + (0.0 if rng is None else float(rng.uniform(-spec.azimuth_jitter, spec.azimuth_jitter)))
     return ScriptedCollision(
         name=spec.name, trajectory=spec.trajectory, link=spec.link, chain=chain,
         onset=spec.onset.draw(rng), rise_time=spec.rise_time.draw(rng), release_time=spec.release_time.draw(rng),
         peak_force=spec.peak_force.draw(rng), position=spec.position.draw(rng), elevation=spec.elevation.draw(rng),
-        azimuth=az, approach_time=spec.approach_time, approach_distance=spec.approach_distance)
+        azimuth=az, approach_time=spec.approach_time, approach_distance=spec.approach_distance,
+        hold_time=spec.hold_time)
+
+
+def scenario_data(c: ScriptedCollision) -> dict[str, Any]:
+    """The YAML mapping of a scenario whose nominal collision is `c` (no ranges): a drawn contact (`hexa eval`'s)
+    written for the simulator node's `scenario` parameter."""
+    position = float(np.degrees(c.position)) if c.link == "plate" else c.position
+    return {"name": c.name, "trajectory": c.trajectory, "link": c.link, "chains": [int(c.chain)],
+            "onset": float(c.onset), "rise_time": float(c.rise_time), "release_time": float(c.release_time),
+            "hold_time": float(c.hold_time), "peak_force": float(c.peak_force), "position": float(position),
+            "elevation_deg": float(np.degrees(c.elevation)), "azimuth_deg": float(np.degrees(c.azimuth)),
+            "approach_time": float(c.approach_time), "approach_distance": float(c.approach_distance)}
