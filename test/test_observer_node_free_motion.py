@@ -1,7 +1,8 @@
 """Free motion in the live simulated graph (target: zero false alarms in 3 × 60 s): the whole graph
 (simulator with no scenario, driver, trajectory, cameras, pose, observer, rnea, ...) runs the paper's three
-trajectories at the demo's real-time factor; the observer must publish no collision event. CI runs one graph over the
-three in turn (`circle+helix+ellipse`, a 30 s sequence whose parts cross-fade over 2 s, as a loop restarts: the
+trajectories at the demo's real-time factor on the realistic simulated robot of seed 0, its nodes on the calibration
+overlay identified on that robot (docs/realism.md); the observer must publish no collision event. CI runs one graph
+over the three in turn (`circle+helix+ellipse`, a 30 s sequence whose parts cross-fade over 2 s, as a loop restarts: the
 helix's 50 mm rise is taken up into the ellipse), 27 s from its start; the 60 s figure per trajectory is measured
 with the same function, each trajectory looping (`python test/test_observer_node_free_motion.py 60`), and reported
 in docs/observer_node.md."""
@@ -24,10 +25,14 @@ CI_DURATION = 27.0
 
 def free_motion_run(trajectory: str, out_dir, domain: int, duration: float,
                     real_time_factor: float | None = None, servo_frame_period: float | None = None,
-                    stream_rate_hz: int | None = None) -> dict:
+                    stream_rate_hz: int | None = None, realism: str | None = None) -> dict:
     """Run the simulated graph with no collision scenario on `trajectory` for `duration` sim seconds; the collision
     events, the residual force (N), moment (N·m) and servo-torque (N·m) peaks the observer published, read from the
     recorded bag, and the samples over a threshold (plate axes or servo torques).
+
+    realism: the simulated robot (default hexa.sim.realism.DEFAULT_REALISM, the realistic one); the nodes run the
+    description that goes with it (hexa_bringup.demo_run.nodes_description: on the realistic robot the calibration
+    overlay identified on it, cached per robot, so that only the first run of a fresh cache identifies it).
 
     At real-time factor 0.3 the whole graph (simulator, two rendered cameras, vision, dynamics, recorder) uses about
     60 % of this 2-core machine; at 0.5 it saturates both cores, and a starved driver then forwards commands in bursts
@@ -36,12 +41,16 @@ def free_motion_run(trajectory: str, out_dir, domain: int, duration: float,
     from hexa_bringup.bag import read_bag, typestore
     from hexa_bringup.rosenv import ros_env
 
+    from hexa.sim.realism import DEFAULT_REALISM
+
     real_time_factor = demo_run.REAL_TIME_FACTOR if real_time_factor is None else real_time_factor
+    realism = DEFAULT_REALISM if realism is None else realism
+    description = demo_run.nodes_description(realism, 0)
     case = f"free_{trajectory}"
     demo_run.CASES.setdefault(case, ("none", trajectory, duration))  # run_case's table, extended in this process
     run = demo_run.run_case(case, out_dir, ros_env(domain), duration=duration, status_every=1e9,
                             real_time_factor=real_time_factor, loop=True, servo_frame_period=servo_frame_period,
-                            stream_rate_hz=stream_rate_hz)
+                            stream_rate_hz=stream_rate_hz, realism=realism, description=description)
     store = typestore()
     events, res, cmds = [], [], []
     for topic, msgtype, _t, data in read_bag(run.bag):
@@ -75,7 +84,7 @@ def free_motion_run(trajectory: str, out_dir, domain: int, duration: float,
             "peak_moment": peak_moment, "peak_servo_torque": peak_servo, "samples_over": int(over.sum()),
             "samples_over_servo": int(servo_over.sum()), "longest_run_over": int(max(runs)),
             "moving_s": round(moving_s, 2), "longest_still_s": round(still, 3),
-            "rc": run.returncode,
+            "rc": run.returncode, "realism": realism, "description": str(description) if description else None,
             "real_time_factor": real_time_factor, "wall_s": round(run.wall_s, 1)}
 
 
@@ -83,11 +92,12 @@ def test_free_motion_over_the_three_trajectories_in_turn_raises_no_collision(tmp
     r = free_motion_run(SEQUENCE, tmp_path, ros_domain_id, duration=CI_DURATION)
     assert r["residuals"] > 180 * CI_DURATION, r   # the observer ran at the current-sample rate (200 Hz) all along
     assert r["moving_s"] > CI_DURATION - 1.0 and r["longest_still_s"] < 0.1, r   # it moved all along
+    assert r["realism"] == "realistic" and r["description"], r   # the realistic robot, its nodes calibrated
     assert r["events"] == [], r
     assert r["rc"] == 0, r                   # the supervisor ended the graph normally (the simulator finished)
 
 
-if __name__ == "__main__":  # 60 s: python test/test_observer_node_free_motion.py 60 [DOMAIN [FRAME [HZ [TRAJS]]]]
+if __name__ == "__main__":  # python test/test_observer_node_free_motion.py 60 [DOMAIN [FRAME [HZ [TRAJS [REALISM]]]]]
     import json
     import tempfile
     from pathlib import Path
@@ -96,7 +106,8 @@ if __name__ == "__main__":  # 60 s: python test/test_observer_node_free_motion.p
     dom = int(sys.argv[2]) if len(sys.argv) > 2 else 63
     frame = float(sys.argv[3]) if len(sys.argv) > 3 else None     # the servo board's pulse frame (s)
     hz = int(sys.argv[4]) if len(sys.argv) > 4 else None          # the Mega's sample rate
-    trajs = sys.argv[5].split(",") if len(sys.argv) > 5 else TRAJECTORIES
+    trajs = sys.argv[5].split(",") if len(sys.argv) > 5 and sys.argv[5] else TRAJECTORIES
+    robot = sys.argv[6] if len(sys.argv) > 6 else None                # ideal | realistic (default)
     for traj in trajs:
         print(json.dumps(free_motion_run(traj, Path(tempfile.mkdtemp()), dom, dur, servo_frame_period=frame,
-                                         stream_rate_hz=hz)), flush=True)
+                                         stream_rate_hz=hz, realism=robot)), flush=True)

@@ -6,6 +6,7 @@ import os
 import sys
 import threading
 import time
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -90,12 +91,31 @@ REAL_TIME_FACTOR = 0.5
 LEAD_IN = 1.0
 
 
+def nodes_description(realism: str, seed: int, log: Callable[[str], None] | None = None) -> Path | None:
+    """The description the nodes run on the simulated robot `realism` of `seed`: None (the packaged one) on the ideal
+    robot, which is that model; on the realistic robot the calibration overlay identified on it the way an operator
+    calibrates a real robot (`hexa calibrate`, hexa.calibration.simulated.simulated_calibration: cached per robot,
+    ≈ 1.5 min of CPU the first time). The nodes never read the simulator's truth.
+
+    Raises:
+        hexa.calibration.identify.CalibrationError, hexa.calibration.recording.RecordingError: no calibration.
+    """
+    from hexa.sim.realism import RealismConfig
+
+    cfg = RealismConfig.named(realism)
+    if not cfg.truth and not cfg.servo_mechanics:
+        return None
+    from hexa.calibration.simulated import simulated_calibration
+
+    return simulated_calibration(seed, cfg, log=log)
+
+
 def run_case(case: str, out_dir: Path, env: dict[str, str], ns: str = "/hexa", seed: int = 0,
              real_time_factor: float = REAL_TIME_FACTOR, record_images: bool = False, duration: float | None = None,
              params: Path = DEFAULT_PARAMS, status_every: float = 5.0, loop: bool = False,
              contact_model: str = "scripted", servo_frame_period: float | None = None,
              stream_rate_hz: int | None = None, realism: str = "ideal",
-             scenario: tuple[str, str] | None = None) -> CaseRun:
+             scenario: tuple[str, str] | None = None, description: str | Path | None = None) -> CaseRun:
     """Bring up the sim graph for `case`, record a bag until the scenario is over, stop everything.
 
     loop: the trajectory node restarts the trajectory at its end (free-motion runs longer than its 10 s);
@@ -103,7 +123,8 @@ def run_case(case: str, out_dir: Path, env: dict[str, str], ns: str = "/hexa", s
     servo board's pulse frame (s; None = the description's); stream_rate_hz: the Mega's sample rate (None = the
     driver's configured one); realism: the simulated robot ("ideal" | "realistic", hexa.sim.realism); scenario:
     (scenario name or YAML path, trajectory) instead of the case's (`case` then only names the output folder; give
-    `duration`)."""
+    `duration`); description: the robot description or calibration overlay of every node but the simulator (None:
+    the packaged description; `nodes_description` gives the one that goes with `realism`)."""
     if scenario is None:
         scenario_name, trajectory, default_duration = CASES[case]
     else:
@@ -130,6 +151,11 @@ def run_case(case: str, out_dir: Path, env: dict[str, str], ns: str = "/hexa", s
                        "-p", f"loop:={'true' if loop else 'false'}"],
         "singularity": ["-p", "robot:=hexa"],
     }
+    if description is not None:
+        path = str(Path(description).resolve())
+        for spec in build_graph("sim", ns, params, node_args):
+            if spec.name != "sim":
+                node_args[spec.name] = node_args.get(spec.name, []) + ["-p", f"description:={path}"]
     specs = build_graph("sim", ns, params, node_args)
     for s in specs:
         if s.name == "sim":

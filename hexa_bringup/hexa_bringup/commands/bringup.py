@@ -28,8 +28,10 @@ def register(sub: argparse._SubParsersAction) -> None:
                         "start at most this fast (rad/s); 0 = off (first command at full servo speed). "
                         f"Default {ROBOT_APPROACH_SPEED} in robot mode, 0 in sim (the simulator starts there)")
     p.add_argument("--realism", choices=["ideal", "realistic"], default=None,
-                   help="sim mode: the simulated robot, ideal or realistic (docs/realism.md); default: the sim "
-                        "node's parameter (ideal)")
+                   help="sim mode: the simulated robot, realistic or ideal (docs/realism.md); default: the sim "
+                        "node's parameter (realistic). On the realistic robot the other nodes run a calibration "
+                        "overlay identified on it (cached per robot; ≈ 1.5 min of CPU the first time) unless "
+                        "--description says otherwise")
     p.add_argument("--trajectory", default=None, metavar="FILE",
                    help="sim/robot: the trajectory node plays this pose file (CSV t x y z alpha beta gamma, SI; e.g. "
                         "from `hexa calibrate excite`) instead of its configured trajectory")
@@ -122,6 +124,56 @@ def description_args(description: str, specs: list, node_args: dict[str, list[st
     return out
 
 
+def sim_robot(params: Path, node_args: dict[str, list[str]]) -> tuple[str, int]:
+    """(realism, seed) of the simulator that sim mode starts: its `-p` overrides, else the parameters file's
+    `/**/sim` (or `sim`) section, else the node's defaults.
+
+    Raises:
+        hexa_bringup.supervisor.SupervisorError: the parameters file is not readable YAML.
+    """
+    import yaml
+
+    from hexa.sim.realism import DEFAULT_REALISM
+    from hexa_bringup.supervisor import SupervisorError
+
+    values: dict[str, object] = {"realism": DEFAULT_REALISM, "seed": 0}
+    if params.is_file():
+        try:
+            data = yaml.safe_load(params.read_text(encoding="utf-8")) or {}
+        except (OSError, yaml.YAMLError) as exc:
+            raise SupervisorError(f"cannot read parameters file {params}: {exc}") from exc
+        for key in ("/**", "/**/sim", "sim"):
+            section = data.get(key) if isinstance(data, dict) else None
+            if isinstance(section, dict) and isinstance(section.get("ros__parameters"), dict):
+                values.update({k: v for k, v in section["ros__parameters"].items() if k in values})
+    args = node_args.get("sim", [])
+    for a in args:
+        name, _, value = a.partition(":=")
+        if name in values and value:
+            values[name] = value
+    try:
+        return str(values["realism"]), int(str(values["seed"]))
+    except ValueError as exc:
+        raise SupervisorError(f"the simulator's seed must be an integer, got {values['seed']!r}") from exc
+
+
+def calibrated_description(params: Path, node_args: dict[str, list[str]]) -> Path | None:
+    """The calibration overlay the nodes of sim mode run when the simulator is the realistic robot (identified on
+    that robot, cached: hexa_bringup.demo_run.nodes_description), None on the ideal robot.
+
+    Raises:
+        hexa_bringup.supervisor.SupervisorError: the robot cannot be calibrated.
+    """
+    from hexa_bringup.demo_run import nodes_description
+    from hexa_bringup.supervisor import SupervisorError
+
+    realism, seed = sim_robot(params, node_args)
+    try:
+        return nodes_description(realism, seed, log=lambda line: print(f"hexa bringup: {line}", flush=True))
+    except ValueError as exc:   # an unknown realism, CalibrationError, RecordingError
+        raise SupervisorError(f"cannot calibrate the simulated {realism} robot of seed {seed}: {exc}") from exc
+
+
 def _bag_topics(bag: str) -> list[str]:
     """The topics of `bag`.
 
@@ -151,8 +203,11 @@ def run(args: argparse.Namespace) -> int:
             node_args = mode_node_args(args)
             params = Path(args.params) if args.params else DEFAULT_PARAMS
             ns = args.ns or ("/upsrpu" if args.mode == "upsrpu" else "/hexa")
-            if getattr(args, "description", None):
-                node_args = description_args(args.description, build_graph(args.mode, ns, params, node_args),
+            description = getattr(args, "description", None)
+            if args.mode == "sim" and not description:
+                description = calibrated_description(params, node_args)
+            if description:
+                node_args = description_args(str(description), build_graph(args.mode, ns, params, node_args),
                                              node_args)
             specs = build_graph(args.mode, ns, params, node_args, compose=args.compose)
             if args.mode == "replay":

@@ -22,10 +22,15 @@ def register(sub: argparse._SubParsersAction) -> None:
                         "a capsule pushes through MuJoCo contacts with friction (truth = MuJoCo's contact force)")
     p.add_argument("--params", default=None,
                    help="node parameter YAML (default: the bundled hexa_bringup/config/hexa_params.yaml)")
-    p.add_argument("--realism", choices=["ideal", "realistic"], default="ideal",
-                   help="the simulated robot: ideal (the nodes' model, set-points applied at once; default) or "
-                        "realistic (a truth drawn from --seed within the documented tolerances, servo friction, gear "
-                        "play, dead band, ACS712 noise, the 20 ms pulse frame: docs/realism.md)")
+    p.add_argument("--realism", choices=["ideal", "realistic"], default="realistic",
+                   help="the simulated robot: realistic (default: a truth drawn from --seed within the documented "
+                        "tolerances, servo friction, gear play, dead band, ACS712 noise, the 20 ms pulse frame; the "
+                        "nodes run a calibration overlay identified on it, cached after the first run: "
+                        "docs/realism.md) or ideal (the nodes' model, set-points applied at once)")
+    p.add_argument("--description", default=None, metavar="YAML",
+                   help="robot description or calibration overlay of every node but the simulator, instead of the "
+                        "one that goes with --realism (e.g. src/hexa/robots/hexa.yaml: the uncalibrated model on the "
+                        "realistic robot)")
     p.add_argument("--ns", default="/hexa")
     p.add_argument("--json", action="store_true", help="print the metrics as JSON")
     p.set_defaults(func=run)
@@ -40,7 +45,8 @@ def watch_hint(domain: int, ns: str = "/hexa") -> str:
 def run(args: argparse.Namespace) -> int:
     from hexa.report.collision_demo import (compute_metrics, markdown_table, plate_equivalent_truth, plot_case,
                                             write_report)
-    from hexa_bringup.demo_run import CASES, DEFAULT_PARAMS, REAL_TIME_FACTOR, case_data_from_bag, run_case
+    from hexa_bringup.demo_run import (CASES, DEFAULT_PARAMS, REAL_TIME_FACTOR, case_data_from_bag, nodes_description,
+                                       run_case)
     from hexa_bringup.rosenv import ros_env
     from hexa_bringup.supervisor import SupervisorError
 
@@ -56,6 +62,20 @@ def run(args: argparse.Namespace) -> int:
     if not params.is_file():
         print(f"hexa demo: parameter file {params} not found", file=sys.stderr)
         return 2
+    if args.description is not None:
+        description: Path | None = Path(args.description)
+        if not description.is_file():
+            print(f"hexa demo: description {description} not found", file=sys.stderr)
+            return 2
+    else:
+        try:
+            description = nodes_description(args.realism, args.seed, log=lambda line: print(f"hexa demo: {line}",
+                                                                                            flush=True))
+        except ValueError as exc:   # CalibrationError, RecordingError
+            print(f"hexa demo: cannot calibrate the simulated robot: {exc}", file=sys.stderr)
+            return 2
+    print(f"hexa demo: the {args.realism} simulated robot (seed {args.seed}); the nodes' model: "
+          f"{description or 'the packaged description'}", flush=True)
     metrics, plots, problems = [], {}, []
     for i, case in enumerate(cases, 1):
         print(f"\n=== hexa demo: case {i}/{len(cases)}: {case} (scenario {CASES[case][0]}, trajectory "
@@ -63,7 +83,7 @@ def run(args: argparse.Namespace) -> int:
         try:
             run = run_case(case, out, env, ns=args.ns, seed=args.seed, real_time_factor=rtf,
                            record_images=args.record_images, contact_model=args.contact_model,
-                           params=params, realism=args.realism)
+                           params=params, realism=args.realism, description=description)
         except SupervisorError as exc:
             print(f"hexa demo: cannot start the graph: {exc}", file=sys.stderr)
             return 2
@@ -80,7 +100,9 @@ def run(args: argparse.Namespace) -> int:
         plots[case] = plot_case(data, m, out / f"{case}.png", plate_equivalent=W)
         print(f"case {case} done in {run.wall_s:.0f} s wall", flush=True)
     notes = "\n".join(f"- {p}" for p in problems)
-    report = write_report(metrics, plots, out, notes=("Problems:\n" + notes) if problems else "")
+    robot = (f"Simulated robot: {args.realism}, seed {args.seed}; the nodes' model: "
+             f"{description or 'the packaged description'}.")
+    report = write_report(metrics, plots, out, notes=robot + ("\n\nProblems:\n" + notes if problems else ""))
     if args.json:
         print(json.dumps({"report": str(report), "cases": [m.as_dict() for m in metrics], "problems": problems}))
     else:

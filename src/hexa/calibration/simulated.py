@@ -61,3 +61,100 @@ def calibrate_simulated_robot(excitation: str | Path, seed: int, realism: Realis
     recs, _ = simulate_excitation_runs(excitation, seed, realism, desc)
     cal = identify([prepare(r, desc, period=exc.period) for r in recs], desc)
     return load_hexa(write_overlay(out, cal, desc)), cal
+
+
+#: the packages of hexa whose source a cached calibration of a simulated robot depends on besides its inputs (the
+#: excitation's design on `calibration` alone)
+_CACHE_SOURCES = ("calibration", "sim")
+
+
+def cache_dir() -> Path:
+    """Where simulated calibrations are kept: `HEXA_CACHE_DIR`, else `$XDG_CACHE_HOME/hexa`, else ~/.cache/hexa."""
+    import os
+
+    if os.environ.get("HEXA_CACHE_DIR"):
+        return Path(os.environ["HEXA_CACHE_DIR"])
+    return Path(os.environ.get("XDG_CACHE_HOME") or Path.home() / ".cache") / "hexa"
+
+
+def _digest(*parts: bytes | str) -> str:
+    import hashlib
+
+    h = hashlib.sha256()
+    for p in parts:
+        b = p.encode() if isinstance(p, str) else p
+        h.update(len(b).to_bytes(8, "little"))
+        h.update(b)
+    return h.hexdigest()[:16]
+
+
+def _sources_digest(packages: tuple[str, ...] = _CACHE_SOURCES) -> str:
+    """One digest of the code that shapes a simulated calibration (the source of hexa's `packages`)."""
+    root = Path(__file__).resolve().parents[1]
+    files = sorted(f for pkg in packages for f in (root / pkg).rglob("*") if f.suffix in (".py", ".yaml"))
+    return _digest(*(f"{f.relative_to(root)}" for f in files), *(f.read_bytes() for f in files))
+
+
+def _description_bytes(path: Path) -> bytes:
+    """The bytes of a description file, and of its base if it is a calibration overlay."""
+    from hexa.robots.hexa_description import OVERLAY_KEY, overlay_base
+    from hexa.robots.schema import load_yaml
+
+    data = load_yaml(path)
+    return path.read_bytes() + (overlay_base(path, data).read_bytes() if OVERLAY_KEY in data else b"")
+
+
+def simulated_calibration(seed: int, realism: RealismConfig, description: str | Path | None = None,
+                          cache: str | Path | None = None,
+                          log: Callable[[str], None] | None = None) -> Path:
+    """The calibration overlay of the simulated robot of `seed` and `realism` (the robot `hexa-sim` runs with the
+    same seed and realism), identified as `hexa calibrate` does — the default excitation design, a free run and a
+    run carrying SIM_PAYLOAD, `identify` — from motion and currents only, never from the simulator's truth.
+
+    Kept in `cache` (default `cache_dir()`/calibration) under a key of the seed, the realism, the description's
+    bytes and the source of the packages that shape the result, so that repeated demos and tests identify each
+    robot once; processes that ask for the same robot at once wait for the first. `log` gets one line per step
+    that takes time. Returns the overlay's path (give it to the nodes as their `description`).
+
+    Raises:
+        hexa.calibration.identify.CalibrationError, RecordingError: the robot cannot be identified.
+    """
+    import fcntl
+    import os
+    import time
+
+    from hexa.calibration.excitation import ExcitationSettings, design_excitation
+    from hexa.robots.hexa_description import DEFAULT_PATH, load_hexa
+
+    path = Path(description) if description is not None else DEFAULT_PATH
+    folder = Path(cache) if cache is not None else cache_dir() / "calibration"
+    folder.mkdir(parents=True, exist_ok=True)
+    settings = ExcitationSettings()
+    base_key = _digest(_description_bytes(path), repr(settings), _sources_digest(("calibration",)))
+    excitation = folder / f"excitation-{base_key}.csv"
+    robot_key = _digest(base_key, str(int(seed)), repr(realism), _sources_digest())
+    overlay = folder / f"sim-seed{int(seed)}-{realism.name}-{robot_key}.yaml"
+    say = log or (lambda _line: None)
+    with open(folder / ".lock", "w") as lock:
+        fcntl.flock(lock, fcntl.LOCK_EX)            # one identification at a time; the others then find its file
+        try:
+            if overlay.is_file():
+                return overlay
+            desc = load_hexa(path)
+            if not excitation.is_file():
+                t0 = time.monotonic()
+                say(f"designing the calibration excitation (once per description) → {excitation}")
+                tmp = excitation.with_suffix(f".tmp{os.getpid()}.csv")
+                design_excitation(desc, settings).write(tmp, settings.rate_hz)
+                os.replace(tmp, excitation)
+                say(f"excitation designed in {time.monotonic() - t0:.0f} s")
+            t0 = time.monotonic()
+            say(f"calibrating the simulated {realism.name} robot of seed {seed} (excitation runs with and without "
+                f"{SIM_PAYLOAD:g} kg, identification; once per robot) → {overlay}")
+            tmp = overlay.with_suffix(f".tmp{os.getpid()}.yaml")
+            calibrate_simulated_robot(excitation, seed, realism, desc, tmp)
+            os.replace(tmp, overlay)
+            say(f"calibrated in {time.monotonic() - t0:.0f} s")
+            return overlay
+        finally:
+            fcntl.flock(lock, fcntl.LOCK_UN)
