@@ -119,20 +119,20 @@ def test_realism_reaches_the_simulator_in_sim_mode_and_is_refused_elsewhere():
                                   approach_speed=None, realism=realism)
 
     assert mode_node_args(args("sim", "realistic"))["sim"] == ["-p", "realism:=realistic"]
-    assert "sim" not in mode_node_args(args("sim", None))        # the sim node's own default (realistic)
+    assert "sim" not in mode_node_args(args("sim", None))        # the sim node's own default (ideal)
     with pytest.raises(SupervisorError, match="realism"):
         mode_node_args(args("robot", "realistic"))
 
 
 def test_sim_mode_knows_the_simulated_robot_from_its_overrides_the_parameters_file_and_the_default(tmp_path):
     from hexa_bringup.commands.bringup import sim_robot
-    from hexa_bringup.graphs import DEFAULT_PARAMS
+    from hexa_bringup.graphs import DEFAULT_PARAMS, DEFAULT_REALISM
     from hexa_bringup.sim_node import PARAMETERS
     from hexa_bringup.supervisor import SupervisorError
 
-    assert PARAMETERS["realism"].default == "realistic"
-    assert sim_robot(DEFAULT_PARAMS, {}) == ("realistic", 0)                       # the shipped parameters
-    assert sim_robot(tmp_path / "none.yaml", {}) == ("realistic", 0)               # no file: the node's defaults
+    assert PARAMETERS["realism"].default == DEFAULT_REALISM
+    assert sim_robot(DEFAULT_PARAMS, {}) == (DEFAULT_REALISM, 0)                   # the shipped parameters
+    assert sim_robot(tmp_path / "none.yaml", {}) == (DEFAULT_REALISM, 0)           # no file: the node's defaults
     own = tmp_path / "p.yaml"
     own.write_text("/**/sim:\n  ros__parameters:\n    seed: 7\n    realism: ideal\n")
     assert sim_robot(own, {}) == ("ideal", 7)

@@ -16,6 +16,7 @@ from typing import Any
 
 from geometry_msgs.msg import PoseStamped, WrenchStamped
 from hexa_msgs.msg import Contact
+from hexa_bringup.graphs import DEFAULT_REALISM
 from hexa_ros import qos
 from hexa_ros.cdr import image_to_cdr
 from hexa_ros.conversions import JOINT_NAMES, fill_pose_msg
@@ -29,7 +30,7 @@ from hexa.kinematics.hexa6rus import rotation_zyx
 from hexa.sim import Simulator
 from hexa.sim.boards import VirtualBoards
 from hexa.sim.pacing import MAX_LAG, Pacer, SimRunner
-from hexa.sim.realism import DEFAULT_REALISM, RealismConfig
+from hexa.sim.realism import RealismConfig
 from hexa.sim.simulator import LINK_CODES
 
 
@@ -54,9 +55,9 @@ PARAMETERS = {
                                        "through MuJoCo contacts)", choices=("scripted", "physical")),
     "servo_frame_period": Param(-1.0, "s between servo set-point frames (0..0.1); < 0 = the description's "
                                       "(or the realism's)", range=(-1.0, 0.1)),
-    "realism": Param(DEFAULT_REALISM, "realistic (a truth drawn from `seed`, servo friction, gear play, dead band, "
-                                      "20 ms pulse frame, ACS712 noise; docs/realism.md) | ideal (the robot is the "
-                                      "nodes' model)",
+    "realism": Param(DEFAULT_REALISM, "ideal (the robot is the nodes' model) | realistic (a truth drawn from "
+                                      "`seed`, servo friction, gear play, dead band, 20 ms pulse frame, ACS712 noise; "
+                                      "docs/realism.md)",
                      choices=("ideal", "realistic"))}
 
 

@@ -28,8 +28,8 @@ def register(sub: argparse._SubParsersAction) -> None:
                         "start at most this fast (rad/s); 0 = off (first command at full servo speed). "
                         f"Default {ROBOT_APPROACH_SPEED} in robot mode, 0 in sim (the simulator starts there)")
     p.add_argument("--realism", choices=["ideal", "realistic"], default=None,
-                   help="sim mode: the simulated robot, realistic or ideal (docs/realism.md); default: the sim "
-                        "node's parameter (realistic). On the realistic robot the other nodes run a calibration "
+                   help="sim mode: the simulated robot, ideal or realistic (docs/realism.md); default: the sim "
+                        "node's parameter (ideal). On the realistic robot the other nodes run a calibration "
                         "overlay identified on it (cached per robot; ≈ 1.5 min of CPU the first time) unless "
                         "--description says otherwise")
     p.add_argument("--trajectory", default=None, metavar="FILE",
@@ -133,7 +133,7 @@ def sim_robot(params: Path, node_args: dict[str, list[str]]) -> tuple[str, int]:
     """
     import yaml
 
-    from hexa.sim.realism import DEFAULT_REALISM
+    from hexa_bringup.graphs import DEFAULT_REALISM
     from hexa_bringup.supervisor import SupervisorError
 
     values: dict[str, object] = {"realism": DEFAULT_REALISM, "seed": 0}

@@ -7,6 +7,8 @@ import os
 import sys
 from pathlib import Path
 
+from hexa_bringup.graphs import DEFAULT_REALISM
+
 
 def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("demo", help="the paper's three collision cases on the simulated robot (bag, report, table)")
@@ -22,11 +24,11 @@ def register(sub: argparse._SubParsersAction) -> None:
                         "a capsule pushes through MuJoCo contacts with friction (truth = MuJoCo's contact force)")
     p.add_argument("--params", default=None,
                    help="node parameter YAML (default: the bundled hexa_bringup/config/hexa_params.yaml)")
-    p.add_argument("--realism", choices=["ideal", "realistic"], default="realistic",
-                   help="the simulated robot: realistic (default: a truth drawn from --seed within the documented "
-                        "tolerances, servo friction, gear play, dead band, ACS712 noise, the 20 ms pulse frame; the "
-                        "nodes run a calibration overlay identified on it, cached after the first run: "
-                        "docs/realism.md) or ideal (the nodes' model, set-points applied at once)")
+    p.add_argument("--realism", choices=["ideal", "realistic"], default=DEFAULT_REALISM,
+                   help=f"the simulated robot (default {DEFAULT_REALISM}): ideal (the nodes' model, set-points applied "
+                        "at once) or realistic (a truth drawn from --seed within the documented tolerances, servo "
+                        "friction, gear play, dead band, ACS712 noise, the 20 ms pulse frame; the nodes run a "
+                        "calibration overlay identified on it, cached after the first run: docs/realism.md)")
     p.add_argument("--description", default=None, metavar="YAML",
                    help="robot description or calibration overlay of every node but the simulator, instead of the "
                         "one that goes with --realism (e.g. src/hexa/robots/hexa.yaml: the uncalibrated model on the "

@@ -190,11 +190,6 @@ class JitterConfig:
         return float(d)
 
 
-#: the simulated robot `hexa-sim`, `hexa demo` and `hexa bringup sim` run unless told otherwise (its nodes then run
-#: a calibration overlay identified on it: hexa.calibration.simulated.simulated_calibration)
-DEFAULT_REALISM = "realistic"
-
-
 @dataclass(frozen=True)
 class RealismConfig:
     """Which effects the simulated robot has (one switch each); `ideal()` and `realistic()` are the two presets.
