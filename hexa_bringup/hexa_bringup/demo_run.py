@@ -12,15 +12,13 @@ from pathlib import Path
 
 import numpy as np
 
-from hexa_bringup.graphs import DEFAULT_PARAMS, build_graph
+from hexa.report.collision_demo import DEMO_CASES
+from hexa_bringup.graphs import DEFAULT_PARAMS, build_graph, with_description
 from hexa_bringup.supervisor import NodeSpec, Supervisor
 
-#: case -> (scenario, trajectory, sim seconds to run: nominal onset + rise + release + margin)
-CASES: dict[str, tuple[str, str, float]] = {
-    "plate": ("plate", "circle", 5.5),
-    "arm": ("arm", "helix", 7.3),
-    "rod": ("rod", "ellipse", 6.5),
-}
+#: case -> (scenario, trajectory, sim seconds to run: nominal onset + rise + release + margin); the demo's
+#: cases, which free-motion runs extend in their own process
+CASES: dict[str, tuple[str, str, float]] = dict(DEMO_CASES)
 
 RECORDED = ["sim/wrench_truth", "sim/contact_truth", "sim/plate_pose_truth", "sim/joint_states_truth", "residual",
             "collision", "contact", "contact_wrench", "joint_states", "joint_commands", "motor_currents",
@@ -152,10 +150,7 @@ def run_case(case: str, out_dir: Path, env: dict[str, str], ns: str = "/hexa", s
         "singularity": ["-p", "robot:=hexa"],
     }
     if description is not None:
-        path = str(Path(description).resolve())
-        for spec in build_graph("sim", ns, params, node_args):
-            if spec.name != "sim":
-                node_args[spec.name] = node_args.get(spec.name, []) + ["-p", f"description:={path}"]
+        node_args = with_description(description, build_graph("sim", ns, params, node_args), node_args)
     specs = build_graph("sim", ns, params, node_args)
     for s in specs:
         if s.name == "sim":

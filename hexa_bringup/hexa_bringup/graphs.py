@@ -175,3 +175,15 @@ def load_graph_file(path: str | Path) -> list[NodeSpec]:
         specs.append(NodeSpec(str(item["name"]), list(cmd), bool(item.get("required", True)),
                               bool(item.get("respawn", True)), bool(item.get("ends_graph", False))))
     return specs
+
+
+def with_description(description: str | Path, specs: Iterable[NodeSpec],
+                     node_args: dict[str, list[str]]) -> dict[str, list[str]]:
+    """`node_args` with `description:=PATH` (absolute) for every node of `specs` but the simulator (the robot itself)
+    and the bag player."""
+    path = Path(description).resolve()
+    out = {k: list(v) for k, v in node_args.items()}
+    for spec in specs:
+        if spec.name not in ("sim", "play"):
+            out[spec.name] = out.get(spec.name, []) + ["-p", f"description:={path}"]
+    return out

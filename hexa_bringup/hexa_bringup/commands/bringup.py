@@ -112,16 +112,13 @@ def description_args(description: str, specs: list, node_args: dict[str, list[st
     from hexa.robots.schema import RobotDescriptionError
     from hexa_bringup.supervisor import SupervisorError
 
-    path = Path(description).resolve()
+    from hexa_bringup.graphs import with_description
+
     try:
-        print(f"hexa bringup: {calibration_summary(load_hexa(path))}", flush=True)
+        print(f"hexa bringup: {calibration_summary(load_hexa(Path(description).resolve()))}", flush=True)
     except RobotDescriptionError as exc:
         raise SupervisorError(str(exc)) from exc
-    out = {k: list(v) for k, v in node_args.items()}
-    for spec in specs:
-        if spec.name not in ("sim", "play"):
-            out[spec.name] = out.get(spec.name, []) + ["-p", f"description:={path}"]
-    return out
+    return with_description(description, specs, node_args)
 
 
 def sim_robot(params: Path, node_args: dict[str, list[str]]) -> tuple[str, int]:

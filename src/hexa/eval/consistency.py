@@ -12,15 +12,11 @@ import math
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
 
+from hexa.report.collision_demo import DEMO_CASES
+
 if TYPE_CHECKING:
     from hexa.sim.scenarios import ScriptedCollision
 
-#: the demo's cases: scenario, trajectory, sim s after the lead-in (hexa_bringup.demo_run.CASES)
-DEMO_CASES: dict[str, tuple[str, str, float]] = {
-    "plate": ("plate", "circle", 5.5),
-    "arm": ("arm", "helix", 7.3),
-    "rod": ("rod", "ellipse", 6.5),
-}
 
 
 @dataclass(frozen=True)

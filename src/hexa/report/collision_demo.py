@@ -21,6 +21,14 @@ LINK_NAMES = {0: "plate", 1: "arm", 2: "rod", 255: "unknown"}
 PAPER_RMSE = {"plate": (0.819, 0.476, 1.282), "arm": (1.119, 1.497, 1.106), "rod": (1.227, 1.187, 1.263)}
 
 
+#: the demo's cases (`hexa demo`, `hexa eval`'s live-vs-offline check): scenario, trajectory, sim s after the
+#: lead-in (nominal onset + rise + release + margin)
+DEMO_CASES: dict[str, tuple[str, str, float]] = {
+    "plate": ("plate", "circle", 5.5),
+    "arm": ("arm", "helix", 7.3),
+    "rod": ("rod", "ellipse", 6.5),
+}
+
 @dataclass
 class CaseData:
     """Recorded signals of one case; times in s (sim time), SI units.
