@@ -31,6 +31,32 @@ def test_nearest_matching_takes_only_samples_within_the_tolerance():
     assert idx.tolist() == [1, -1, 4, -1]
 
 
+def test_residuals_stamped_by_the_observers_tracked_offset_are_matched_to_their_samples():
+    """The observer stamps a residual with its sample's board time plus the host offset SampleClock tracks; the
+    bench finds each residual's sample from the offset the observer said last (good to a fraction of a period),
+    across lost residuals, with evenly spaced and with jittered board times, at 1 kHz and at 200 Hz."""
+    from hexa.dynamics.monitor import SampleClock
+    from hexa_bringup.bench_graph_analysis import match_tracked_offset
+
+    rng = np.random.default_rng(4)
+    for period in (1e-3, 5e-3):
+        n = 3000
+        stamps = 1.8e9 + np.arange(n) * period + 0.8e-3 + rng.exponential(1.5e-3, n)   # the driver's host stamps
+        keep = np.ones(n, bool)
+        keep[[0, 1, 500, 501, 502, 2999]] = False                      # residuals the subscriber never got
+        for even, board in ((True, np.arange(n) * period), (False, np.cumsum(period + rng.normal(0.0, 2e-5, n)))):
+            board = np.round(board * 1e6) * 1e-6                       # the Mega's sample instants (its clock)
+            clock = SampleClock()
+            res = np.array([clock.time(st, int(round(b * 1e6))) for st, b in zip(stamps, board)])
+            said = clock.board_offset                                  # the observer's diagnostics, at the end
+            for guess in (said + 0.3 * period, said - 0.3 * period):
+                idx = match_tracked_offset(res[keep], board, guess, from_end=True)
+                assert idx.tolist() == np.flatnonzero(keep).tolist(), (period, guess)
+            if even:   # evenly spaced samples fit every whole-period shift: the guess decides
+                shifted = match_tracked_offset(res[keep], board, said + period, from_end=True)
+                assert (shifted - np.flatnonzero(keep)).tolist() == [-1] * int(keep.sum())
+
+
 def test_frames_sharing_a_stamp_pair_in_order():
     from hexa_bringup.bench_graph_analysis import fifo_pairs
 

@@ -31,6 +31,20 @@ def test_sample_clock_follows_the_host_stamps_and_reanchors_on_a_board_reset():
     assert c2.time(5.0, 1000) == pytest.approx(5.0)        # 5 s of host time against 1 ms of board time: re-anchor
 
 
+def test_sample_clock_says_its_offset_from_the_boards_own_clock():
+    """board_offset + a sample's raw board time = the time the clock gives it: what a subscriber needs to trace a
+    residual's stamp back to its sample (hexa bench graph's robot mode)."""
+    c = SampleClock(tau=1.0, jump=0.5)
+    assert c.board_offset is None
+    for k in range(500):
+        raw = 7_000_000 + 1000 * k
+        t = c.time(200.0 + 0.001 * k + 0.003 * (k % 5), raw)
+        assert t == pytest.approx(c.board_offset + raw * 1e-6, abs=1e-9)
+    assert SampleClock(fixed_offset=2.5).board_offset is None
+    fixed = SampleClock(fixed_offset=2.5)
+    assert fixed.time(0.0, 1000) == pytest.approx(fixed.board_offset + 1000e-6)
+
+
 def _streams(n: int, tau_extra: np.ndarray | None = None, seed: int = 0):
     """Rest-pose samples of the simulator, as the driver publishes them: (stamp, board µs, currents, commanded)."""
     from hexa.sim import Simulator

@@ -68,6 +68,8 @@ def test_params_file_has_a_block_per_node_and_only_keys_the_nodes_declare(rcl):
         declared = set(re.findall(r'(?:declare_parameter|\bp)\(\s*"(\w+)"', src))
         if re.search(r"declare_parameter\(DESCRIPTION\b", src):     # hexa_ros.node's robot-YAML parameter
             declared.add("description")
+        if re.search(r"declare_parameter\(REALTIME_PRIORITY\b", src):   # hexa_ros.realtime's
+            declared.add("realtime_priority")
         declared |= set(re.findall(r'^\s+"(\w+)": Param\(', src, re.M))   # a PARAMETERS table of hexa_ros.node.Param
         if name == "driver":
             declared |= {"uno_port", "mega_port", "baud", "stream_rate_hz", "command_rate_hz", "max_speed"}

@@ -6,12 +6,15 @@ processing graph `hexa bringup replay` starts (hexa_bringup.graphs.build_graph("
 (hexa_bringup.bench_graph_probe, its own process) notes when each output arrives; the player logs when it published
 each input. The report: CPU per node process from /proc over the playing window, latencies (frame → plate_pose,
 current sample → residual, collision START → first contact and first contact_wrench), inputs against outputs per
-node, and the outputs against a slow replay (rate 0.3) of the same bag.
+node, and the outputs against a slow replay (rate 0.3) of the same bag. The player stands in for the driver and
+the measuring subscriber must not add its own wait to what it measures: both run at the safety path's SCHED_FIFO
+priority (hexa_ros.realtime), as the driver and the observer do.
 
 Robot: the graph `hexa bringup robot` starts, without the simulator and the trajectory node, at 1× wall time: both
 camera nodes in `folder` source on frames of the bag taken while the robot was at rest, the driver against the
 emulated Uno and Mega (hexa.protocol.emulator) streaming the bag's rest currents at 1 kHz and at 200 Hz, a hold
-command at the rest pose. The report: CPU per process, the rates achieved, frame → plate_pose and sample → residual.
+command at the rest pose; the emulated boards (microcontrollers on the robot) and the measuring subscriber at the
+safety path's priority. The report: CPU per process, the rates achieved, frame → plate_pose and sample → residual.
 
 Without a BAG the bench records one first (the plate case of `hexa demo` with the camera topics, currents at 1 kHz)
 and keeps it under the cache directory for the next runs.
@@ -43,6 +46,7 @@ from hexa_bringup.bench_graph_analysis import (cdr_stamp_ns, compare_contacts, c
 # the inputs played from a bag, relative to the graph's namespace: the replay graph's sensor inputs (one definition)
 from hexa_bringup.graphs import CAMERA_TOPICS, CAMERAS  # noqa: F401 - bench_graph_robot takes them from here
 from hexa_bringup.graphs import SENSOR_INPUTS as INPUTS
+from hexa_ros.realtime import SAFETY_PRIORITY, set_realtime_priority
 
 
 #: outputs of the processing graph the probe listens to: topic → message type
@@ -108,14 +112,17 @@ def held_domain(forced: int | None = None) -> Iterator[int]:
 
 class Children:
     """Child processes, each in its own session; stop_all() (also on leaving the `with` block) sends SIGINT to each
-    process group, waits, and kills what is left."""
+    process group, waits, and kills what is left. A child started with a `priority` runs under SCHED_FIFO at it from
+    its first instruction (hexa_ros.realtime; not granted: normal priority, said once)."""
 
     def __init__(self, env: dict[str, str]) -> None:
         self.env = env
         self.procs: dict[str, subprocess.Popen] = {}
         self.logs: dict[str, Path] = {}
+        self._said_priority = False
 
-    def start(self, name: str, cmd: list[str], log: Path | None = None, pipe: bool = False) -> subprocess.Popen:
+    def start(self, name: str, cmd: list[str], log: Path | None = None, pipe: bool = False,
+              priority: int = 0) -> subprocess.Popen:
         out: Any = subprocess.PIPE if pipe else subprocess.DEVNULL
         err: Any = subprocess.DEVNULL
         fh = None
@@ -135,6 +142,10 @@ class Children:
             if fh is not None:
                 fh.close()
         self.procs[name] = proc
+        why = set_realtime_priority(priority, proc.pid)
+        if why and not self._said_priority:
+            say(f"{name}: {why}")
+            self._said_priority = True
         return proc
 
     def dead(self) -> list[str]:
@@ -235,7 +246,8 @@ class CpuSampler:
 class Probe:
     """The measuring subscriber process (hexa_bringup.bench_graph_probe probe) and its stdout."""
 
-    def __init__(self, children: Children, work: Path, spec: dict, name: str = "probe") -> None:
+    def __init__(self, children: Children, work: Path, spec: dict, name: str = "probe",
+                 priority: int = SAFETY_PRIORITY) -> None:
         work.mkdir(parents=True, exist_ok=True)
         self.spec_path = work / "probe_spec.json"
         self.out_path = work / "probe.pickle"
@@ -244,7 +256,8 @@ class Probe:
         self.spec_path.write_text(json.dumps(spec))
         self.children, self.name = children, name
         self.proc = children.start(name, [sys.executable, "-m", "hexa_bringup.bench_graph_probe", "probe",
-                                          str(self.spec_path), str(self.out_path)], log=work / "probe.log", pipe=True)
+                                          str(self.spec_path), str(self.out_path)], log=work / "probe.log", pipe=True,
+                                    priority=priority)
         self.lines: queue.Queue[str] = queue.Queue()
         self.ready = False
         self.waiting: list[str] = []
@@ -622,7 +635,7 @@ def replay_once(info: BagInputs, index: dict, rate: float, env: dict[str, str], 
         player_cmd = [sys.executable, "-m", "hexa_bringup.cli", "play", str(info.path), "--clock", "--rate",
                       f"{rate:g}", "--wait", "30", "--wait-subscribers", "--log", str(log), "--topics",
                       *info.topics]
-        player = ch.start("player", player_cmd, log=work / "player.out")
+        player = ch.start("player", player_cmd, log=work / "player.out", priority=SAFETY_PRIORITY)
         pids["player"] = player.pid
         pids["probe"] = probe.proc.pid
         say(f"{what}: playing {info.duration:.1f} s of sensor data ({len(info.topics)} topics + /clock)")

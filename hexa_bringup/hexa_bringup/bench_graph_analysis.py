@@ -55,6 +55,66 @@ def match_nearest(stamps: Sequence[float], times: Sequence[float], tol: float = 
     return idx
 
 
+def match_tracked_offset(stamps: Sequence[float], times: Sequence[float], guess: float, tol: float = 1e-4,
+                         probe: int = 200, from_end: bool = False) -> np.ndarray:
+    """For each stamp (s, in arrival order) the index of the time (s, increasing) it was made from, where each stamp
+    is its time plus an offset that moves slowly from sample to sample (the observer's residual stamps: the sample's
+    board time plus the host offset hexa.dynamics.monitor.SampleClock tracks, which moves by less than 1 µs per sample
+    while the samples are ≥ 1 ms apart); -1 where no time fits.
+
+    `guess` (s) is the offset to start from (the observer's `board_clock_offset_s` diagnostics value, or the median
+    of the samples' host stamp − board time), good to a fraction of the sample period: the samples around
+    `stamp − guess` are tried as the first match, each scored by how many of the next `probe` stamps land within `tol`
+    of a time; of those that score (nearly) best — with evenly spaced samples every shift by whole periods does — the
+    one nearest the guess wins. From there each match re-anchors the offset for the next stamp; a run of 20 stamps
+    without a match starts the search again. `from_end`: the search starts at the last stamp and the tracking runs
+    backwards (a guess read at the end of a run).
+    """
+    s = np.asarray(stamps, dtype=float)
+    t = np.asarray(times, dtype=float)
+    if from_end:      # the same tracking on the time-reversed axis
+        rev = match_tracked_offset(-s[::-1], -t[::-1], -guess, tol, probe)[::-1]
+        return np.where(rev >= 0, t.size - 1 - rev, -1)
+    idx = np.full(s.size, -1, dtype=np.int64)
+    if s.size == 0 or t.size == 0:
+        return idx
+
+    def nearest(x: np.ndarray) -> np.ndarray:
+        k = np.clip(np.searchsorted(t, x), 1, max(t.size - 1, 1))
+        lo = np.clip(k - 1, 0, t.size - 1)
+        return np.where(np.abs(t[lo] - x) <= np.abs(t[np.clip(k, 0, t.size - 1)] - x), lo,
+                        np.clip(k, 0, t.size - 1))
+
+    def acquire(k: int) -> float | None:
+        centre = int(nearest(np.array([s[k] - guess]))[0])
+        nxt = s[k:k + probe]
+        scored = []
+        for j in range(max(0, centre - 20), min(t.size, centre + 21)):
+            off = s[k] - t[j]
+            scored.append((int(np.count_nonzero(np.abs(t[nearest(nxt - off)] - (nxt - off)) <= tol)), off))
+        best_n = max(n for n, _ in scored)
+        if best_n < 0.5 * nxt.size:
+            return None
+        return min((off for n, off in scored if n >= best_n - max(2, 0.02 * nxt.size)), key=lambda o: abs(o - guess))
+
+    off: float | None = None
+    misses = 0
+    for k in range(s.size):
+        if off is None:
+            off = acquire(k)
+            if off is None:
+                continue
+        x = s[k] - off
+        i = int(nearest(np.array([x]))[0])
+        if abs(t[i] - x) <= tol:
+            idx[k], off, misses = i, s[k] - t[i], 0
+        else:
+            misses += 1
+            if misses >= 20:
+                off, misses = None, 0
+    return idx
+
+
 def fifo_pairs(keys_a: Sequence, keys_b: Sequence) -> list[tuple[int, int]]:
     """(i, j) pairs with keys_a[i] == keys_b[j], the k-th occurrence of a key in `a` paired with its k-th
     occurrence in `b` (frames that share a stamp)."""

@@ -8,13 +8,12 @@ driver's `stream_rate_hz`, and the measuring subscriber publishes a hold command
 node: the robot stays where the frames show it, so the observer has no reason for a collision).
 
 Latencies: frame → plate_pose from the arrival of the later of colour and depth at the subscriber; sample →
-motor_currents from the instant the Mega measured the sample (the emulator's clock zero plus its board time, on the
-monotonic clock). Sample → residual cannot be matched sample by sample here: without sim time the observer stamps a
-residual with the sample's board time plus an offset it tracks as the mean of (host stamp − board time), which is
-the sample's instant plus the mean delay until the driver stamped it, and which no subscriber can reproduce exactly
-(the filter's state depends on the first sample the observer heard). So each residual's latency is estimated as
-(arrival − stamp) + the median delay sample → driver stamp over the window, and the rows say so; the rates and the
-residual/current counts are exact.
+motor_currents and sample → residual from the instant the Mega measured the sample (the emulator's clock zero plus
+its board time, on the monotonic clock). Without sim time the observer stamps a residual with the sample's board
+time plus a host offset it tracks (hexa.dynamics.monitor.SampleClock), which no subscriber can reproduce exactly
+(its state depends on the first sample the observer heard) but which moves by less than a microsecond per sample:
+each residual is matched to its sample by following that offset from residual to residual
+(hexa_bringup.bench_graph_analysis.match_tracked_offset), so its latency is exact.
 """
 from __future__ import annotations
 
@@ -34,7 +33,8 @@ from hexa.benchmarks import BenchRow
 from hexa_bringup.bench_graph import (CAMERA_TOPICS, CAMERAS, OUTPUTS, TARGET_P95, BagInputs, BenchGraphError,
                                       Children, CpuSampler, Probe, bag_identity, cpu_rows, frame_pose_latency,
                                       graph_specs, latency_rows, node_names, parse_outputs, say, top_frames)
-from hexa_bringup.bench_graph_analysis import cdr_stamp_ns
+from hexa_bringup.bench_graph_analysis import cdr_stamp_ns, match_tracked_offset
+from hexa_ros.realtime import SAFETY_PRIORITY
 
 #: the Mega's stream rates measured
 ROBOT_RATES = (1000, 200)
@@ -149,6 +149,7 @@ class RobotResult:
     residual_latency: list[float]                 # estimated (module docstring)
     driver_latency: list[float]                   # sample → motor_currents arrival
     stamp_delay: float                            # median sample → driver's header stamp (s)
+    residual_matched: int                         # residuals in the window matched to their sample
     events: int
     contacts: int
     boards: dict[str, Any]
@@ -195,7 +196,7 @@ def robot_once(info: BagInputs, scene: RestScene, stream_hz: int, env: dict[str,
         with Children(env) as ch:
             boards = ch.start("boards", [sys.executable, "-m", "hexa_bringup.bench_graph_probe", "boards", str(uno),
                                          str(mega), "--amps", *[f"{a:.6f}" for a in scene.amps]],
-                              log=work / "boards.log", pipe=True)
+                              log=work / "boards.log", pipe=True, priority=SAFETY_PRIORITY)
             assert boards.stdout is not None
             line = boards.stdout.readline().strip()
             if not line.startswith("READY "):
@@ -249,12 +250,17 @@ def robot_once(info: BagInputs, scene: RestScene, stream_hz: int, env: dict[str,
     dl = (m["recv"] - sample_t)[sel_m].tolist()
     stamp_delay = float(np.median((m["stamp"] - realtime_offset - sample_t)[sel_m])) if sel_m.any() else float("nan")
     r_recv, r_stamp = out["residual"]
-    sel_r = in_window(r_recv)
-    rl = (r_recv[sel_r] + realtime_offset - r_stamp[sel_r] * 1e-9 + stamp_delay).tolist()
+    # the observer's offset (its residual stamp − the sample's board time), from its diagnostics; else ≈ the
+    # driver's host stamp − board time
+    said = str(out["diagnostics"].get(f"{ns}/observer", {}).get("board_clock_offset_s", ""))
+    guess = float(said) if said else float(np.median(m["stamp"] - m["board"])) if m["board"].size else 0.0
+    idx = match_tracked_offset(r_stamp * 1e-9, m["board"], guess, from_end=True)   # the guess is the last one said
+    sel_r = in_window(r_recv) & (idx >= 0)
+    rl = (r_recv[sel_r] - sample_t[idx[sel_r]]).tolist()
     return RobotResult(
         stream_hz=stream_hz, window=(w0, w1), cpu={n: cpu.percent(n, w0, w1) for n in pids}, nodes=nodes, pids=pids,
         processing=processing, sources=sources, rates=rates, counts=counts, frame_latency=fl, residual_latency=rl,
-        driver_latency=dl, stamp_delay=stamp_delay,
+        driver_latency=dl, stamp_delay=stamp_delay, residual_matched=int(np.count_nonzero(sel_r)),
         events=sum(1 for e in out["collision"] if e["kind"] == "START"), contacts=len(out["contact"]),
         boards=board_stats, fps=scene.fps, diagnostics=out["diagnostics"])
 
@@ -280,9 +286,8 @@ def robot_rows(r: RobotResult) -> list[BenchRow]:
     rows += latency_rows("frame -> plate_pose", r.frame_latency, TARGET_P95["frame_pose"],
                          "camera frame (later of colour, depth) arrives -> plate_pose arrives")
     rows += latency_rows("sample -> residual", r.residual_latency, TARGET_P95["sample_residual"],
-                         f"estimated: residual arrival - its stamp + the median delay sample -> driver stamp "
-                         f"({r.stamp_delay * 1e3:.1f} ms); the observer's tracked offset cannot be matched per "
-                         f"sample")
+                         f"the Mega measures the sample -> its residual arrives ({r.residual_matched} residuals "
+                         f"matched to their sample by the observer's tracked offset)")
     rows += latency_rows("sample -> motor_currents", r.driver_latency, None,
                          "the Mega measures the sample -> the driver's motor_currents arrives")
     rows.append(BenchRow("observer: collision STARTs at rest", r.events, "events", "0", r.events == 0,

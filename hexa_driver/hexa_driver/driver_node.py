@@ -33,6 +33,7 @@ from hexa.robots.hexa_description import calibration_summary, load_hexa
 from hexa_ros import cdr, diagnostics, qos
 from hexa_ros.conversions import JOINT_NAMES
 from hexa_ros.node import DESCRIPTION, DESCRIPTION_PARAM, descriptor
+from hexa_ros.realtime import REALTIME_PRIORITY, REALTIME_PRIORITY_PARAM, apply_realtime_priority
 from hexa_driver.driver_params import driver_descriptor
 
 
@@ -55,6 +56,8 @@ class DriverNode(Node):
             self.cfg = cfg = load_driver_config(self.declare_parameter("config", path, d("config", path)).value)
             cfg.update({k: self.declare_parameter(k, cfg[k], d(k, cfg[k])).value for k in SCALAR_KEYS})
             desc = load_hexa(self.declare_parameter(DESCRIPTION, "", descriptor(DESCRIPTION_PARAM)).value or None)
+            priority = int(self.declare_parameter(REALTIME_PRIORITY, REALTIME_PRIORITY_PARAM.default,
+                                                  descriptor(REALTIME_PRIORITY_PARAM)).value)
         except ParameterException as exc:
             raise ValueError(str(exc)) from exc
         self.get_logger().info(calibration_summary(desc))   # the overlay's horn offsets shift the pulse map
@@ -80,6 +83,7 @@ class DriverNode(Node):
         self.create_timer(float(cfg["diagnostics_period"]), self._publish_diagnostics)
         # the serial link's rate limit is a wall-time matter, also under use_sim_time (docs/driver.md)
         self.create_timer(self.sched.min_interval, self._flush, clock=Clock(clock_type=ClockType.STEADY_TIME))
+        self.priority = apply_realtime_priority(self, priority)   # before the link threads: they inherit it
         self.uno.start()
         self.mega.start()
         self._said: dict[str, str] = {}
@@ -164,7 +168,8 @@ class DriverNode(Node):
     def _publish_diagnostics(self) -> None:
         reports = driver_reports(self.sched, self.uno, self.mega, time.monotonic(), float(self.cfg["stale_timeout"]))
         self.pub_diag.publish(diagnostics.array(self, [
-            diagnostics.status(r.name, getattr(diagnostics, r.level), r.message, r.values, r.hardware_id)
+            diagnostics.status(r.name, getattr(diagnostics, r.level), r.message,
+                               {**r.values, REALTIME_PRIORITY: self.priority}, r.hardware_id)
             for r in reports]))
         for board, link in (("uno", self.uno), ("mega", self.mega)):   # an absent port: named once per new error
             err = link.stats.last_error if link.stats.state != CONNECTED else ""

@@ -7,6 +7,7 @@ from hexa.dynamics.monitoring import WatchConfig
 from hexa.dynamics.observer import ObserverConfig
 from hexa.estimation import EstimatorConfig
 from hexa_ros.node import DESCRIPTION, DESCRIPTION_PARAM, Param
+from hexa_ros.realtime import REALTIME_PRIORITY, REALTIME_PRIORITY_PARAM
 
 #: the parameters the observer applies on a running node (hexa.dynamics.monitor.CollisionMonitor.configure)
 RUNTIME = ("gains", "thresholds", "servo_thresholds", "release_ratio", "min_duration", "cusum_drift", "cusum_alarm",
@@ -24,6 +25,7 @@ def observer_parameters() -> dict[str, Param]:
 
     table = {
         DESCRIPTION: DESCRIPTION_PARAM,
+        REALTIME_PRIORITY: REALTIME_PRIORITY_PARAM,
         "zeta_source": Param("estimator", "estimator (hobby servos: joint_states.position is the command) | measured",
                              choices=("estimator", "measured")),
         "time_source": Param("auto", "sample time: auto (board clock of motor_currents when present) | board | stamp",

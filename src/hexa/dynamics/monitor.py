@@ -51,9 +51,22 @@ class SampleClock:
         self.tau, self.jump, self.fixed_offset = tau, jump, fixed_offset
         self.gate: StreamGate[tuple[float, float]] = StreamGate(self._follows, adopt_after)
         self._raw: int | None = None
+        self._raw0 = 0                   # the first accepted board time (µs): `board` counts from it
         self._board = 0.0
         self._offset = 0.0
         self.backwards = 0
+
+    @property
+    def board_offset(self) -> float | None:
+        """Sample time − the board's own clock (s; the board's µs counter unwrapped from the first accepted value):
+        what a subscriber adds to a sample's board_time_us to get the time this clock gives it now (None before the
+        first sample). It moves by less than 1 µs per sample, so consecutive sample times can be traced back to
+        their samples."""
+        if self._raw is None:
+            return None
+        if self.fixed_offset is not None:
+            return self.fixed_offset
+        return self._offset - self._raw0 * 1e-6
 
     @property
     def rejected(self) -> dict[str, int]:
@@ -79,6 +92,8 @@ class SampleClock:
             self.backwards += verdict == "time_past"
             return None
         first, dt = self._raw is None, board - self._board
+        if first:
+            self._raw0 = raw
         self._raw, self._board = raw, board
         if self.fixed_offset is not None:
             return board + self.fixed_offset
@@ -356,6 +371,8 @@ class CollisionMonitor:
                                   "estimator_settling_samples": self.settling}
         values.update({f"reject_node_{k}": v for k, v in self.rejects.items()})
         values.update(self.input_counters())
+        offset = self.clock.board_offset     # a subscriber traces residual stamps back to their samples with it
+        values["board_clock_offset_s"] = "" if offset is None else f"{offset:.6f}"
         values.update({f"reject_observer_{k}": v for k, v in obs.rejected.items()})
         values.update({f"reject_estimator_{k}": v for k, v in est.rejected.items()})
         return values

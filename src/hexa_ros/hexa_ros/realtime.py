@@ -1,0 +1,82 @@
+"""Real-time scheduling of a node's process: the 1 kHz safety path (driver → observer) preempts the vision nodes.
+
+On the 2-core robot PC a camera frame costs the pose node several ms of CPU; at normal priority a current sample
+that arrives meanwhile waits for the kernel's next time slice, so the sample → residual latency's tail grows with
+the vision's load (docs/realtime.md has the figures with and without). ros2_control's controller manager does the
+same (`thread_priority`, SCHED_FIFO 50). The kernel's real-time throttling (sched_rt_runtime_us, 95 % of each second by
+default) keeps a runaway FIFO process from freezing the machine.
+
+A process may raise itself to SCHED_FIFO as root or within its `rtprio` limit (`ulimit -r`; on the robot PC:
+`@realtime - rtprio 98` in /etc/security/limits.conf and the operator in group `realtime`). Without either the node
+runs at normal priority and says so (log warning and diagnostics), it never fails to start for it.
+"""
+from __future__ import annotations
+
+import os
+from typing import Any
+
+from hexa_ros.node import Param
+
+#: the parameter every node on the 1 kHz safety path declares
+REALTIME_PRIORITY = "realtime_priority"
+#: the priority hexa gives the safety path (driver, observer) by default: ros2_control's
+SAFETY_PRIORITY = 50
+REALTIME_PRIORITY_PARAM = Param(
+    SAFETY_PRIORITY, "SCHED_FIFO priority (1-99) of this node's process, all its threads, so the 1 kHz path preempts "
+                     "the vision nodes; 0 = normal scheduling. Needs root or an rtprio limit (docs/running.md); "
+                     "without, the node runs at normal priority and warns", range=(0, 99))
+
+
+def set_realtime_priority(priority: int, pid: int | None = None) -> str:
+    """Put every thread of process `pid` (default: this one) under SCHED_FIFO at `priority` (1-99); threads started
+    later inherit it from the thread that starts them. `priority` 0 leaves the scheduling as it is.
+
+    Returns:
+        "" when granted (or 0 asked), else why not (the process keeps its scheduling).
+
+    Raises:
+        ValueError: `priority` outside 0..99.
+    """
+    if not 0 <= int(priority) <= 99:
+        raise ValueError(f"realtime priority must be 0..99, got {priority!r}")
+    if priority == 0:
+        return ""
+    pid = os.getpid() if pid is None else int(pid)
+    try:
+        tids = sorted(int(t) for t in os.listdir(f"/proc/{pid}/task"))
+    except OSError:
+        tids = [pid]
+    param = os.sched_param(int(priority))
+    for tid in tids:
+        try:
+            os.sched_setscheduler(tid, os.SCHED_FIFO, param)
+        except ProcessLookupError:      # the thread ended meanwhile
+            continue
+        except OSError as exc:          # EPERM: neither root nor within the rtprio limit
+            return (f"SCHED_FIFO {priority} not granted ({exc.strerror}; `ulimit -r` is "
+                    f"{_rtprio_limit()}): running at normal priority")
+    return ""
+
+
+def realtime_priority_of(pid: int | None = None) -> int:
+    """The SCHED_FIFO/SCHED_RR priority of process `pid`'s main thread (0: normal scheduling)."""
+    pid = os.getpid() if pid is None else int(pid)
+    policy = os.sched_getscheduler(pid)
+    return os.sched_getparam(pid).sched_priority if policy in (os.SCHED_FIFO, os.SCHED_RR) else 0
+
+
+def apply_realtime_priority(node: Any, priority: int) -> int:
+    """`set_realtime_priority` for `node`'s process, logged; the priority the process runs at (for diagnostics)."""
+    why = set_realtime_priority(priority)
+    if why:
+        node.get_logger().warning(f"{REALTIME_PRIORITY} {priority}: {why}")
+    elif priority:
+        node.get_logger().info(f"{REALTIME_PRIORITY}: SCHED_FIFO {priority}")
+    return realtime_priority_of()
+
+
+def _rtprio_limit() -> str:
+    import resource
+
+    soft, _ = resource.getrlimit(resource.RLIMIT_RTPRIO)
+    return "unlimited" if soft == resource.RLIM_INFINITY else str(soft)
