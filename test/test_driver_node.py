@@ -131,6 +131,10 @@ def test_driver_recovers_from_unplug_within_two_seconds_and_diagnostics_show_it(
         assert st, "diagnostics did not return to OK"
         d = kv(st)
         assert d["state"] == "CONNECTED" and int(d["disconnects"]) == 1 and int(d["connects"]) == 2
+        # the link threads run at the safety path's SCHED_FIFO priority where the process may raise itself
+        import resource
+        granted = os.geteuid() == 0 or resource.getrlimit(resource.RLIMIT_RTPRIO)[0] >= 50
+        assert int(d["realtime_priority"]) == (50 if granted else 0)
         assert float(d["last_reconnect_s"]) < 2.5
         uno_d = wait_for(lambda: (s := probe.diag_status("servo board")) is not None and
                          kv(s)["state"] == "CONNECTED" and kv(s), 3.0)
