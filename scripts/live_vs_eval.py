@@ -9,7 +9,7 @@ ROS domain) at real-time factor `--rtf`; the offline run is hexa.eval.consistenc
 scenario, trajectory, duration, seed and robot). Prints one markdown row per live run: detection time live and
 offline (commands at phase 0), their difference, whether link and chain agree, the force RMSE of both and their
 ratio, and the offline detection times over the command phases 0-4 ms (hexa.eval.consistency.detection_span)
-(docs/eval.md, "The live graph against the eval").
+(docs/eval_live.md).
 """
 from __future__ import annotations
 

@@ -106,8 +106,7 @@ def test_the_live_cases_agree_with_hexa_eval_on_the_same_seed(demo_run):
     run's, and the live detection time within 20 ms of the offline ones over the command phase — when in each 5 ms
     current-sample period the 100 Hz commands reach the servos: 0 offline by default, wherever the host's scheduling
     puts each command live. The arm's offline detection moves 80 ms with the phase (6.484-6.564 s), the plate's not at
-    all (4.604 s); live, 5 arm runs gave 6.492-6.577 s, 4 plate runs 4.594-4.604 s (docs/eval.md, "The live graph
-    against the eval")."""
+    all (4.604 s); live, 5 arm runs gave 6.492-6.577 s, 4 plate runs 4.594-4.604 s (docs/eval_live.md)."""
     from hexa.eval.consistency import agreement, offline_case
 
     live = {c["case"]: c for c in demo_run["result"]["cases"]}

@@ -1,6 +1,6 @@
 """The live graph against `hexa eval` on the same case and seed: a demo case (`hexa demo`'s nominal scenario) run
 through `hexa.eval.campaign.simulate`, and how its detection time, link/chain and force RMSE compare with the live
-graph's (docs/eval.md, "The live graph against the eval").
+graph's (docs/eval_live.md).
 
 Both sides are `hexa.report.collision_demo.compute_metrics` dictionaries (`CaseMetrics.as_dict()`): what `hexa demo
 --json` prints per case, and what `offline_case` returns.
@@ -102,6 +102,6 @@ def detection_span(case: str, seed: int = 0, realism: str = "ideal", phases: tup
                    ) -> tuple[float, float]:
     """The earliest and latest offline detection time (s) of `case` over the command `phases` (oracle isolation, no
     force identification: only the detector's output is compared). In the live graph the phase is wherever the
-    host's scheduling puts each command; the detector's output depends on it (docs/eval.md)."""
+    host's scheduling puts each command; the detector's output depends on it (docs/eval_live.md)."""
     times = [offline_case(case, seed, realism, p, isolation="oracle", identify=False)["detect_time"] for p in phases]
     return min(times), max(times)

@@ -421,7 +421,7 @@ def write_report(result: dict[str, Any], out_dir: str | Path, plots: bool = True
             lines += ["", f"Force RMSE below the paper's on every axis: {held['below']} / {held['cases']} detected "
                       f"cases whose servos held, {stalled['below']} / {stalled['cases']} where some servo reached "
                       f"its stall torque during the contact; of these, {t2['below']} / {t2['cases']} where the push "
-                      "also drove the robot through a type II singularity (docs/eval.md)."]
+                      "also drove the robot through a type II singularity (docs/eval_findings.md)."]
         lines += [""] + _isolation_lines(iso) + [
                   "| link | cases | detected | peak ≥ 3 N: detected / cases | delay median / p95 (ms) | "
                   "false STARTs before the contact |", "|---|---|---|---|---|---|"]
