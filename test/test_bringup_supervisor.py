@@ -137,6 +137,9 @@ def test_sim_mode_knows_the_simulated_robot_from_its_overrides_the_parameters_fi
     own.write_text("/**/sim:\n  ros__parameters:\n    seed: 7\n    realism: ideal\n")
     assert sim_robot(own, {}) == ("ideal", 7)
     assert sim_robot(own, {"sim": ["-p", "realism:=realistic", "-p", "seed:=3"]}) == ("realistic", 3)
+    own.write_text("/**:\n  ros__parameters:\n    seed: 4\n/robot2:\n  sim:\n    ros__parameters:\n      seed: 5\n")
+    assert sim_robot(own, {}) == (DEFAULT_REALISM, 4)                              # the wildcard section
+    assert sim_robot(own, {}, "/robot2") == (DEFAULT_REALISM, 5)                   # a later, nested namespace one
     own.write_text("/**/sim:\n  ros__parameters:\n    seed: seven\n")
     with pytest.raises(SupervisorError, match="seed"):
         sim_robot(own, {})

@@ -121,15 +121,17 @@ def description_args(description: str, specs: list, node_args: dict[str, list[st
     return with_description(description, specs, node_args)
 
 
-def sim_robot(params: Path, node_args: dict[str, list[str]]) -> tuple[str, int]:
-    """(realism, seed) of the simulator that sim mode starts: its `-p` overrides, else the parameters file's
-    `/**/sim` (or `sim`) section, else the node's defaults.
+def sim_robot(params: Path, node_args: dict[str, list[str]], namespace: str = "/hexa") -> tuple[str, int]:
+    """(realism, seed) of the simulator that sim mode starts: its `-p` overrides, else what the parameters file gives
+    the node `<namespace>/sim` (every section that matches it, wildcards included, as rcl applies them), else the
+    node's defaults.
 
     Raises:
         hexa_bringup.supervisor.SupervisorError: the parameters file is not readable YAML.
     """
     import yaml
 
+    from hexa_bringup.commands.service import node_parameters
     from hexa_bringup.graphs import DEFAULT_REALISM
     from hexa_bringup.supervisor import SupervisorError
 
@@ -139,10 +141,9 @@ def sim_robot(params: Path, node_args: dict[str, list[str]]) -> tuple[str, int]:
             data = yaml.safe_load(params.read_text(encoding="utf-8")) or {}
         except (OSError, yaml.YAMLError) as exc:
             raise SupervisorError(f"cannot read parameters file {params}: {exc}") from exc
-        for key in ("/**", "/**/sim", "sim"):
-            section = data.get(key) if isinstance(data, dict) else None
-            if isinstance(section, dict) and isinstance(section.get("ros__parameters"), dict):
-                values.update({k: v for k, v in section["ros__parameters"].items() if k in values})
+        if isinstance(data, dict):
+            given = node_parameters(data, f"{namespace.rstrip('/')}/sim")
+            values.update({k: v for k, v in given.items() if k in values})
     args = node_args.get("sim", [])
     for a in args:
         name, _, value = a.partition(":=")
@@ -154,7 +155,7 @@ def sim_robot(params: Path, node_args: dict[str, list[str]]) -> tuple[str, int]:
         raise SupervisorError(f"the simulator's seed must be an integer, got {values['seed']!r}") from exc
 
 
-def calibrated_description(params: Path, node_args: dict[str, list[str]]) -> Path | None:
+def calibrated_description(params: Path, node_args: dict[str, list[str]], namespace: str = "/hexa") -> Path | None:
     """The calibration overlay the nodes of sim mode run when the simulator is the realistic robot (identified on
     that robot, cached: hexa_bringup.demo_run.nodes_description), None on the ideal robot.
 
@@ -164,7 +165,7 @@ def calibrated_description(params: Path, node_args: dict[str, list[str]]) -> Pat
     from hexa_bringup.demo_run import nodes_description
     from hexa_bringup.supervisor import SupervisorError
 
-    realism, seed = sim_robot(params, node_args)
+    realism, seed = sim_robot(params, node_args, namespace)
     try:
         return nodes_description(realism, seed, log=lambda line: print(f"hexa bringup: {line}", flush=True))
     except ValueError as exc:   # an unknown realism, CalibrationError, RecordingError
@@ -202,7 +203,7 @@ def run(args: argparse.Namespace) -> int:
             ns = args.ns or ("/upsrpu" if args.mode == "upsrpu" else "/hexa")
             description = getattr(args, "description", None)
             if args.mode == "sim" and not description:
-                description = calibrated_description(params, node_args)
+                description = calibrated_description(params, node_args, ns)
             if description:
                 node_args = description_args(str(description), build_graph(args.mode, ns, params, node_args),
                                              node_args)

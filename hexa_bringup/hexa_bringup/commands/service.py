@@ -334,19 +334,25 @@ def _matches(key: str, node: str) -> bool:
     return re.fullmatch(pattern, node) is not None
 
 
+def node_parameters(data: dict, node: str) -> dict:
+    """The parameters the loaded ROS parameters YAML `data` gives the fully qualified `node` (every section whose
+    name or wildcard matches it, later ones over earlier ones, as rcl applies them), flattened to dotted names."""
+    found: dict = {}
+    for key, params in _node_sections(data):
+        if _matches(key, node):
+            found.update(_flat(params))
+    return found
+
+
 def file_parameters(data, node: str, path: str) -> dict:
-    """The parameters a ROS parameters YAML gives `node` (every section whose name or wildcard matches it, later
-    ones over earlier ones), flattened to dotted names.
+    """`node_parameters` of a ROS parameters YAML.
 
     Raises:
         CliError: the file is not a parameters YAML or has nothing for `node`.
     """
     if not isinstance(data, dict):
         raise CliError(f"{path} is not a ROS parameters YAML (a mapping of node names to ros__parameters)")
-    found: dict = {}
-    for key, params in _node_sections(data):
-        if _matches(key, node):
-            found.update(_flat(params))
+    found = node_parameters(data, node)
     if not found:
         raise CliError(f"{path} has no ros__parameters for {node}")
     return found
