@@ -9,7 +9,8 @@ import textwrap
 
 import pytest
 
-from hexa_ros.realtime import realtime_priority_of, set_realtime_priority
+from hexa_ros.realtime import (apply_requested_priority, realtime_priority_of, request_realtime_priority,
+                               set_realtime_priority)
 
 CHILD = textwrap.dedent("""
     import json, os, resource, sys, threading, time
@@ -86,3 +87,56 @@ def test_another_process_is_raised_by_its_pid():
 def test_a_priority_outside_0_99_is_refused(bad):
     with pytest.raises(ValueError, match="0..99"):
         set_realtime_priority(bad)
+
+
+class _Logged:
+    """What apply_requested_priority needs of a node: a logger that keeps the lines."""
+
+    def __init__(self) -> None:
+        self.lines: list[tuple[str, str]] = []
+
+    def get_logger(self):
+        node = self
+
+        class _Logger:
+            def info(self, text):
+                node.lines.append(("info", text))
+
+            def warning(self, text):
+                node.lines.append(("warning", text))
+
+        return _Logger()
+
+
+def test_a_node_only_asks_the_entry_point_that_owns_the_process_raises_it():
+    """request_realtime_priority leaves the process alone (a node built in a test or a script must not put that
+    program under SCHED_FIFO); apply_requested_priority, which hexa_ros.node.run calls, raises it to the highest
+    priority asked for and each node that asked logs it."""
+    before = realtime_priority_of()
+    asking, quiet = _Logged(), _Logged()
+    request_realtime_priority(asking, 12)
+    assert realtime_priority_of() == before
+    code = textwrap.dedent("""
+        import json, sys
+        sys.path.insert(0, sys.argv[1])
+        from test_realtime_priority import _Logged
+        from hexa_ros.realtime import apply_requested_priority, request_realtime_priority
+        a, b, c = _Logged(), _Logged(), _Logged()
+        request_realtime_priority(a, 12)
+        request_realtime_priority(b, 20)
+        got = apply_requested_priority([a, b, c])
+        print(json.dumps({"got": got, "a": a.lines, "b": b.lines, "c": c.lines}))
+    """)
+    import json
+    from pathlib import Path
+
+    out = json.loads(subprocess.run([sys.executable, "-c", code, str(Path(__file__).parent)], capture_output=True,
+                                    text=True, timeout=60, check=True).stdout)
+    if _may_raise_priority():
+        assert out["got"] == 20
+        assert out["a"] == out["b"] == [["info", "realtime_priority: SCHED_FIFO 20"]]
+    else:
+        assert out["got"] == 0 and out["a"][0][0] == "warning" and "not granted" in out["a"][0][1]
+    assert out["c"] == []
+    assert apply_requested_priority([quiet]) == before      # nobody asked: nothing changes, nothing said
+    assert quiet.lines == []

@@ -33,7 +33,8 @@ from hexa.robots.hexa_description import calibration_summary, load_hexa
 from hexa_ros import cdr, diagnostics, qos
 from hexa_ros.conversions import JOINT_NAMES
 from hexa_ros.node import DESCRIPTION, DESCRIPTION_PARAM, descriptor
-from hexa_ros.realtime import REALTIME_PRIORITY, REALTIME_PRIORITY_PARAM, apply_realtime_priority
+from hexa_ros.realtime import (REALTIME_PRIORITY, REALTIME_PRIORITY_PARAM, realtime_priority_of,
+                               request_realtime_priority)
 from hexa_driver.driver_params import driver_descriptor
 
 
@@ -83,7 +84,7 @@ class DriverNode(Node):
         self.create_timer(float(cfg["diagnostics_period"]), self._publish_diagnostics)
         # the serial link's rate limit is a wall-time matter, also under use_sim_time (docs/driver.md)
         self.create_timer(self.sched.min_interval, self._flush, clock=Clock(clock_type=ClockType.STEADY_TIME))
-        self.priority = apply_realtime_priority(self, priority)   # before the link threads: they inherit it
+        request_realtime_priority(self, priority)   # the entry point raises the process, link threads included
         self.uno.start()
         self.mega.start()
         self._said: dict[str, str] = {}
@@ -169,7 +170,7 @@ class DriverNode(Node):
         reports = driver_reports(self.sched, self.uno, self.mega, time.monotonic(), float(self.cfg["stale_timeout"]))
         self.pub_diag.publish(diagnostics.array(self, [
             diagnostics.status(r.name, getattr(diagnostics, r.level), r.message,
-                               {**r.values, REALTIME_PRIORITY: self.priority}, r.hardware_id)
+                               {**r.values, REALTIME_PRIORITY: realtime_priority_of()}, r.hardware_id)
             for r in reports]))
         for board, link in (("uno", self.uno), ("mega", self.mega)):   # an absent port: named once per new error
             err = link.stats.last_error if link.stats.state != CONNECTED else ""

@@ -29,7 +29,7 @@ from hexa_ros import diagnostics, node, qos
 from hexa_ros.cdr import CdrError, joint_state_from_cdr, motor_currents_from_cdr
 from hexa_ros.conversions import ordered_values, pose_fields
 from hexa_ros.node import DESCRIPTION, declare_parameters
-from hexa_ros.realtime import REALTIME_PRIORITY, apply_realtime_priority
+from hexa_ros.realtime import REALTIME_PRIORITY, realtime_priority_of, request_realtime_priority
 from hexa_ros.stamps import to_sec
 from rcl_interfaces.msg import SetParametersResult
 from rclpy.node import Node
@@ -56,7 +56,7 @@ class ObserverNode(Node):
     def __init__(self, **kwargs: Any) -> None:
         super().__init__("observer", **kwargs)
         v = declare_parameters(self, observer_parameters())
-        self.priority = apply_realtime_priority(self, int(v[REALTIME_PRIORITY]))   # the 1 kHz path first
+        request_realtime_priority(self, int(v[REALTIME_PRIORITY]))   # the 1 kHz path first (hexa_ros.realtime)
         desc = load_hexa(str(v[DESCRIPTION]) or None)
         self.get_logger().info(calibration_summary(desc))   # per-servo K_t, offsets, friction of an overlay
         sim = MonitorConfig.sim_clock_of(str(v["board_clock"]), bool(self.get_parameter("use_sim_time").value))
@@ -153,7 +153,7 @@ class ObserverNode(Node):
     def _diagnostics(self) -> None:
         level, msg = self.watch.health()
         values = {**self.watch.values(), "events_sent": self.out.events_sent,
-                  "joint_states_subscribed": self.sub_states is not None, REALTIME_PRIORITY: self.priority}
+                  "joint_states_subscribed": self.sub_states is not None, REALTIME_PRIORITY: realtime_priority_of()}
         st = diagnostics.status(self.get_fully_qualified_name(), getattr(diagnostics, level), msg, values)
         self.pub_diag.publish(diagnostics.array(self, [st]))
 

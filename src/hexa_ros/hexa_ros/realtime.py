@@ -6,6 +6,8 @@ the vision's load (docs/realtime.md has the figures with and without). ros2_cont
 same (`thread_priority`, SCHED_FIFO 50). The kernel's real-time throttling (sched_rt_runtime_us, 95 % of each second by
 default) keeps a runaway FIFO process from freezing the machine.
 
+Nodes ask (`request_realtime_priority`); the entry point that owns the process (hexa_ros.node.run) raises it
+(`apply_requested_priority`), so a node built inside a test or a script leaves that program's scheduling alone.
 A process may raise itself to SCHED_FIFO as root or within its `rtprio` limit (`ulimit -r`; on the robot PC:
 `@realtime - rtprio 98` in /etc/security/limits.conf and the operator in group `realtime`). Without either the node
 runs at normal priority and says so (log warning and diagnostics), it never fails to start for it.
@@ -21,6 +23,8 @@ from hexa_ros.node import Param
 REALTIME_PRIORITY = "realtime_priority"
 #: the priority hexa gives the safety path (driver, observer) by default: ros2_control's
 SAFETY_PRIORITY = 50
+#: the attribute a node's requested priority is kept in
+_WANTED = "_hexa_realtime_priority"
 REALTIME_PRIORITY_PARAM = Param(
     SAFETY_PRIORITY, "SCHED_FIFO priority (1-99) of this node's process, all its threads, so the 1 kHz path preempts "
                      "the vision nodes; 0 = normal scheduling. Needs root or an rtprio limit (docs/running.md); "
@@ -65,13 +69,24 @@ def realtime_priority_of(pid: int | None = None) -> int:
     return os.sched_getparam(pid).sched_priority if policy in (os.SCHED_FIFO, os.SCHED_RR) else 0
 
 
-def apply_realtime_priority(node: Any, priority: int) -> int:
-    """`set_realtime_priority` for `node`'s process, logged; the priority the process runs at (for diagnostics)."""
-    why = set_realtime_priority(priority)
-    if why:
-        node.get_logger().warning(f"{REALTIME_PRIORITY} {priority}: {why}")
-    elif priority:
-        node.get_logger().info(f"{REALTIME_PRIORITY}: SCHED_FIFO {priority}")
+def request_realtime_priority(node: Any, priority: int) -> None:
+    """Note that `node` wants its process at SCHED_FIFO `priority`. The process is raised by the entry point that
+    owns it (`apply_requested_priority`, from hexa_ros.node.run), never by a node built inside another program (a
+    test, a script), which would put that whole program under SCHED_FIFO."""
+    setattr(node, _WANTED, int(priority))
+
+
+def apply_requested_priority(nodes: list[Any]) -> int:
+    """Raise this process to the highest priority its `nodes` asked for (`request_realtime_priority`), logged by
+    each node that asked; the priority the process runs at."""
+    asks = [(node, int(getattr(node, _WANTED, 0))) for node in nodes]
+    wanted = max((p for _, p in asks), default=0)
+    why = set_realtime_priority(wanted) if wanted > 0 else ""
+    for node, p in asks:
+        if p and why:
+            node.get_logger().warning(f"{REALTIME_PRIORITY} {p}: {why}")
+        elif p:
+            node.get_logger().info(f"{REALTIME_PRIORITY}: SCHED_FIFO {wanted}")
     return realtime_priority_of()
 
 
