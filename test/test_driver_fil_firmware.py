@@ -123,11 +123,16 @@ def test_uno_firmware_latch_report_times_each_pulse_and_names_its_command(tmp_pa
             link.on_latch = lambda latch, t_rx: latches.append(latch)
             link.request(fr.SET_LATCH_REPORT, fr.pack_latch_report(True))
             widths: dict[int, tuple[int, ...]] = {link.last_targets_seq: (1500,) * 6}
-            for k in range(1, 21):   # a command every ~50 ms, each with its own widths
+            for k in range(1, 21):   # 20 commands, each with its own widths, the next once a frame latched this one
                 w = tuple(1000 + 100 * i + 20 * k for i in range(6))
                 assert link.set_targets(w)
-                widths[link.last_targets_seq] = w
-                time.sleep(0.05)
+                seq = link.last_targets_seq
+                widths[seq] = w
+                # paced by the board's frames, not by wall time: simavr runs at 0.2-1x of real time with the host's
+                # load, and a command superseded within one 20 ms frame is never latched (as on the robot)
+                t_end = time.monotonic() + 5.0
+                while not any(x.seqs[5] == seq for x in list(latches)) and time.monotonic() < t_end:
+                    time.sleep(0.005)
             time.sleep(0.1)
             link.request(fr.SET_LATCH_REPORT, fr.pack_latch_report(False))
             n_off = len(latches)
@@ -135,8 +140,8 @@ def test_uno_firmware_latch_report_times_each_pulse_and_names_its_command(tmp_pa
             assert len(latches) <= n_off + 1              # disabled: the stream stops (one may be in flight)
             assert link.stats.crc_errors == 0 and link.stats.decode_errors == 0
         del latches[n_off:]
-        # ~1.1 s of commands: 55 frames at simavr's full speed, 22-23 where it runs at 0.4x, 11-12 on a loaded
-        # 2-core host (0.2x); enough for the spacing check below, which proves none is missing in between
+        # at least one 20 ms frame per command: enough for the spacing check below, which proves none is missing in
+        # between
         assert len(latches) >= 8
         starts = [x.frame_start_us for x in latches]
         spacing = [b - a for a, b in zip(starts, starts[1:])]
