@@ -157,10 +157,11 @@ class SimNode(Node):
         rclpy.spin_once(self, timeout_sec=0.0)
 
     def close(self) -> None:
-        pacer = self.runner.pacer
+        pacer, worker = self.runner.pacer, self.camera_worker
         if pacer.stalls:
+            waited = f"; {worker.waited:.1f} s waiting for the camera worker" if worker is not None else ""
             self.get_logger().info(f"pacing: {pacer.stalls} stalls over max_lag, {pacer.dropped:.1f} s of wall time "
-                                   f"dropped (not caught up)")
+                                   f"dropped (not caught up){waited}")
         try:
             if self.camera_worker is not None:
                 self.camera_worker.close()        # publishes the frames handed over; raises the worker's error

@@ -29,6 +29,7 @@ them raised it already.
 from __future__ import annotations
 
 import threading
+import time
 from collections.abc import Callable, Collection
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
@@ -87,6 +88,7 @@ class CameraWorker:
         self._reported = False           # the error was raised in the caller once
         self._started = threading.Event()
         self.frames = 0                  # frames rendered and delivered
+        self.waited = 0.0                # wall seconds `submit` blocked for the worker
         self._thread = threading.Thread(target=self._run, name=name, daemon=True)
         self._thread.start()
         self._started.wait()
@@ -107,8 +109,11 @@ class CameraWorker:
         if not want <= set(CAMERA_NAMES):
             raise ValueError(f"unknown cameras {sorted(want - set(CAMERA_NAMES))}; cameras: {list(CAMERA_NAMES)}")
         with self._cond:
-            while self._waiting is not None and self._error is None:
-                self._cond.wait()
+            if self._waiting is not None and self._error is None:
+                t0 = time.monotonic()
+                while self._waiting is not None and self._error is None:
+                    self._cond.wait()
+                self.waited += time.monotonic() - t0
             self._raise_error()
             if self._closing:
                 raise CameraWorkerError("the camera worker is closed")
