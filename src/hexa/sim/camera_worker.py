@@ -1,6 +1,6 @@
 """The simulator's cameras rendered on a thread of their own, beside the stepping (CameraWorker).
 
-Rendering both cameras costs ~12 ms of CPU per camera and frame (GL render, then the noise and the depth
+Rendering both cameras costs ~15 ms of CPU per camera and frame (GL render, then the noise and the depth
 conversion), while a 1 ms physics step costs ~20 µs: rendered inline at every camera instant, the frames take most of
 the stepping loop's wall time and a paced run falls below half of real time. MuJoCo's GL calls and numpy's large array
 operations release the GIL, so a render on another thread leaves the stepping thread running.
