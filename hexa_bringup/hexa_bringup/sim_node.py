@@ -5,7 +5,8 @@ Topics (relative, e.g. under /hexa): cam_{top,side}/color/image_raw (rgb8), cam_
 cam_{top,side}/aligned_depth_to_color/image_raw (16UC1 mm) and its camera_info (sensor-data QoS); sim/wrench_truth
 (WrenchStamped: force at the contact point), sim/contact_truth (hexa_msgs/Contact), sim/plate_pose_truth
 (PoseStamped), sim/joint_states_truth (JointState: ζ, ζ̇, τ); /clock. All stamps are sim time; the output is
-deterministic for a given seed. The virtual Uno/Mega serial ports appear at `link_dir` (boards: true).
+deterministic for a given seed. The camera frames render and publish on their own thread (hexa.sim.camera_worker)
+while the physics steps on. The virtual Uno/Mega serial ports appear at `link_dir` (boards: true).
 Parameters: PARAMETERS below (start-up only, read-only), hexa_bringup/config/hexa_params.yaml (`/**/sim`) and
 docs/simulator.md.
 """
