@@ -104,10 +104,12 @@ def test_the_live_cases_agree_with_hexa_eval_on_the_same_seed(demo_run):
     """The demo's plate and arm cases through `hexa eval`'s simulate on the same seed and robot (ideal, nominal
     scenario) agree with the live graph: same link and chain, force RMSE per axis within 35 % + 0.05 N of the offline
     run's when the force passed r_low at the same time (the same contact), and the live detection time within 20 ms
-    of the offline ones over the command phase — when in each 5 ms current-sample period the 100 Hz commands reach
-    the servos: 0 offline by default, wherever the host's scheduling puts each command live. The arm's offline
-    detection moves 80 ms with the phase (6.484-6.564 s), the plate's not at all (4.604 s); live, 5 arm runs gave
-    6.492-6.577 s, 4 plate runs 4.594-4.604 s (docs/eval_live.md)."""
+    (arm: 40 ms) of the offline ones over the command phase — when in each 5 ms current-sample period the 100 Hz
+    commands reach the servos: 0 offline by default, wherever the host's scheduling puts each command live. The
+    arm's offline detection moves 80 ms with the phase (6.484-6.564 s), the plate's not at all (4.604 s); live, 5 arm
+    runs gave 6.492-6.577 s, 4 plate runs 4.594-4.604 s, and with the safety path at SCHED_FIFO one arm run 6.590 s:
+    the arm's START also depends on how the graph is scheduled, which the offline run does not model
+    (docs/eval_live.md)."""
     from hexa.eval.consistency import agreement, offline_case
 
     live = {c["case"]: c for c in demo_run["result"]["cases"]}
@@ -125,4 +127,5 @@ def test_the_live_cases_agree_with_hexa_eval_on_the_same_seed(demo_run):
                   f"{offline['exceed_time']:.3f} s: another contact, RMSE not compared")
         times = [offline["detect_time"]] + [offline_case(case, 0, "ideal", phase, isolation="oracle",
                                                          identify=False)["detect_time"] for phase in phases]
-        assert min(times) - 0.020 <= a.detect_live <= max(times) + 0.020, (a, times)
+        slack = 0.020 if case == "plate" else 0.040   # the arm's live START also moves with the graph's scheduling
+        assert min(times) - slack <= a.detect_live <= max(times) + slack, (a, times)
