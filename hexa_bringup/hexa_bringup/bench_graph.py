@@ -530,14 +530,19 @@ def parse_outputs(received: dict[str, list[tuple[int, bytes]]], ns: str) -> dict
             out[name].append({"recv": r * 1e-9, "id": int(m.collision_id), "link": int(m.link), "chain": int(m.chain),
                               "stamp": m.header.stamp.sec + m.header.stamp.nanosec * 1e-9})
     diags: dict[str, dict[str, str]] = {}
-    for _r, d in received.get("/diagnostics", []):
+    offsets: list[tuple[float, float]] = []     # (arrival, the observer's board_clock_offset_s)
+    for r, d in received.get("/diagnostics", []):
         try:
             m = store.deserialize_cdr(d, "diagnostic_msgs/msg/DiagnosticArray")
         except Exception:  # noqa: BLE001 - diagnostics are informative only
             continue
         for st in m.status:
             diags[st.name] = {kv.key: kv.value for kv in st.values}
+            said = diags[st.name].get("board_clock_offset_s", "") if st.name == f"{t}observer" else ""
+            if said:
+                offsets.append((r * 1e-9, float(said)))
     out["diagnostics"] = diags
+    out["board_clock_offsets"] = offsets
     return out
 
 

@@ -55,63 +55,67 @@ def match_nearest(stamps: Sequence[float], times: Sequence[float], tol: float = 
     return idx
 
 
-def match_tracked_offset(stamps: Sequence[float], times: Sequence[float], guess: float, tol: float = 1e-4,
-                         probe: int = 200, from_end: bool = False) -> np.ndarray:
+def match_tracked_offset(stamps: Sequence[float], times: Sequence[float], guess: float, anchor: int = -1,
+                         tol: float | None = None, probe: int = 200) -> np.ndarray:
     """For each stamp (s, in arrival order) the index of the time (s, increasing) it was made from, where each stamp
     is its time plus an offset that moves slowly from sample to sample (the observer's residual stamps: the sample's
-    board time plus the host offset hexa.dynamics.monitor.SampleClock tracks, which moves by less than 1 µs per sample
-    while the samples are ≥ 1 ms apart); -1 where no time fits.
+    board time plus the host offset hexa.dynamics.monitor.SampleClock tracks; it follows the host stamps with a 10 s
+    time constant, so it moves by microseconds per sample, by tens of them while it settles after a start with a late
+    first sample); -1 where no time fits.
 
-    `guess` (s) is the offset to start from (the observer's `board_clock_offset_s` diagnostics value, or the median
-    of the samples' host stamp − board time), good to a fraction of the sample period: the samples around
-    `stamp − guess` are tried as the first match, each scored by how many of the next `probe` stamps land within `tol`
-    of a time; of those that score (nearly) best — with evenly spaced samples every shift by whole periods does — the
-    one nearest the guess wins. From there each match re-anchors the offset for the next stamp; a run of 20 stamps
-    without a match starts the search again. `from_end`: the search starts at the last stamp and the tracking runs
-    backwards (a guess read at the end of a run).
+    `guess` (s) is the offset at stamp `anchor` (the observer's `board_clock_offset_s` diagnostics value and the
+    residual that arrived just before it), good to a fraction of the sample period. The samples around
+    `stamps[anchor] − guess` are tried there, each scored by how many of the `probe` stamps either side it then
+    follows; of those that score (nearly) best — with evenly spaced samples every shift by whole periods does — the
+    one nearest the guess wins. From there the offset is followed stamp by stamp in both directions, each match
+    re-anchoring it (within `tol` of the next time, default a quarter of the median sample period: what the offset
+    moves over a few lost stamps stays inside it); 20 stamps in a row without a match end the following.
     """
     s = np.asarray(stamps, dtype=float)
     t = np.asarray(times, dtype=float)
-    if from_end:      # the same tracking on the time-reversed axis
-        rev = match_tracked_offset(-s[::-1], -t[::-1], -guess, tol, probe)[::-1]
-        return np.where(rev >= 0, t.size - 1 - rev, -1)
     idx = np.full(s.size, -1, dtype=np.int64)
     if s.size == 0 or t.size == 0:
         return idx
+    k0 = anchor % s.size
+    if tol is None:
+        tol = 0.25 * float(np.median(np.diff(t))) if t.size > 1 else 1e-4
 
-    def nearest(x: np.ndarray) -> np.ndarray:
-        k = np.clip(np.searchsorted(t, x), 1, max(t.size - 1, 1))
-        lo = np.clip(k - 1, 0, t.size - 1)
-        return np.where(np.abs(t[lo] - x) <= np.abs(t[np.clip(k, 0, t.size - 1)] - x), lo,
-                        np.clip(k, 0, t.size - 1))
+    def nearest(x: float) -> int:
+        k = int(np.searchsorted(t, x))
+        if k <= 0:
+            return 0
+        if k >= t.size:
+            return t.size - 1
+        return k if abs(t[k] - x) < abs(t[k - 1] - x) else k - 1
 
-    def acquire(k: int) -> float | None:
-        centre = int(nearest(np.array([s[k] - guess]))[0])
-        nxt = s[k:k + probe]
-        scored = []
-        for j in range(max(0, centre - 20), min(t.size, centre + 21)):
-            off = s[k] - t[j]
-            scored.append((int(np.count_nonzero(np.abs(t[nearest(nxt - off)] - (nxt - off)) <= tol)), off))
-        best_n = max(n for n, _ in scored)
-        if best_n < 0.5 * nxt.size:
-            return None
-        return min((off for n, off in scored if n >= best_n - max(2, 0.02 * nxt.size)), key=lambda o: abs(o - guess))
+    def follow(off: float, step: int, limit: int, out: np.ndarray | None) -> int:
+        """Follow the offset from stamp k0 + step on, at most `limit` stamps; how many matched."""
+        n, misses, k = 0, 0, k0 + step
+        while 0 <= k < s.size and abs(k - k0) <= limit and misses < 20:
+            x = s[k] - off
+            i = nearest(x)
+            if abs(t[i] - x) <= tol:
+                n, misses, off = n + 1, 0, s[k] - t[i]
+                if out is not None:
+                    out[k] = i
+            else:
+                misses += 1
+            k += step
+        return n
 
-    off: float | None = None
-    misses = 0
-    for k in range(s.size):
-        if off is None:
-            off = acquire(k)
-            if off is None:
-                continue
-        x = s[k] - off
-        i = int(nearest(np.array([x]))[0])
-        if abs(t[i] - x) <= tol:
-            idx[k], off, misses = i, s[k] - t[i], 0
-        else:
-            misses += 1
-            if misses >= 20:
-                off, misses = None, 0
+    centre = nearest(s[k0] - guess)
+    scored = []
+    for j in range(max(0, centre - 20), min(t.size, centre + 21)):
+        off = s[k0] - t[j]
+        scored.append((follow(off, 1, probe, None) + follow(off, -1, probe, None), j))
+    best_n = max(n for n, _ in scored)
+    if best_n < 0.5 * min(2 * probe, s.size - 1):
+        return idx
+    near = [j for n, j in scored if n >= best_n - max(2, 0.02 * best_n)]
+    j0 = min(near, key=lambda j: abs(s[k0] - t[j] - guess))
+    idx[k0] = j0
+    follow(s[k0] - t[j0], 1, s.size, idx)
+    follow(s[k0] - t[j0], -1, s.size, idx)
     return idx
 
 

@@ -250,11 +250,14 @@ def robot_once(info: BagInputs, scene: RestScene, stream_hz: int, env: dict[str,
     dl = (m["recv"] - sample_t)[sel_m].tolist()
     stamp_delay = float(np.median((m["stamp"] - realtime_offset - sample_t)[sel_m])) if sel_m.any() else float("nan")
     r_recv, r_stamp = out["residual"]
-    # the observer's offset (its residual stamp − the sample's board time), from its diagnostics; else ≈ the
-    # driver's host stamp − board time
-    said = str(out["diagnostics"].get(f"{ns}/observer", {}).get("board_clock_offset_s", ""))
-    guess = float(said) if said else float(np.median(m["stamp"] - m["board"])) if m["board"].size else 0.0
-    idx = match_tracked_offset(r_stamp * 1e-9, m["board"], guess, from_end=True)   # the guess is the last one said
+    # the observer's offset (its residual stamp − the sample's board time) as it said it last in the window, at the
+    # residual that arrived just before; the residuals are traced to their samples from there
+    said = [(at, off) for at, off in out["board_clock_offsets"] if w0 <= at < w1 + 1.0]
+    if said and r_recv.size:
+        at, guess = said[-1]
+        idx = match_tracked_offset(r_stamp * 1e-9, m["board"], guess, max(int(np.searchsorted(r_recv, at)) - 1, 0))
+    else:
+        idx = np.full(r_recv.size, -1, dtype=np.int64)
     sel_r = in_window(r_recv) & (idx >= 0)
     rl = (r_recv[sel_r] - sample_t[idx[sel_r]]).tolist()
     return RobotResult(
