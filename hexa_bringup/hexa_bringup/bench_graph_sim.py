@@ -9,6 +9,7 @@ so a factor below the requested one is what the machine could do, not a transien
 from __future__ import annotations
 
 import os
+import shutil
 import time
 from dataclasses import dataclass
 from pathlib import Path
@@ -56,6 +57,28 @@ def sim_once(env: dict[str, str], params: Path, work: Path, duration: float, rea
             "nodes": [n for names in nodes.values() for n in names], "ready_publishers": [f"{ns}/residual"],
             "ready_messages": ["/clock"]}
     work.mkdir(parents=True, exist_ok=True)
+    try:
+        received, pids, cpu_pct, t0, t1 = _measure(env, specs, nodes, spec, work, duration, ready_timeout)
+    finally:
+        shutil.rmtree(link_dir, ignore_errors=True)     # the virtual boards' serial links
+    clocks = [(t_ns * 1e-9, cdr_stamp_ns(data) * 1e-9) for t_ns, data in received.get("/clock", [])]
+    win = np.array([c for c in clocks if t0 <= c[0] <= t1])
+    if len(win) < 2:
+        raise BenchGraphError(f"sim mode: fewer than two /clock messages in the measuring window (logs in {work})")
+    rtf = float((win[-1, 1] - win[0, 1]) / (win[-1, 0] - win[0, 0]))
+
+    def in_window(topic: str) -> int:
+        return sum(1 for t_ns, _ in received.get(topic, []) if t0 <= t_ns * 1e-9 <= t1)
+
+    return SimResult(rtf=rtf, window=t1 - t0, cpu=cpu_pct, nodes=nodes, pids=pids,
+                     counts={"clock": len(win), "residual": in_window(f"{ns}/residual"),
+                             "plate_pose": in_window(f"{ns}/plate_pose")})
+
+
+def _measure(env: dict[str, str], specs: list, nodes: dict, spec: dict, work: Path, duration: float,
+             ready_timeout: float) -> tuple[dict, dict, dict, float, float]:
+    """Start the graph and the probe, measure `duration` wall s after WARM_UP, stop them: what the probe received,
+    the pids, CPU % per process over the window, and the window's ends."""
     with Children(env) as ch:
         probe = Probe(ch, work, spec)
         for s in specs:
@@ -76,18 +99,7 @@ def sim_once(env: dict[str, str], params: Path, work: Path, duration: float, rea
             t1 = time.monotonic()
         ch.stop([s.name for s in specs])
         received = probe.finish()
-    clocks = [(t_ns * 1e-9, cdr_stamp_ns(data) * 1e-9) for t_ns, data in received.get("/clock", [])]
-    win = np.array([c for c in clocks if t0 <= c[0] <= t1])
-    if len(win) < 2:
-        raise BenchGraphError(f"sim mode: fewer than two /clock messages in the measuring window (logs in {work})")
-    rtf = float((win[-1, 1] - win[0, 1]) / (win[-1, 0] - win[0, 0]))
-
-    def in_window(topic: str) -> int:
-        return sum(1 for t_ns, _ in received.get(topic, []) if t0 <= t_ns * 1e-9 <= t1)
-
-    return SimResult(rtf=rtf, window=t1 - t0, cpu={n: cpu.percent(n, t0, t1) for n in pids}, nodes=nodes, pids=pids,
-                     counts={"clock": len(win), "residual": in_window(f"{ns}/residual"),
-                             "plate_pose": in_window(f"{ns}/plate_pose")})
+    return received, pids, {n: cpu.percent(n, t0, t1) for n in pids}, t0, t1
 
 
 def sim_rows(r: SimResult) -> list[BenchRow]:
