@@ -63,6 +63,23 @@ def test_residuals_stamped_by_the_observers_tracked_offset_are_matched_to_their_
                 assert (shifted - kept).tolist() == [-1] * len(kept)
 
 
+def test_the_bench_helpers_run_at_the_observers_configured_priority(tmp_path):
+    """The player, the emulated boards and the measuring subscriber take the observer's realtime_priority from the
+    parameters file (wildcards and namespaces as rcl matches them), else the node's default (normal scheduling)."""
+    from hexa_bringup.bench_graph import safety_priority
+    from hexa_bringup.graphs import DEFAULT_PARAMS
+    from hexa_ros.realtime import REALTIME_PRIORITY_PARAM
+
+    assert safety_priority(DEFAULT_PARAMS) == REALTIME_PRIORITY_PARAM.default == 0
+    own = tmp_path / "p.yaml"
+    own.write_text("/**/observer:\n  ros__parameters:\n    realtime_priority: 50\n")
+    assert safety_priority(own) == 50
+    assert safety_priority(own, "/robot2") == 50
+    own.write_text("/hexa/observer:\n  ros__parameters:\n    realtime_priority: 30\n")
+    assert safety_priority(own, "/hexa") == 30 and safety_priority(own, "/other") == 0
+    assert safety_priority(tmp_path / "none.yaml") == 0
+
+
 def test_frames_sharing_a_stamp_pair_in_order():
     from hexa_bringup.bench_graph_analysis import fifo_pairs
 

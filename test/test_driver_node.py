@@ -96,7 +96,8 @@ def test_driver_recovers_from_unplug_within_two_seconds_and_diagnostics_show_it(
     got = []
     with UnoEmulator(on_targets=got.append, link=tmp_path / "uno") as uno, \
             MegaEmulator(link=tmp_path / "mega") as mega:
-        procs.start(driver_args(uno.port, mega.port, "stream_rate_hz:=200", "diagnostics_period:=0.1"), ros_env)
+        procs.start(driver_args(uno.port, mega.port, "stream_rate_hz:=200", "diagnostics_period:=0.1",
+                                "realtime_priority:=50"), ros_env)
         assert wait_for(lambda: len(probe.currents) >= 20, 30.0), "no motor_currents from the driver"
         zeta = np.full(6, load_hexa().zeta_center)
         probe.command(zeta)
@@ -131,7 +132,7 @@ def test_driver_recovers_from_unplug_within_two_seconds_and_diagnostics_show_it(
         assert st, "diagnostics did not return to OK"
         d = kv(st)
         assert d["state"] == "CONNECTED" and int(d["disconnects"]) == 1 and int(d["connects"]) == 2
-        # the link threads run at the safety path's SCHED_FIFO priority where the process may raise itself
+        # asked for realtime_priority 50, the link threads run at SCHED_FIFO 50 where the process may raise itself
         import resource
         granted = os.geteuid() == 0 or resource.getrlimit(resource.RLIMIT_RTPRIO)[0] >= 50
         assert int(d["realtime_priority"]) == (50 if granted else 0)

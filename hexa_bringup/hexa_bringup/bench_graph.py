@@ -7,14 +7,15 @@ processing graph `hexa bringup replay` starts (hexa_bringup.graphs.build_graph("
 each input. The report: CPU per node process from /proc over the playing window, latencies (frame → plate_pose,
 current sample → residual, collision START → first contact and first contact_wrench), inputs against outputs per
 node, and the outputs against a slow replay (rate 0.3) of the same bag. The player stands in for the driver and
-the measuring subscriber must not add its own wait to what it measures: both run at the safety path's SCHED_FIFO
-priority (hexa_ros.realtime), as the driver and the observer do.
+the measuring subscriber must not add its own wait to what it measures: both run at the observer's
+`realtime_priority` of the parameters file (`safety_priority`; hexa_ros.realtime), as the driver does.
 
 Robot: the graph `hexa bringup robot` starts, without the simulator and the trajectory node, at 1× wall time: both
 camera nodes in `folder` source on frames of the bag taken while the robot was at rest, the driver against the
 emulated Uno and Mega (hexa.protocol.emulator) streaming the bag's rest currents at 1 kHz and at 200 Hz, a hold
 command at the rest pose; the emulated boards (microcontrollers on the robot) and the measuring subscriber at the
-safety path's priority. The report: CPU per process, the rates achieved, frame → plate_pose and sample → residual.
+observer's `realtime_priority`. The report: CPU per process, the rates achieved, frame → plate_pose and sample →
+residual.
 
 Without a BAG the bench records one first (the plate case of `hexa demo` with the camera topics, currents at 1 kHz)
 and keeps it under the cache directory for the next runs.
@@ -46,7 +47,7 @@ from hexa_bringup.bench_graph_analysis import (cdr_stamp_ns, compare_contacts, c
 # the inputs played from a bag, relative to the graph's namespace: the replay graph's sensor inputs (one definition)
 from hexa_bringup.graphs import CAMERA_TOPICS, CAMERAS  # noqa: F401 - bench_graph_robot takes them from here
 from hexa_bringup.graphs import SENSOR_INPUTS as INPUTS
-from hexa_ros.realtime import SAFETY_PRIORITY, set_realtime_priority
+from hexa_ros.realtime import REALTIME_PRIORITY, REALTIME_PRIORITY_PARAM, set_realtime_priority
 
 
 #: outputs of the processing graph the probe listens to: topic → message type
@@ -247,7 +248,7 @@ class Probe:
     """The measuring subscriber process (hexa_bringup.bench_graph_probe probe) and its stdout."""
 
     def __init__(self, children: Children, work: Path, spec: dict, name: str = "probe",
-                 priority: int = SAFETY_PRIORITY) -> None:
+                 priority: int = 0) -> None:
         work.mkdir(parents=True, exist_ok=True)
         self.spec_path = work / "probe_spec.json"
         self.out_path = work / "probe.pickle"
@@ -321,6 +322,21 @@ def node_names(cmd: list[str], default: str) -> list[str]:
     names = [m.group(1) for a in cmd[:cut] if (m := re.match(r"^([A-Za-z_]\w*)=[A-Za-z_][\w.]*:[A-Za-z_]\w*$", a))]
     names += [a.split(":=", 1)[1] for a in cmd[cut:] if a.startswith("__node:=") or ":__node:=" in a]
     return names or [default]
+
+
+def safety_priority(params: Path, ns: str = "/hexa") -> int:
+    """The SCHED_FIFO priority `params` gives the observer (`realtime_priority`; the node's default without one):
+    the bench's stand-ins for the driver and the boards, and its measuring subscriber, run at it too."""
+    import yaml
+
+    from hexa_bringup.commands.service import node_parameters
+
+    try:
+        data = yaml.safe_load(params.read_text(encoding="utf-8")) if params.is_file() else None
+    except (OSError, yaml.YAMLError):
+        data = None
+    given = node_parameters(data, f"{ns.rstrip('/')}/observer") if isinstance(data, dict) else {}
+    return int(given.get(REALTIME_PRIORITY, REALTIME_PRIORITY_PARAM.default))
 
 
 def graph_specs(mode: str, ns: str, params: Path, node_args: dict[str, list[str]] | None = None,
@@ -631,7 +647,8 @@ def replay_once(info: BagInputs, index: dict, rate: float, env: dict[str, str], 
     what = f"replay at {rate:g}x"
     t_start = time.monotonic()
     with Children(env) as ch:
-        probe = Probe(ch, work, probe_spec)
+        priority = safety_priority(params, ns)
+        probe = Probe(ch, work, probe_spec, priority=priority)
         for s in specs:
             ch.start(s.name, s.cmd, log=work / f"{s.name}.log")
         say(f"{what}: starting {len(specs)} node processes ({', '.join(nodes)}) and waiting for them")
@@ -640,7 +657,7 @@ def replay_once(info: BagInputs, index: dict, rate: float, env: dict[str, str], 
         player_cmd = [sys.executable, "-m", "hexa_bringup.cli", "play", str(info.path), "--clock", "--rate",
                       f"{rate:g}", "--wait", "30", "--wait-subscribers", "--log", str(log), "--topics",
                       *info.topics]
-        player = ch.start("player", player_cmd, log=work / "player.out", priority=SAFETY_PRIORITY)
+        player = ch.start("player", player_cmd, log=work / "player.out", priority=priority)
         pids["player"] = player.pid
         pids["probe"] = probe.proc.pid
         say(f"{what}: playing {info.duration:.1f} s of sensor data ({len(info.topics)} topics + /clock)")

@@ -32,9 +32,9 @@ import numpy as np
 from hexa.benchmarks import BenchRow
 from hexa_bringup.bench_graph import (CAMERA_TOPICS, CAMERAS, OUTPUTS, TARGET_P95, BagInputs, BenchGraphError,
                                       Children, CpuSampler, Probe, bag_identity, cpu_rows, frame_pose_latency,
-                                      graph_specs, latency_rows, node_names, parse_outputs, say, top_frames)
+                                      graph_specs, latency_rows, node_names, parse_outputs, safety_priority, say,
+                                      top_frames)
 from hexa_bringup.bench_graph_analysis import cdr_stamp_ns, match_tracked_offset
-from hexa_ros.realtime import SAFETY_PRIORITY
 
 #: the Mega's stream rates measured
 ROBOT_RATES = (1000, 200)
@@ -196,13 +196,13 @@ def robot_once(info: BagInputs, scene: RestScene, stream_hz: int, env: dict[str,
         with Children(env) as ch:
             boards = ch.start("boards", [sys.executable, "-m", "hexa_bringup.bench_graph_probe", "boards", str(uno),
                                          str(mega), "--amps", *[f"{a:.6f}" for a in scene.amps]],
-                              log=work / "boards.log", pipe=True, priority=SAFETY_PRIORITY)
+                              log=work / "boards.log", pipe=True, priority=safety_priority(params, ns))
             assert boards.stdout is not None
             line = boards.stdout.readline().strip()
             if not line.startswith("READY "):
                 raise BenchGraphError(f"{what}: the board emulators did not start:\n{ch.log_tail('boards')}")
             clock_zero = float(json.loads(line[6:])["mega_clock_zero"])
-            probe = Probe(ch, work, probe_spec)
+            probe = Probe(ch, work, probe_spec, priority=safety_priority(params, ns))
             for s in specs:
                 ch.start(s.name, s.cmd, log=work / f"{s.name}.log")
             say(f"{what}: starting {len(specs)} node processes ({', '.join(nodes)}) and waiting for the first "

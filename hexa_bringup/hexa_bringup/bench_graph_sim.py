@@ -18,7 +18,7 @@ import numpy as np
 
 from hexa.benchmarks import BenchRow
 from hexa_bringup.bench_graph import (BenchGraphError, Children, CpuSampler, Probe, cpu_rows, graph_specs,
-                                      node_names, say)
+                                      node_names, safety_priority, say)
 from hexa_bringup.bench_graph_analysis import cdr_stamp_ns
 
 #: wall seconds between the graph being up and the measuring window (the serial links connect, the arms settle)
@@ -58,7 +58,7 @@ def sim_once(env: dict[str, str], params: Path, work: Path, duration: float, rea
             "ready_messages": ["/clock"]}
     work.mkdir(parents=True, exist_ok=True)
     try:
-        received, pids, cpu_pct, t0, t1 = _measure(env, specs, nodes, spec, work, duration, ready_timeout)
+        received, pids, cpu_pct, t0, t1 = _measure(env, specs, nodes, spec, work, duration, ready_timeout, params)
     finally:
         shutil.rmtree(link_dir, ignore_errors=True)     # the virtual boards' serial links
     clocks = [(t_ns * 1e-9, cdr_stamp_ns(data) * 1e-9) for t_ns, data in received.get("/clock", [])]
@@ -76,11 +76,11 @@ def sim_once(env: dict[str, str], params: Path, work: Path, duration: float, rea
 
 
 def _measure(env: dict[str, str], specs: list, nodes: dict, spec: dict, work: Path, duration: float,
-             ready_timeout: float) -> tuple[dict, dict, dict, float, float]:
+             ready_timeout: float, params: Path) -> tuple[dict, dict, dict, float, float]:
     """Start the graph and the probe, measure `duration` wall s after WARM_UP, stop them: what the probe received,
     the pids, CPU % per process over the window, and the window's ends."""
     with Children(env) as ch:
-        probe = Probe(ch, work, spec)
+        probe = Probe(ch, work, spec, priority=safety_priority(params))
         for s in specs:
             ch.start(s.name, s.cmd, log=work / f"{s.name}.log")
         say(f"sim mode: starting {len(specs)} node processes ({', '.join(nodes)}) and waiting for /clock")

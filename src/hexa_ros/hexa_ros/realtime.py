@@ -21,14 +21,14 @@ from hexa_ros.node import Param
 
 #: the parameter every node on the 1 kHz safety path declares
 REALTIME_PRIORITY = "realtime_priority"
-#: the priority hexa gives the safety path (driver, observer) by default: ros2_control's
+#: the priority recommended for the safety path (driver, observer) on the robot PC: ros2_control's
 SAFETY_PRIORITY = 50
 #: the attribute a node's requested priority is kept in
 _WANTED = "_hexa_realtime_priority"
 REALTIME_PRIORITY_PARAM = Param(
-    SAFETY_PRIORITY, "SCHED_FIFO priority (1-99) of this node's process, all its threads, so the 1 kHz path preempts "
-                     "the vision nodes; 0 = normal scheduling. Needs root or an rtprio limit (docs/running.md); "
-                     "without, the node runs at normal priority and warns", range=(0, 99))
+    0, "SCHED_FIFO priority (1-99) of this node's process, all its threads, so the 1 kHz path preempts the vision "
+       "nodes (50 on the robot PC); 0 = normal scheduling (the default). Needs root or an rtprio limit "
+       "(docs/running.md); without, the node runs at normal priority and warns", range=(0, 99))
 
 
 def set_realtime_priority(priority: int, pid: int | None = None) -> str:
