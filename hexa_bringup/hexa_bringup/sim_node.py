@@ -5,8 +5,7 @@ Topics (relative, e.g. under /hexa): cam_{top,side}/color/image_raw (rgb8), cam_
 cam_{top,side}/aligned_depth_to_color/image_raw (16UC1 mm) and its camera_info (sensor-data QoS); sim/wrench_truth
 (WrenchStamped: force at the contact point), sim/contact_truth (hexa_msgs/Contact), sim/plate_pose_truth
 (PoseStamped), sim/joint_states_truth (JointState: ζ, ζ̇, τ); /clock. All stamps are sim time; the output is
-deterministic for a given seed. The camera frames render and publish on their own thread (hexa.sim.camera_worker)
-while the physics steps on. The virtual Uno/Mega serial ports appear at `link_dir` (boards: true).
+deterministic for a given seed. The virtual Uno/Mega serial ports appear at `link_dir` (boards: true).
 Parameters: PARAMETERS below (start-up only, read-only), hexa_bringup/config/hexa_params.yaml (`/**/sim`) and
 docs/simulator.md.
 """
@@ -30,7 +29,6 @@ from sensor_msgs.msg import CameraInfo, Image, JointState
 from hexa.kinematics.hexa6rus import rotation_zyx
 from hexa.sim import Simulator
 from hexa.sim.boards import VirtualBoards
-from hexa.sim.camera_worker import CameraFrame, CameraWorker
 from hexa.sim.pacing import MAX_LAG, Pacer, SimRunner
 from hexa.sim.realism import RealismConfig
 from hexa.sim.simulator import LINK_CODES
@@ -84,8 +82,6 @@ class SimNode(Node):
                              realism=RealismConfig.named(str(v["realism"])))
         self.runner = SimRunner(self.sim, pacer, clock_rate, truth_rate, cam_rate if cameras else None, duration,
                                 start_delay)
-        # the frames render on their own thread while the physics steps (hexa.sim.camera_worker)
-        self.camera_worker: CameraWorker | None = CameraWorker(self.sim, self._publish_frame) if cameras else None
         self.boards = VirtualBoards(self.sim, link_dir=str(v["link_dir"])).start() if v["boards"] else None
         self.clock_pub = self.create_publisher(Clock, "/clock", 10)
         self.cam_pubs = {}
@@ -109,27 +105,20 @@ class SimNode(Node):
         self.clock_pub.publish(Clock(clock=to_stamp(self.sim.time)))
 
     def cameras(self) -> None:
-        """Keep this instant for the camera worker, rendering each camera with a subscriber to its images (a camera
-        nobody listens to is not rendered; its noise advances as if it were: the frames stay those of the seed).
-        Waits while the worker is a frame behind (SimRunner's pacer drops that wall time)."""
-        wanted = [name for name, (pub, _, _) in self.cam_pubs.items()
-                  if pub["color/image_raw"].get_subscription_count()
-                  + pub["aligned_depth_to_color/image_raw"].get_subscription_count() > 0]
-        assert self.camera_worker is not None
-        self.camera_worker.submit(self.sim.frame_state(), wanted)
-
-    def _publish_frame(self, frame: CameraFrame) -> None:
-        """The camera worker's delivery (on its thread): the images serialized, and the camera_info, stamped with the
-        frame's sim time."""
-        pub, info, frame_id = self.cam_pubs[frame.camera]
-        st = to_stamp(frame.time)
-        if frame.rgb is not None and frame.depth is not None:
-            pub["color/image_raw"].publish(image_to_cdr(st.sec, st.nanosec, frame_id, frame.rgb, "rgb8"))
-            pub["aligned_depth_to_color/image_raw"].publish(
-                image_to_cdr(st.sec, st.nanosec, frame_id, frame.depth, "16UC1"))
-        info.header.stamp = st
-        pub["color/camera_info"].publish(info)
-        pub["aligned_depth_to_color/camera_info"].publish(info)
+        """Each camera with a subscriber to its images: render once (colour and depth), publish serialized; a camera
+        nobody listens to is not rendered (its noise advances as if it were: the frames stay those of the seed)."""
+        st = to_stamp(self.sim.time)
+        for name, (pub, info, frame) in self.cam_pubs.items():
+            color, depth_pub = pub["color/image_raw"], pub["aligned_depth_to_color/image_raw"]
+            if color.get_subscription_count() + depth_pub.get_subscription_count() == 0:
+                self.sim.skip_render(name)
+            else:
+                rgb, depth = self.sim.render(name)
+                color.publish(image_to_cdr(st.sec, st.nanosec, frame, rgb, "rgb8"))
+                depth_pub.publish(image_to_cdr(st.sec, st.nanosec, frame, depth, "16UC1"))
+            info.header.stamp = st
+            pub["color/camera_info"].publish(info)
+            pub["aligned_depth_to_color/camera_info"].publish(info)
 
     def truth(self) -> None:
         s, g = self.sim.state(), self.sim.ground_truth()
@@ -158,18 +147,13 @@ class SimNode(Node):
         rclpy.spin_once(self, timeout_sec=0.0)
 
     def close(self) -> None:
-        pacer, worker = self.runner.pacer, self.camera_worker
+        pacer = self.runner.pacer
         if pacer.stalls:
-            waited = f"; {worker.waited:.1f} s waiting for the camera worker" if worker is not None else ""
             self.get_logger().info(f"pacing: {pacer.stalls} stalls over max_lag, {pacer.dropped:.1f} s of wall time "
-                                   f"dropped (not caught up){waited}")
-        try:
-            if self.camera_worker is not None:
-                self.camera_worker.close()        # publishes the frames handed over; raises the worker's error
-        finally:
-            if self.boards is not None:
-                self.boards.stop()
-            self.sim.close()
+                                   f"dropped (not caught up)")
+        if self.boards is not None:
+            self.boards.stop()
+        self.sim.close()
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -119,13 +119,9 @@ class RGBDRenderer:
         mujoco.mjr_readPixels(self._rgb, self._depth, self._rect, self._con)
         rgb = np.flipud(self._rgb).copy()
         buf = np.flipud(self._depth).astype(np.float64)
-        z = buf + self._c
         with np.errstate(divide="ignore"):
-            np.divide(self._d, z, out=z)
-        depth = z.astype(np.float32)
-        invalid = buf <= 0.0
-        invalid |= depth >= self._zfar * 0.999
-        depth[invalid] = np.inf
+            depth = (self._d / (buf + self._c)).astype(np.float32)
+        depth[(buf <= 0.0) | (depth >= self._zfar * 0.999)] = np.inf
         return rgb, depth
 
     def close(self) -> None:
@@ -148,18 +144,14 @@ def depth_image_mm(depth_m: np.ndarray, cfg: CameraConfig, rel_sigma: float, noi
                    ) -> np.ndarray:
     """uint16 depth in mm with range-proportional Gaussian noise and 1 mm quantisation; 0 = invalid (see module)."""
     z = depth_m
-    valid = np.isfinite(z)
-    valid &= z >= cfg.depth_min
-    valid &= z <= cfg.depth_max
-    zn = np.where(valid, z, 0.0)
-    if noise is not None and rel_sigma > 0:       # in place: the same float32 operations, fewer buffers
-        scale = np.multiply(noise.draw(z.size).reshape(z.shape), rel_sigma)
-        scale += 1.0
-        zn *= scale
-    zn *= 1000.0
-    np.rint(zn, out=zn)
-    np.clip(zn, 0, 65535, out=zn)
-    mm = zn.astype(np.uint16)
+    valid = np.isfinite(z) & (z >= cfg.depth_min) & (z <= cfg.depth_max)
+    if noise is not None and rel_sigma > 0:
+        n = noise.draw(z.size).reshape(z.shape)
+        zn = np.where(valid, z, 0.0) * (1.0 + rel_sigma * n)
+    else:
+        zn = np.where(valid, z, 0.0)
+    mm = np.rint(zn * 1000.0)
+    mm = np.clip(mm, 0, 65535).astype(np.uint16)
     mm[~valid] = 0
     return mm
 
@@ -168,8 +160,6 @@ def noisy_rgb(rgb: np.ndarray, sigma: float, noise: NoiseBank | None) -> np.ndar
     """uint8 colour with additive Gaussian noise of `sigma` levels (see module)."""
     if noise is None or sigma <= 0:
         return rgb
-    out = np.multiply(noise.draw(rgb.size).reshape(rgb.shape), sigma)   # float32, in place from here
-    out += rgb
-    np.rint(out, out=out)
-    np.clip(out, 0, 255, out=out)
-    return out.astype(np.uint8)
+    n = noise.draw(rgb.size).reshape(rgb.shape)
+    out = rgb.astype(np.float32) + sigma * n
+    return np.clip(np.rint(out), 0, 255).astype(np.uint8)

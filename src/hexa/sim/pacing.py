@@ -1,15 +1,14 @@
 """Real-time pacing of the simulator's stepping loop, and the loop itself (SimRunner: the sim node publishes
 what it asks for).
 
-The simulator steps as fast as it can and sleeps to keep sim time at `real_time_factor` × wall time. Waiting for the
-camera worker at a camera instant (hexa.sim.camera_worker: the frames render on their own thread, ~30 ms of CPU per
-frame pair, and the loop waits when the worker is a frame behind) or a host stall makes it fall behind that pace.
-Catching up means stepping without sleeping until the pace is restored: sim time then runs several times faster than
-the rest of the graph, whose commands (trajectory → driver → virtual Uno) then reach the simulated servos sparser in
-sim time than they were played — gaps of 20–50 ms followed by a burst of set-point steps, which the arms really
-follow with jerks that the observer sees as unmodelled torque (docs/history/observer_node.md, "Command timing"). So
-when the loop is more than `max_lag` wall seconds behind, the lost wall time is dropped instead: the run gets longer,
-and sim time never runs ahead of the requested factor.
+The simulator steps as fast as it can and sleeps to keep sim time at `real_time_factor` × wall time. A camera render
+(≈ 22 ms per camera) or a host stall makes it fall behind that pace. Catching up means stepping without sleeping
+until the pace is restored: sim time then runs several times faster than the rest of the graph, whose commands
+(trajectory → driver → virtual Uno) then reach the simulated servos sparser in sim time than they were played —
+gaps of 20–50 ms followed by a burst of set-point steps, which the arms really follow with jerks that the observer
+sees as unmodelled torque (docs/history/observer_node.md, "Command timing"). So when the loop is more than `max_lag`
+wall seconds behind, the lost wall time is dropped instead: the run gets longer, and sim time never runs ahead of the
+requested factor.
 """
 from __future__ import annotations
 
@@ -95,11 +94,8 @@ class SimRunner:
     every `truth_rate` Hz and a camera frame pair every 1/`camera_rate` s of sim time, paced by `pacer`.
 
     The output does not depend on wall time (only the pacing does): for a given seed a run publishes the same
-    messages with the same sim-time stamps. `outputs.cameras()` may hand the instant to a thread that renders and
-    publishes it while the physics steps on (hexa.sim.camera_worker); it waits for that thread rather than skip a
-    frame, so the camera frames too are those of the seed. Before stepping, sim time is held at its start for
-    `start_delay` wall seconds while the rest of the graph starts, re-publishing the clock, the truth and the cameras
-    every 0.5 s.
+    messages at the same sim times. Before stepping, sim time is held at its start for `start_delay` wall seconds
+    while the rest of the graph starts, re-publishing the clock, the truth and the cameras every 0.5 s.
 
     Args:
         sim: the hexa.sim.Simulator (`step(n)`, `time`, `timestep`).

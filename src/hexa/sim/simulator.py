@@ -335,11 +335,10 @@ class Simulator:
         self._noise: dict[str, NoiseBank] = {}
         self.rgb_noise_sigma = self.config.rgb_noise_sigma      # image noise (hexa.sim.randomize changes them)
         self.depth_noise_rel = self.config.depth_noise_rel
-        #: width and height (px) of the render buffer every camera's image is cut from
-        self.render_size = (max(c.width for c in self.config.cameras.values()),
-                            max(c.height for c in self.config.cameras.values()))
         if cameras:
-            self._renderer = RGBDRenderer(m, *self.render_size)
+            w = max(c.width for c in self.config.cameras.values())
+            h = max(c.height for c in self.config.cameras.values())
+            self._renderer = RGBDRenderer(m, w, h)
             for k, name in enumerate(CAMERA_NAMES):
                 c = self.config.cameras[name]
                 self._noise[name] = NoiseBank(c.width * c.height * 3, seed=self.seed * 7919 + 17 * (k + 1))
@@ -766,42 +765,24 @@ class Simulator:
             rgb, depth = renderer.render(self.data, cam_id)
         return self._camera_images(camera, rgb, depth, noise)
 
-    def render_frame(self, camera: str, frame: FrameState, noise: bool = True, renderer: RGBDRenderer | None = None,
-                     data: Any = None) -> tuple[np.ndarray, np.ndarray]:
+    def render_frame(self, camera: str, frame: FrameState, noise: bool = True) -> tuple[np.ndarray, np.ndarray]:
         """`render` of an earlier instant kept by `frame_state`: the same colour and depth images (the noise is the
         camera's next draw), rendered off the physics' data.
 
-        With `renderer` and `data` (an RGBDRenderer and an MjData of this simulator's `model`, both the caller's) the
-        frame is rendered with them and without the simulator's lock, so it may run on another thread while `step`
-        runs (hexa.sim.camera_worker); only the camera's noise is then the simulator's. Without them the simulator's
-        own renderer and scratch data are used under its lock.
-
         Raises:
-            SimulatorError: unknown camera; RenderError: no `renderer` given and the simulator was built with
-            cameras=False.
+            SimulatorError: unknown camera; RenderError: the simulator was built with cameras=False.
         """
-        if (renderer is None) != (data is None):
-            raise SimulatorError("render_frame takes a renderer and an MjData together, or neither")
-        if renderer is not None:
-            if camera not in self._cam_ids:
-                raise SimulatorError(f"unknown camera {camera!r}; cameras: {list(self._cam_ids)}")
-            rgb, depth = self._render_kept(renderer, data, self._cam_ids[camera], frame)
-        else:
-            own, cam_id = self._renderer_of(camera)
-            with self._lock:
-                rgb, depth = self._render_kept(own, self._scratch_data(), cam_id, frame)
+        renderer, cam_id = self._renderer_of(camera)
+        with self._lock:
+            s = self._scratch_data()
+            s.time = frame.time
+            s.qpos[:] = frame.qpos
+            s.mocap_pos[:] = frame.mocap_pos
+            s.mocap_quat[:] = frame.mocap_quat
+            mujoco.mj_kinematics(self.model, s)
+            mujoco.mj_camlight(self.model, s)          # the cameras' and lights' poses (a fresh MjData has none)
+            rgb, depth = renderer.render(s, cam_id)
         return self._camera_images(camera, rgb, depth, noise)
-
-    def _render_kept(self, renderer: RGBDRenderer, data: Any, cam_id: int, frame: FrameState
-                     ) -> tuple[np.ndarray, np.ndarray]:
-        """Raw colour and metric depth of camera `cam_id` at the kept instant `frame`, with `data` as scratch."""
-        data.time = frame.time
-        data.qpos[:] = frame.qpos
-        data.mocap_pos[:] = frame.mocap_pos
-        data.mocap_quat[:] = frame.mocap_quat
-        mujoco.mj_kinematics(self.model, data)
-        mujoco.mj_camlight(self.model, data)          # the cameras' and lights' poses (a fresh MjData has none)
-        return renderer.render(data, cam_id)
 
     def _renderer_of(self, camera: str) -> tuple[RGBDRenderer, int]:
         """The renderer and the MuJoCo id of `camera`.
