@@ -141,9 +141,10 @@ def run(factories: Sequence[Callable[..., Any]], name: str, argv: list[str] | No
             print(f"hexa {name}: {exc}", file=sys.stderr)
             return 2
         raise
-    from hexa_ros.realtime import apply_requested_priority
+    if any(getattr(node, "_hexa_realtime_priority", 0) for node in nodes):   # hexa_ros.realtime's request
+        from hexa_ros.realtime import apply_requested_priority
 
-    apply_requested_priority(nodes)     # this process is the nodes' own: SCHED_FIFO when one asked for it
+        apply_requested_priority(nodes)     # this process is the nodes' own: SCHED_FIFO when one asked for it
     for node in nodes:
         node.get_logger().info("ready")
     stop_on_signal()     # a signal from here on ends the spin before or after its first step, never a traceback
