@@ -11,9 +11,9 @@ Latencies: frame → plate_pose from the arrival of the later of colour and dept
 motor_currents and sample → residual from the instant the Mega measured the sample (the emulator's clock zero plus
 its board time, on the monotonic clock). Without sim time the observer stamps a residual with the sample's board
 time plus a host offset it tracks (hexa.dynamics.monitor.SampleClock), which no subscriber can reproduce exactly
-(its state depends on the first sample the observer heard) but which moves by less than a microsecond per sample:
-each residual is matched to its sample by following that offset from residual to residual
-(hexa_bringup.bench_graph_analysis.match_tracked_offset), so its latency is exact.
+(its state depends on the first sample the observer heard) but which moves by microseconds per sample and which the
+observer says in /diagnostics: each residual is matched to its sample by following that offset from residual to
+residual (hexa_bringup.bench_graph_analysis.match_tracked_offset), so its latency is exact.
 """
 from __future__ import annotations
 
@@ -148,7 +148,6 @@ class RobotResult:
     frame_latency: list[float]
     residual_latency: list[float]                 # estimated (module docstring)
     driver_latency: list[float]                   # sample → motor_currents arrival
-    stamp_delay: float                            # median sample → driver's header stamp (s)
     residual_matched: int                         # residuals in the window matched to their sample
     events: int
     contacts: int
@@ -192,17 +191,18 @@ def robot_once(info: BagInputs, scene: RestScene, stream_hz: int, env: dict[str,
                   "ready_publishers": [f"{ns}/{t}" for t in OUTPUTS],
                   "ready_messages": [f"{ns}/residual", f"{ns}/plate_pose"], "hold_command": scene.zeta}
     what = f"robot mode, currents at {stream_hz} Hz"
+    priority = safety_priority(params, ns)     # the boards and the subscriber at the safety path's priority
     try:
         with Children(env) as ch:
             boards = ch.start("boards", [sys.executable, "-m", "hexa_bringup.bench_graph_probe", "boards", str(uno),
                                          str(mega), "--amps", *[f"{a:.6f}" for a in scene.amps]],
-                              log=work / "boards.log", pipe=True, priority=safety_priority(params, ns))
+                              log=work / "boards.log", pipe=True, priority=priority)
             assert boards.stdout is not None
             line = boards.stdout.readline().strip()
             if not line.startswith("READY "):
                 raise BenchGraphError(f"{what}: the board emulators did not start:\n{ch.log_tail('boards')}")
             clock_zero = float(json.loads(line[6:])["mega_clock_zero"])
-            probe = Probe(ch, work, probe_spec, priority=safety_priority(params, ns))
+            probe = Probe(ch, work, probe_spec, priority=priority)
             for s in specs:
                 ch.start(s.name, s.cmd, log=work / f"{s.name}.log")
             say(f"{what}: starting {len(specs)} node processes ({', '.join(nodes)}) and waiting for the first "
@@ -220,7 +220,6 @@ def robot_once(info: BagInputs, scene: RestScene, stream_hz: int, env: dict[str,
                         raise BenchGraphError(f"{what}: {dead[0]} exited during the run:\n{ch.log_tail(dead[0])}")
                     time.sleep(0.1)
                 w1 = time.monotonic()
-                realtime_offset = time.time() - time.monotonic()      # host (ROS) clock − monotonic clock
             ch.stop([s.name for s in specs])
             received = probe.finish()
             ch.stop(["boards"])
@@ -248,7 +247,6 @@ def robot_once(info: BagInputs, scene: RestScene, stream_hz: int, env: dict[str,
     sample_t = clock_zero + m["board"]       # the monotonic time the Mega measured each sample
     sel_m = in_window(m["recv"])
     dl = (m["recv"] - sample_t)[sel_m].tolist()
-    stamp_delay = float(np.median((m["stamp"] - realtime_offset - sample_t)[sel_m])) if sel_m.any() else float("nan")
     r_recv, r_stamp = out["residual"]
     # the observer's offset (its residual stamp − the sample's board time) as it said it last in the window, at the
     # residual that arrived just before; the residuals are traced to their samples from there
@@ -263,7 +261,7 @@ def robot_once(info: BagInputs, scene: RestScene, stream_hz: int, env: dict[str,
     return RobotResult(
         stream_hz=stream_hz, window=(w0, w1), cpu={n: cpu.percent(n, w0, w1) for n in pids}, nodes=nodes, pids=pids,
         processing=processing, sources=sources, rates=rates, counts=counts, frame_latency=fl, residual_latency=rl,
-        driver_latency=dl, stamp_delay=stamp_delay, residual_matched=int(np.count_nonzero(sel_r)),
+        driver_latency=dl, residual_matched=int(np.count_nonzero(sel_r)),
         events=sum(1 for e in out["collision"] if e["kind"] == "START"), contacts=len(out["contact"]),
         boards=board_stats, fps=scene.fps, diagnostics=out["diagnostics"])
 

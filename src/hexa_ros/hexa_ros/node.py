@@ -28,6 +28,9 @@ from typing import Any
 CONFIG_ERRORS: tuple[type[BaseException], ...] = (ValueError, OSError, KeyError)
 #: seconds one executor step waits at most
 SPIN_STEP = 0.2
+#: the node attribute hexa_ros.realtime.request_realtime_priority keeps a node's asked-for priority in; `run` raises
+#: the process only when one is set (hexa_ros.realtime stays unimported otherwise)
+REQUESTED_PRIORITY = "_hexa_realtime_priority"
 EXECUTORS = ("events", "single")
 
 
@@ -141,7 +144,7 @@ def run(factories: Sequence[Callable[..., Any]], name: str, argv: list[str] | No
             print(f"hexa {name}: {exc}", file=sys.stderr)
             return 2
         raise
-    if any(getattr(node, "_hexa_realtime_priority", 0) for node in nodes):   # hexa_ros.realtime's request
+    if any(getattr(node, REQUESTED_PRIORITY, 0) for node in nodes):   # hexa_ros.realtime.request_realtime_priority
         from hexa_ros.realtime import apply_requested_priority
 
         apply_requested_priority(nodes)     # this process is the nodes' own: SCHED_FIFO when one asked for it

@@ -17,14 +17,14 @@ from __future__ import annotations
 import os
 from typing import Any
 
-from hexa_ros.node import Param
+from hexa_ros.node import REQUESTED_PRIORITY, Param
 
 #: the parameter every node on the 1 kHz safety path declares
 REALTIME_PRIORITY = "realtime_priority"
 #: the priority recommended for the safety path (driver, observer) on the robot PC: ros2_control's
 SAFETY_PRIORITY = 50
-#: the attribute a node's requested priority is kept in
-_WANTED = "_hexa_realtime_priority"
+#: the attribute a node's requested priority is kept in (hexa_ros.node.run reads it)
+_WANTED = REQUESTED_PRIORITY
 REALTIME_PRIORITY_PARAM = Param(
     0, "SCHED_FIFO priority (1-99) of this node's process, all its threads, so the 1 kHz path preempts the vision "
        "nodes (50 on the robot PC); 0 = normal scheduling (the default). Needs root or an rtprio limit "
