@@ -13,6 +13,16 @@ import pytest
 
 # Headless MuJoCo rendering (EGL) for every test, also when pytest is run without the Makefile.
 os.environ.setdefault("MUJOCO_GL", "egl")
+try:
+    # The test process is a ROS peer too: its participants take hexa's Fast DDS profile. Fast DDS reads the profile
+    # file once per process, at the first participant: a test calling rclpy.init() before setting it would leave
+    # every later test of the process with the 512 KB shared-memory segment, whose image messages go over UDP and
+    # are lost under load.
+    from hexa_ros.env import apply_defaults
+except ImportError:         # before `make setup`: the ROS tests skip themselves
+    pass
+else:
+    apply_defaults()
 
 REPO = Path(__file__).resolve().parents[1]
 TEST_DIR = Path(__file__).resolve().parent
