@@ -11,7 +11,7 @@ import pytest
 
 from hexa.eval import CampaignConfig, ProgressBar, jobs_of, run_campaign
 from hexa.eval.campaign import DETECTOR_NAMES, THRESHOLD_SCALES, draw_contact, run_contact_job
-from hexa.eval.report import summarize, write_report
+from hexa.eval.report import matched_delay, summarize, write_report
 
 pytestmark = pytest.mark.slow   # a campaign on worker processes: left out of `make check`
 
@@ -138,6 +138,19 @@ def test_smoke_campaign_on_two_worker_processes_writes_the_report(tmp_path):
     iso = s["isolation"]
     assert iso["rendered_cases"] == 6 and iso["detected"] == sum(pl["detected"] for pl in s["links"].values())
     assert "Isolation on rendered frames" in text and "isolation: right link + chain" in text
+
+
+def test_the_detectors_are_compared_at_the_papers_false_alarms_and_not_without_free_motion():
+    def row(scale, fa, delay):
+        return {"scale": scale, "false_alarms": fa, "delay_median_ms": delay, "detection_arm_strong": 0.5}
+
+    paper1 = row(1.0, 23, 56.5)
+    cusum = [row(1.0, 122, 18.7), row(1.3, 37, 34.8), row(1.5, 15, 45.4), row(2.0, 0, 76.2)]
+    m = matched_delay(cusum, paper1, hours=1.0)     # the first scale with no more false alarms than the paper's
+    assert m["scale"] == 1.5 and m["ratio"] == pytest.approx(45.4 / 56.5) and m["false_alarms"] == 15
+    assert matched_delay(cusum, paper1, hours=0.0)["scale"] is None       # no free motion: rates unknown
+    assert np.isnan(matched_delay(cusum, paper1, hours=0.0)["ratio"])
+    assert matched_delay(cusum[:2], row(1.0, 0, 56.5), hours=1.0)["scale"] is None   # never as quiet
 
 
 def test_progress_bar_counts_jobs_and_simulated_time():

@@ -28,7 +28,7 @@ TARGETS = (
     ("isolation_right", "isolation: right link + chain, detected contacts", ">=", 0.98),
     ("point_error_median_mm", "isolation: point error, median (mm)", "<=", 5.0),
     ("rmse_below_paper", "detected cases with force RMSE below the paper's on every axis", ">=", 0.90),
-    ("delay_vs_paper", "CUSUM detector's median delay ÷ the paper detector's, at no more false alarms", "<=", 0.5),
+    ("delay_vs_paper", "CUSUM detector's median delay ÷ the paper detector's, at its false alarms", "<=", 0.5),
 )
 
 
@@ -143,6 +143,23 @@ def summarize_kinds(cases: list[dict[str, Any]], free: list[dict[str, Any]]) -> 
     return out
 
 
+def matched_delay(rows: list[dict[str, Any]], paper1: dict[str, Any], hours: float) -> dict[str, Any]:
+    """A detector's DET row at the paper detector's false-alarm count (its fixed thresholds, × 1): of the scales
+    that raise no more false alarms in free motion than the paper's, the one with the shortest median delay, and
+    that delay ÷ the paper's. Without free motion (`hours` 0) the false-alarm rates are unknown: NaN, scale None."""
+    none = {"scale": None, "delay_ms": float("nan"), "ratio": float("nan"), "false_alarms": None,
+            "detection_arm_strong": float("nan")}
+    if hours <= 0 or not paper1["delay_median_ms"] > 0:
+        return none
+    fit = [r for r in rows if r["false_alarms"] <= paper1["false_alarms"] and math.isfinite(r["delay_median_ms"])]
+    if not fit:
+        return none
+    best = min(fit, key=lambda r: r["delay_median_ms"])
+    return {"scale": best["scale"], "delay_ms": best["delay_median_ms"], "false_alarms": best["false_alarms"],
+            "ratio": best["delay_median_ms"] / paper1["delay_median_ms"],
+            "detection_arm_strong": best["detection_arm_strong"]}
+
+
 def summarize(result: dict[str, Any]) -> dict[str, Any]:
     """Per robot (realism): per-link detection and delays, free-motion false alarms, the DET curves of every replayed
     detector (the CUSUM, the threshold detector, the paper's), force RMSE against the paper's, the live detector
@@ -211,17 +228,15 @@ def summarize(result: dict[str, Any]) -> dict[str, Any]:
             det_curve[name] = rows
         s["det"] = det_curve
         node1 = next(r for r in det_curve[live] if abs(r["scale"] - 1.0) < 1e-9)
-        cusum1 = next(r for r in det_curve["cusum"] if abs(r["scale"] - 1.0) < 1e-9)
         paper1 = next(r for r in det_curve["paper"] if abs(r["scale"] - 1.0) < 1e-9)
-        # the CUSUM at × 1 against the paper's at × 1, when it raises no more false alarms
-        ratio = (cusum1["delay_median_ms"] / paper1["delay_median_ms"]
-                 if cusum1["false_alarms"] <= paper1["false_alarms"] and paper1["delay_median_ms"] > 0
-                 else float("nan"))
-        s["vs_paper"] = {"detector": "cusum", "delay_ms": cusum1["delay_median_ms"],
-                         "paper_delay_ms": paper1["delay_median_ms"], "false_alarms": cusum1["false_alarms"],
-                         "paper_false_alarms": paper1["false_alarms"], "ratio": ratio,
-                         "arm_detection": cusum1["detection_arm_strong"],
-                         "paper_arm_detection": paper1["detection_arm_strong"]}
+        matched = {name: matched_delay(det_curve[name], paper1, hours) for name in DETECTOR_NAMES if name != "paper"}
+        m = matched["cusum"]
+        s["vs_paper"] = {"detector": "cusum", "scale": m["scale"], "delay_ms": m["delay_ms"],
+                         "paper_delay_ms": paper1["delay_median_ms"], "false_alarms": m["false_alarms"],
+                         "paper_false_alarms": paper1["false_alarms"], "ratio": m["ratio"],
+                         "arm_detection": m["detection_arm_strong"],
+                         "paper_arm_detection": paper1["detection_arm_strong"], "matched": matched}
+        ratio = m["ratio"]
         iso = summarize_isolation(cases)
         s["isolation"] = iso
         s["targets"] = {
@@ -445,10 +460,14 @@ def write_report(result: dict[str, Any], out_dir: str | Path, plots: bool = True
                          f"{k['false_starts_before_contact']} | {k['free_hours'] * 60:.1f} | "
                          f"{k['live_false_starts_free']} | " + " | ".join(cells) + " |")
         v = s["vs_paper"]
-        lines += ["", "CUSUM detector against the paper's, both at × 1: median delay "
-                  f"{_fmt(v['delay_ms'])} ms vs {_fmt(v['paper_delay_ms'])} ms (ratio {_fmt(v['ratio'])}), "
-                  f"{v['false_alarms']} vs {v['paper_false_alarms']} false alarms in free motion, arm contacts "
-                  f"≥ 3 N detected {_fmt(v['arm_detection'])} vs {_fmt(v['paper_arm_detection'])}.", "",
+        at = "no free motion, so no false-alarm rate to match" if v["scale"] is None else f"at × {v['scale']:g}"
+        lines += ["", f"At the paper detector's false alarms (its fixed thresholds, × 1: {v['paper_false_alarms']} "
+                  f"in {s['free_hours'] * 60:.1f} min of free motion), the CUSUM detector {at}: median delay "
+                  f"{_fmt(v['delay_ms'])} ms vs {_fmt(v['paper_delay_ms'])} ms (ratio {_fmt(v['ratio'])}), arm "
+                  f"contacts ≥ 3 N detected {_fmt(v['arm_detection'])} vs {_fmt(v['paper_arm_detection'])}; the "
+                  "node's threshold detector " + ("—" if v["matched"]["threshold"]["scale"] is None else
+                                                   f"at × {v['matched']['threshold']['scale']:g}: ratio "
+                                                   f"{_fmt(v['matched']['threshold']['ratio'])}") + ".", "",
                   "DET (thresholds × scale; every detector on the same runs — FA/h, median delay (ms), detection "
                   "≥ 3 N):", "",
                   "| scale | " + " | ".join(f"{n}: FA/h | {n}: delay | {n}: det ≥ 3 N" for n in DETECTOR_NAMES)
