@@ -12,7 +12,7 @@ in sample time: `plate_pose_estimate`. Collision events on `collision` and the l
 from __future__ import annotations
 
 import math
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from geometry_msgs.msg import PoseStamped, WrenchStamped
 from hexa_msgs.msg import CollisionEvent, Residual, ZetaEstimates
@@ -26,6 +26,9 @@ from visualization_msgs.msg import MarkerArray
 from hexa import frames
 from hexa.kinematics.hexa6rus import rotation_zyx
 
+if TYPE_CHECKING:
+    from hexa.robots.hexa_description import HexaDescription
+
 NAN6 = [math.nan] * 6
 #: s of sample time between looks at who subscribes to the outputs sent only while subscribed
 SUBSCRIBERS_EVERY = 0.1
@@ -35,7 +38,7 @@ class ObserverOutputs:
     """Publishers of the observer's outputs on `node`; `settings` (the node's runtime values, read at each sample):
     marker_rate_hz, marker_scale, pose_estimate_rate_hz, tf_rate_hz, zeta_batch_period."""
 
-    def __init__(self, node: Any, desc: Any, frame_id: str, settings: dict[str, Any]) -> None:
+    def __init__(self, node: Any, desc: HexaDescription, frame_id: str, settings: dict[str, Any]) -> None:
         self.node, self.desc, self.frame_id, self.set = node, desc, frame_id, settings
         pub = node.create_publisher
         self.residual = pub(Residual, "residual", qos.STREAM)
