@@ -460,7 +460,8 @@ def write_report(result: dict[str, Any], out_dir: str | Path, plots: bool = True
                          f"{k['false_starts_before_contact']} | {k['free_hours'] * 60:.1f} | "
                          f"{k['live_false_starts_free']} | " + " | ".join(cells) + " |")
         v = s["vs_paper"]
-        at = "no free motion, so no false-alarm rate to match" if v["scale"] is None else f"at × {v['scale']:g}"
+        at = (f"at × {v['scale']:g}" if v["scale"] is not None else "(no free motion: no false-alarm rate to match)"
+              if s["free_hours"] <= 0 else "(at no scale as few false alarms)")
         lines += ["", f"At the paper detector's false alarms (its fixed thresholds, × 1: {v['paper_false_alarms']} "
                   f"in {s['free_hours'] * 60:.1f} min of free motion), the CUSUM detector {at}: median delay "
                   f"{_fmt(v['delay_ms'])} ms vs {_fmt(v['paper_delay_ms'])} ms (ratio {_fmt(v['ratio'])}), arm "
