@@ -333,3 +333,48 @@ def test_the_nodes_model_of_a_run_is_its_own_description_the_simulated_robot_sta
     assert all(j["calibrate"] == str(exc) and j["stream_rate_hz"] == 143.0 for _, j in jobs)
     with pytest.raises(ValueError, match="no excitation file"):
         CampaignConfig(calibrate=str(tmp_path / "missing.csv"))
+
+
+def test_a_terminated_campaign_stops_its_worker_processes(tmp_path):
+    """`kill` (SIGTERM) on `hexa eval` ends it with 130 like Ctrl-C and takes its pool's workers with it: a worker
+    left behind would go on simulating on cores the next job needs."""
+    import os
+    import signal
+    import subprocess
+    import sys
+    import time
+    from pathlib import Path
+
+    def workers(pid: int) -> set[int]:
+        out = set()
+        for entry in os.listdir("/proc"):
+            try:
+                stat = Path(f"/proc/{entry}/stat").read_text()
+                cmd = Path(f"/proc/{entry}/cmdline").read_bytes()
+            except (OSError, ValueError):
+                continue
+            if entry.isdigit() and int(stat.rpartition(")")[2].split()[1]) == pid and b"spawn_main" in cmd:
+                out.add(int(entry))
+        return out
+
+    hexa = str(Path(sys.executable).parent / "hexa")
+    proc = subprocess.Popen([hexa, "eval", "--cases", "0", "--minutes", "4", "--workers", "2", "--realism", "ideal",
+                             "--no-plots", "--out", str(tmp_path)], stdout=subprocess.DEVNULL,
+                            stderr=subprocess.PIPE, text=True, start_new_session=True)
+    try:
+        deadline = time.monotonic() + 90
+        while time.monotonic() < deadline and len(workers(proc.pid)) < 2 and proc.poll() is None:
+            time.sleep(0.2)
+        started = workers(proc.pid)
+        assert len(started) == 2, f"the pool's two workers did not start: {started}"
+        time.sleep(2.0)                           # the workers are simulating
+        proc.send_signal(signal.SIGTERM)
+        assert proc.wait(timeout=30) == 130
+        deadline = time.monotonic() + 10
+        while time.monotonic() < deadline and any(Path(f"/proc/{p}").exists() for p in started):
+            time.sleep(0.1)
+        assert not [p for p in started if Path(f"/proc/{p}").exists()], "workers outlived the campaign"
+    finally:
+        if proc.poll() is None:
+            os.killpg(proc.pid, signal.SIGKILL)
+            proc.wait()

@@ -5,6 +5,7 @@ from __future__ import annotations
 import argparse
 import json
 import math
+import signal
 import sys
 from pathlib import Path
 
@@ -75,6 +76,7 @@ def run(args: argparse.Namespace) -> int:
         print(f"hexa eval: {note}", file=sys.stderr)
     jobs = jobs_of(cfg)
     bar = ProgressBar(len(jobs), sum(j.get("seconds", 8.0) for _, j in jobs))
+    signal.signal(signal.SIGTERM, _interrupt)      # `kill`: stop the workers as Ctrl-C does (run_campaign)
     try:
         result = run_campaign(cfg, progress=bar.update)
     except (ValueError, OSError) as exc:   # Dask missing, or its scheduler unreachable
@@ -88,3 +90,7 @@ def run(args: argparse.Namespace) -> int:
         print(md.read_text(encoding="utf-8").split("## Figures")[0])
         print(f"report: {md}")
     return 0
+
+
+def _interrupt(_signum: int, _frame: object) -> None:
+    raise KeyboardInterrupt

@@ -242,10 +242,19 @@ def run_campaign(cfg: CampaignConfig, progress: Callable[[float], Any] | None = 
         with ProcessPoolExecutor(max_workers=workers, mp_context=multiprocessing.get_context("spawn")) as pool:
             futures = {pool.submit(_run_job, kind, job): kind for kind, job in jobs}
             pending = set(futures)
-            while pending:
-                finished, pending = wait(pending, return_when=FIRST_COMPLETED)
-                for f in finished:
-                    done(futures[f], f.result())
+            try:
+                while pending:
+                    finished, pending = wait(pending, return_when=FIRST_COMPLETED)
+                    for f in finished:
+                        done(futures[f], f.result())
+            except BaseException:
+                # interrupted (Ctrl-C, SIGTERM) or a job failed: the workers stop now, not after their running and
+                # queued jobs (ProcessPoolExecutor has no public way to end its running workers before 3.14)
+                procs = list((getattr(pool, "_processes", None) or {}).values())   # shutdown() forgets them
+                pool.shutdown(wait=False, cancel_futures=True)
+                for proc in procs:
+                    proc.terminate()
+                raise
     contacts = sorted((r for k, r in results if k == "contact"), key=lambda r: (r["realism"], r["index"]))
     free = sorted((r for k, r in results if k == "free"), key=lambda r: (r["realism"], r["trajectory"]))
     return {"config": asdict(cfg), "contacts": contacts, "free": free, "workers": workers, "engine": engine,
