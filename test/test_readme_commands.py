@@ -348,6 +348,12 @@ print(json.dumps(out))
 """
 
 
+def _braces(raw: str) -> list[str]:
+    """Every name a README pattern stands for, expanding each `{a,b}` group as a shell does."""
+    m = re.match(r"^(.*?)\{([^}]+)\}(.*)$", raw)
+    return [name for alt in m.group(2).split(",") for name in _braces(m.group(1) + alt + m.group(3))] if m else [raw]
+
+
 def topic_table(text: str, ns: str = "/hexa") -> dict[str, tuple[str, str, str]]:
     """topic → (type "pkg/Name", reliability, durability) from the README's table with a QoS column."""
     lines = text.splitlines()
@@ -359,8 +365,7 @@ def topic_table(text: str, ns: str = "/hexa") -> dict[str, tuple[str, str, str]]
         cells = [c.strip() for c in line.strip("|").split("|")]
         names = []
         for raw in re.findall(r"`([^`]+)`", cells[0]):
-            m = re.match(r"^(.*)\{([^}]+)\}(.*)$", raw)
-            for name in ([m.group(1) + alt + m.group(3) for alt in m.group(2).split(",")] if m else [raw]):
+            for name in _braces(raw):
                 names.append(name if name.startswith("/") else f"{ns}/{name}")
         types = [t.strip() for t in cells[1].split(",")]
         qos = cells[3]
