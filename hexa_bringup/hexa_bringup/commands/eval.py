@@ -5,7 +5,6 @@ from __future__ import annotations
 import argparse
 import json
 import math
-import signal
 import sys
 from pathlib import Path
 
@@ -76,7 +75,9 @@ def run(args: argparse.Namespace) -> int:
         print(f"hexa eval: {note}", file=sys.stderr)
     jobs = jobs_of(cfg)
     bar = ProgressBar(len(jobs), sum(j.get("seconds", 8.0) for _, j in jobs))
-    signal.signal(signal.SIGTERM, _interrupt)      # `kill`: stop the workers as Ctrl-C does (run_campaign)
+    from hexa_ros.node import install_signal_handlers
+
+    install_signal_handlers()     # SIGTERM (`kill`) as Ctrl-C: KeyboardInterrupt, and run_campaign stops the workers
     try:
         result = run_campaign(cfg, progress=bar.update)
     except (ValueError, OSError) as exc:   # Dask missing, or its scheduler unreachable
@@ -90,7 +91,3 @@ def run(args: argparse.Namespace) -> int:
         print(md.read_text(encoding="utf-8").split("## Figures")[0])
         print(f"report: {md}")
     return 0
-
-
-def _interrupt(_signum: int, _frame: object) -> None:
-    raise KeyboardInterrupt

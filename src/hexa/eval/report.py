@@ -236,7 +236,6 @@ def summarize(result: dict[str, Any]) -> dict[str, Any]:
                          "paper_false_alarms": paper1["false_alarms"], "ratio": m["ratio"],
                          "arm_detection": m["detection_arm_strong"],
                          "paper_arm_detection": paper1["detection_arm_strong"], "matched": matched}
-        ratio = m["ratio"]
         iso = summarize_isolation(cases)
         s["isolation"] = iso
         s["targets"] = {
@@ -247,7 +246,7 @@ def summarize(result: dict[str, Any]) -> dict[str, Any]:
             "delay_median_ms": _pct(ad, 50), "delay_p95_ms": _pct(ad, 95),
             "delay_arm_median_ms": per_link["arm"]["delay_median_ms"],
             "rmse_below_paper": rmse_ok / rmse_n if rmse_n else float("nan"),
-            "delay_vs_paper": ratio,
+            "delay_vs_paper": m["ratio"],
         }
         s["rmse_cases"] = rmse_n
         s["rmse_by_servos"] = {k: {"below": v[0], "cases": v[1]} for k, v in rmse_split.items()}
@@ -460,8 +459,12 @@ def write_report(result: dict[str, Any], out_dir: str | Path, plots: bool = True
                          f"{k['false_starts_before_contact']} | {k['free_hours'] * 60:.1f} | "
                          f"{k['live_false_starts_free']} | " + " | ".join(cells) + " |")
         v = s["vs_paper"]
-        at = (f"at × {v['scale']:g}" if v["scale"] is not None else "(no free motion: no false-alarm rate to match)"
-              if s["free_hours"] <= 0 else "(at no scale as few false alarms)")
+        if v["scale"] is not None:
+            at = f"at × {v['scale']:g}"
+        elif s["free_hours"] <= 0:
+            at = "(no free motion: no false-alarm rate to match)"
+        else:
+            at = "(at no scale as few false alarms)"
         lines += ["", f"At the paper detector's false alarms (its fixed thresholds, × 1: {v['paper_false_alarms']} "
                   f"in {s['free_hours'] * 60:.1f} min of free motion), the CUSUM detector {at}: median delay "
                   f"{_fmt(v['delay_ms'])} ms vs {_fmt(v['paper_delay_ms'])} ms (ratio {_fmt(v['ratio'])}), arm "

@@ -23,8 +23,6 @@ from hexa_ros.node import REQUESTED_PRIORITY, Param
 REALTIME_PRIORITY = "realtime_priority"
 #: the priority recommended for the safety path (driver, observer) on the robot PC: ros2_control's
 SAFETY_PRIORITY = 50
-#: the attribute a node's requested priority is kept in (hexa_ros.node.run reads it)
-_WANTED = REQUESTED_PRIORITY
 REALTIME_PRIORITY_PARAM = Param(
     0, "SCHED_FIFO priority (1-99) of this node's process, all its threads, so the 1 kHz path preempts the vision "
        "nodes (50 on the robot PC); 0 = normal scheduling (the default). Needs root or an rtprio limit "
@@ -73,13 +71,13 @@ def request_realtime_priority(node: Any, priority: int) -> None:
     """Note that `node` wants its process at SCHED_FIFO `priority`. The process is raised by the entry point that
     owns it (`apply_requested_priority`, from hexa_ros.node.run), never by a node built inside another program (a
     test, a script), which would put that whole program under SCHED_FIFO."""
-    setattr(node, _WANTED, int(priority))
+    setattr(node, REQUESTED_PRIORITY, int(priority))
 
 
 def apply_requested_priority(nodes: list[Any]) -> int:
     """Raise this process to the highest priority its `nodes` asked for (`request_realtime_priority`), logged by
     each node that asked; the priority the process runs at."""
-    asks = [(node, int(getattr(node, _WANTED, 0))) for node in nodes]
+    asks = [(node, int(getattr(node, REQUESTED_PRIORITY, 0))) for node in nodes]
     wanted = max((p for _, p in asks), default=0)
     why = set_realtime_priority(wanted) if wanted > 0 else ""
     for node, p in asks:
