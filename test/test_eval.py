@@ -378,3 +378,64 @@ def test_a_terminated_campaign_stops_its_worker_processes(tmp_path):
         if proc.poll() is None:
             os.killpg(proc.pid, signal.SIGKILL)
             proc.wait()
+
+
+def test_a_campaign_on_a_few_robots_calibrates_each_once_and_runs_its_jobs_on_it(tmp_path, monkeypatch):
+    """`robots` N: the jobs run on N simulated robots in turn (the simulator's truth from the robot's seed, its noise
+    from the job's), each robot calibrated once before the jobs, and every job's nodes run its robot's overlay.
+    The identification is replaced by a recorder here (it is tested in test_calibration.py): what is tested is
+    which robot each job simulates and which model its nodes get."""
+    from hexa.calibration import simulated
+    from hexa.eval import campaign
+    from hexa.robots.hexa_description import load_hexa
+    from hexa.sim import Simulator
+    from hexa.sim.realism import RealismConfig, draw_truth
+
+    desc = load_hexa()
+    realistic = RealismConfig.realistic()
+    sim = Simulator(desc, seed=5, robot_seed=9, cameras=False, realism=realistic)
+    assert sim.truth is not None and sim.seed == 5
+    assert sim.truth.plate.mass == draw_truth(desc, 9, realistic.tolerances).plate.mass
+    assert sim.truth.plate.mass != draw_truth(desc, 5, realistic.tolerances).plate.mass
+
+    exc = tmp_path / "excitation.csv"
+    exc.write_text("0,0,0,-0.55,0,0,0\n1,0,0,-0.55,0,0,0\n", encoding="utf-8")
+    cfg = CampaignConfig(cases=3, free_seconds=150.0, realisms=("realistic",), seed=2, robots=2,
+                         calibrate=str(exc), workers=1, isolation="oracle", identify=False)
+    jobs = jobs_of(cfg)
+    kinds = [k for k, _ in jobs]
+    assert kinds[:2] == ["calibrate", "calibrate"] and "calibrate" not in kinds[2:]
+    pool = sorted(j["robot_seed"] for k, j in jobs if k == "calibrate")
+    assert len(set(pool)) == 2
+    for kind in ("free", "contact"):
+        seeds = [j["robot_seed"] for k, j in jobs if k == kind]
+        assert set(seeds) == set(pool) and all(a != b for a, b in zip(seeds, seeds[1:]))   # the robots in turn
+    own = jobs_of(dataclasses.replace(cfg, robots=0))       # a robot per job, calibrated in its job
+    assert all(k != "calibrate" and j["robot_seed"] == j["sim_seed"] for k, j in own)
+    with pytest.raises(ValueError, match="robots must be >= 0"):
+        CampaignConfig(robots=-1)
+
+    identified: list[int] = []
+
+    def identify(excitation, seed, realism, base, out):
+        identified.append(seed)
+        mass = 0.2 + 0.01 * (seed - pool[0])        # a model per robot, told apart by its plate mass
+        out.write_text(f"calibration_of: ''\ninertia:\n  plate:\n    mass: {mass}\n", encoding="utf-8")
+        return load_hexa(out), None
+
+    ran: list[tuple[int, int, float]] = []
+
+    def simulate(*args, **kw):
+        ran.append((kw["seed"], kw["robot_seed"], kw["nodes_desc"].plate.mass))
+        raise _Stop
+
+    class _Stop(Exception):
+        pass
+
+    monkeypatch.setattr(simulated, "calibrate_simulated_robot", identify)
+    monkeypatch.setattr(campaign, "simulate", simulate)
+    with pytest.raises(_Stop):
+        run_campaign(dataclasses.replace(cfg, cases=0))
+    assert sorted(identified) == pool                 # once per robot, before any job
+    (sim_seed, robot, mass), = ran
+    assert robot in pool and sim_seed != robot and mass == pytest.approx(0.2 + 0.01 * (robot - pool[0]))

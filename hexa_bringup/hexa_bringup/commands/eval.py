@@ -43,8 +43,11 @@ def register(sub: argparse._SubParsersAction) -> None:
                         "oracle: the true contact at the START (isolation not measured)")
     p.add_argument("--calibrate", metavar="EXCITATION", default=None,
                    help="run each robot's nodes on a calibration overlay identified in-process on that robot from "
-                        "this excitation file (`hexa calibrate excite`; two runs of it per job, ≈ 10 s each); "
+                        "this excitation file (`hexa calibrate excite`; two runs of it per robot, ≈ 10–30 s); "
                         "default: the description's nominal model")
+    p.add_argument("--robots", type=int, default=0, metavar="N",
+                   help="run the jobs on N simulated robots in turn, each calibrated once first with --calibrate "
+                        "(default 0: a robot drawn for every job, each calibrated in its job)")
     p.add_argument("--stream-rate", type=float, default=None, metavar="HZ",
                    help="the currents' rate (the driver's stream_rate_hz; default its 200 Hz)")
     p.add_argument("--no-identify", action="store_true", help="skip the force identification (no RMSE)")
@@ -66,7 +69,7 @@ def run(args: argparse.Namespace) -> int:
         cfg = CampaignConfig(cases=args.cases, free_seconds=hours * 3600.0, realisms=realisms, seed=args.seed,
                              workers=args.workers, identify=not args.no_identify, scheduler=args.scheduler,
                              detector=args.detector, trajectories=args.trajectories, isolation=args.isolation,
-                             calibrate=args.calibrate, stream_rate_hz=args.stream_rate)
+                             calibrate=args.calibrate, stream_rate_hz=args.stream_rate, robots=args.robots)
     except ValueError as exc:
         print(f"hexa eval: {exc}", file=sys.stderr)
         return 2
@@ -74,7 +77,7 @@ def run(args: argparse.Namespace) -> int:
     if note:   # run_campaign falls back to the oracle and the report says so too
         print(f"hexa eval: {note}", file=sys.stderr)
     jobs = jobs_of(cfg)
-    bar = ProgressBar(len(jobs), sum(j.get("seconds", 8.0) for _, j in jobs))
+    bar = ProgressBar(len(jobs), sum(j.get("seconds", 60.0 if k == "calibrate" else 8.0) for k, j in jobs))
     from hexa_ros.node import install_signal_handlers
 
     install_signal_handlers()     # SIGTERM (`kill`) as Ctrl-C: KeyboardInterrupt, and run_campaign stops the workers

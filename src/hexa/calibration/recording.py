@@ -134,7 +134,7 @@ def simulate_recording(pose_of: Callable[[float], NDArray], duration: float, see
         if payload > 0:
             add_plate_payload(sim, payload, point)
         rng = np.random.default_rng([int(seed), 23])
-        readout = CurrentReadout(sim, seed)
+        readout = CurrentReadout(sim)
         jitter = realism.jitter
         z0 = kin.inverse_kinematics(desc, start)
         sim.set_servo_targets(z0)

@@ -18,7 +18,8 @@ from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
 from dataclasses import asdict, dataclass, field, replace
 from typing import Any, Callable
 
-from hexa.eval.campaign import ISOLATION_MODES, TRAJECTORIES, kinds_of, run_contact_job, run_free_job
+from hexa.eval.campaign import (ISOLATION_MODES, TRAJECTORIES, kinds_of, run_calibration_job, run_contact_job,
+                                run_free_job)
 
 #: free motion is cut into jobs of at most this many seconds (one trajectory each, looped), for the parallel pool
 FREE_CHUNK_S = 60.0
@@ -37,9 +38,11 @@ class CampaignConfig:
     scheduler's address ("tcp://host:8786"; its workers need hexa installed); `isolation`: "rendered" (the
     isolation node's core on rendered frames, the default; the oracle when this machine cannot render, see
     `isolation_mode`) or "oracle" (the true contact at the START: isolation not measured); `calibrate`: an
-    excitation file (`hexa calibrate excite`): each job's nodes run the calibration overlay identified in-process on
-    that job's own simulated robot (two runs of the file, hexa.calibration.simulated; ≈ 10 s a job) instead of the
-    description; `stream_rate_hz`: the currents' rate (default the driver's `stream_rate_hz`, 200 Hz)."""
+    excitation file (`hexa calibrate excite`): the nodes run the calibration overlay identified in-process on their
+    simulated robot (two runs of the file, hexa.calibration.simulated; ≈ 10–30 s a robot) instead of the
+    description; `robots`: 0 (default) draws a robot for every job, N > 0 runs the jobs on N robots in turn (robot
+    seeds seed·100003 + 90000 + n), each calibrated once before the jobs when `calibrate` is given;
+    `stream_rate_hz`: the currents' rate (default the driver's `stream_rate_hz`, 200 Hz)."""
 
     cases: int = 6
     free_seconds: float = 20.0
@@ -55,6 +58,7 @@ class CampaignConfig:
     isolation: str = "rendered"
     calibrate: str | None = None
     stream_rate_hz: float | None = None
+    robots: int = 0
 
     def __post_init__(self) -> None:
         from hexa.sim.realism import RealismConfig
@@ -66,6 +70,8 @@ class CampaignConfig:
             raise ValueError(f"cases ({self.cases}) and free_seconds ({self.free_seconds}) must be >= 0")
         if self.cases == 0 and self.free_seconds == 0:
             raise ValueError("nothing to run: give cases > 0 or free_seconds > 0")
+        if self.robots < 0:
+            raise ValueError(f"robots must be >= 0 (0: a robot per job), got {self.robots}")
         if self.workers is not None and self.workers < 1:
             raise ValueError(f"workers must be >= 1, got {self.workers}")
         for r in self.realisms:
@@ -120,21 +126,34 @@ def local_workers(scheduler: str) -> int | None:
     return n
 
 
+def robot_seed(cfg: CampaignConfig, n: int, sim_seed: int) -> int:
+    """The simulated robot of a campaign's n-th job of a kind: its own (`sim_seed`) without `cfg.robots`, else robot
+    n mod robots (seed·100003 + 90000 + n mod robots, apart from every simulator seed)."""
+    return sim_seed if cfg.robots <= 0 else cfg.seed * 100003 + 90000 + n % cfg.robots
+
+
 def jobs_of(cfg: CampaignConfig) -> list[tuple[str, dict[str, Any]]]:
-    """The campaign's jobs: ("free", job) per free-motion chunk and robot, then ("contact", job) per case and robot
-    (the long jobs first, so that the pool's workers finish together). Free motion is split evenly over the selected
-    trajectory kinds; chunk k has the simulator seed seed·100003 + 50000 + k and follows, looped, the paper's
-    trajectories in turn or the random trajectory random:<its simulator seed>."""
+    """The campaign's jobs: ("calibrate", job) per robot to calibrate first (`cfg.robots` with `cfg.calibrate`), then
+    ("free", job) per free-motion chunk and robot, then ("contact", job) per case and robot (the long jobs first, so
+    that the pool's workers finish together). Free motion is split evenly over the selected trajectory kinds; chunk
+    k has the simulator seed seed·100003 + 50000 + k and follows, looped, the paper's trajectories in turn or the
+    random trajectory random:<its simulator seed>. Each job's simulated robot is `robot_seed`'s."""
+    calibrations: list[tuple[str, dict[str, Any]]] = []
     jobs: list[tuple[str, dict[str, Any]]] = []
     contacts: list[tuple[str, dict[str, Any]]] = []
     kinds = kinds_of(cfg.trajectories)
     for realism in cfg.realisms:
+        if cfg.calibrate and cfg.robots > 0:
+            calibrations += [("calibrate", {"calibrate": os.path.abspath(cfg.calibrate), "realism": realism,
+                                            "robot_seed": robot_seed(cfg, n, 0)}) for n in range(cfg.robots)]
         for i in range(cfg.cases):
-            contacts.append(("contact", {"campaign_seed": cfg.seed, "index": i, "sim_seed": cfg.seed * 100003 + i,
-                                     "realism": realism, "identify": cfg.identify, "observer": cfg.observer,
-                                     "detector": cfg.detector, "cusum": cfg.cusum,
-                                     "trajectories": cfg.trajectories, "isolation": cfg.isolation,
-                                     **_model_fields(cfg)}))
+            sim_seed = cfg.seed * 100003 + i
+            contacts.append(("contact", {"campaign_seed": cfg.seed, "index": i, "sim_seed": sim_seed,
+                                         "robot_seed": robot_seed(cfg, i, sim_seed),
+                                         "realism": realism, "identify": cfg.identify, "observer": cfg.observer,
+                                         "detector": cfg.detector, "cusum": cfg.cusum,
+                                         "trajectories": cfg.trajectories, "isolation": cfg.isolation,
+                                         **_model_fields(cfg)}))
         k = 0
         for kind in kinds:
             left, j = cfg.free_seconds / len(kinds), 0
@@ -142,12 +161,13 @@ def jobs_of(cfg: CampaignConfig) -> list[tuple[str, dict[str, Any]]]:
                 chunk = min(FREE_CHUNK_S, left)
                 sim_seed = cfg.seed * 100003 + 50000 + k
                 name = TRAJECTORIES[j % len(TRAJECTORIES)] if kind == "paper" else f"random:{sim_seed}"
-                jobs.append(("free", {"trajectory": name, "seconds": chunk, "sim_seed": sim_seed, "realism": realism,
+                jobs.append(("free", {"trajectory": name, "seconds": chunk, "sim_seed": sim_seed,
+                                      "robot_seed": robot_seed(cfg, k, sim_seed), "realism": realism,
                                       "observer": cfg.observer, "detector": cfg.detector, "cusum": cfg.cusum,
                                       **_model_fields(cfg)}))
                 left -= chunk
                 k, j = k + 1, j + 1
-    return jobs + contacts
+    return calibrations + jobs + contacts
 
 
 def _model_fields(cfg: CampaignConfig) -> dict[str, Any]:
@@ -161,7 +181,8 @@ def _model_fields(cfg: CampaignConfig) -> dict[str, Any]:
 
 
 def _run_job(kind: str, job: dict[str, Any]) -> dict[str, Any]:
-    r = run_contact_job(job) if kind == "contact" else run_free_job(job)
+    run = {"contact": run_contact_job, "free": run_free_job, "calibrate": run_calibration_job}[kind]
+    r = run(job)
     r["pid"] = os.getpid()   # the worker process that ran it
     return r
 
@@ -188,40 +209,93 @@ class ProgressBar:
         return line
 
 
-def _run_on_dask(cfg: CampaignConfig, jobs: list[tuple[str, dict[str, Any]]],
-                 done: Callable[[str, dict[str, Any]], None]) -> int:
-    """Run `jobs` on Dask distributed (`cfg.scheduler`), calling `done(kind, result)` as each finishes; returns the
-    number of workers. A "local:N" cluster lives for this call; an address is connected to and left running."""
-    try:
-        from distributed import Client, LocalCluster, as_completed
-    except ImportError as exc:   # the set-up installs it (requirements/core.txt)
-        raise ValueError(f"scheduler {cfg.scheduler!r} needs Dask distributed (pip install 'dask[distributed]'): "
-                         f"{exc}") from exc
-    n = local_workers(cfg.scheduler or "")
-    cluster = (LocalCluster(n_workers=n, threads_per_worker=1, processes=True, dashboard_address=None)
-               if n is not None else None)
-    try:
-        with Client(cluster if cluster is not None else cfg.scheduler, timeout="10s") as client:
+class _Engine:
+    """Where the jobs run: in this process, a spawned process pool, or Dask distributed (`cfg.scheduler`; a
+    "local:N" cluster lives as long as the engine, an address is connected to and left running). `run(jobs, done)`
+    runs a batch and calls `done(kind, result)` as each job finishes; batches run one after another on the same
+    workers."""
+
+    def __init__(self, cfg: CampaignConfig) -> None:
+        self.cfg, self.workers = cfg, cfg.workers or os.cpu_count() or 1
+        self.name = "process pool" if self.workers > 1 else "in process"
+        self._pool: ProcessPoolExecutor | None = None
+        self._client: Any = None
+        self._cluster: Any = None
+
+    def __enter__(self) -> "_Engine":
+        cfg = self.cfg
+        if cfg.scheduler is not None:
+            try:
+                from distributed import Client, LocalCluster
+            except ImportError as exc:   # the set-up installs it (requirements/core.txt)
+                raise ValueError(f"scheduler {cfg.scheduler!r} needs Dask distributed (pip install "
+                                 f"'dask[distributed]'): {exc}") from exc
+            n = local_workers(cfg.scheduler)
+            self.name = f"dask {cfg.scheduler}"
+            self._cluster = (LocalCluster(n_workers=n, threads_per_worker=1, processes=True, dashboard_address=None)
+                             if n is not None else None)
+            try:
+                self._client = Client(self._cluster if self._cluster is not None else cfg.scheduler, timeout="10s")
+            except BaseException:
+                self._close_cluster()
+                raise
+            self.workers = len(self._client.scheduler_info(n_workers=-1).get("workers", {})) or (n or 0)
+        elif self.workers > 1:
+            # spawn: each worker imports MuJoCo afresh (no state inherited from a parent that may hold a GL context)
+            self._pool = ProcessPoolExecutor(max_workers=self.workers, mp_context=multiprocessing.get_context("spawn"))
+        return self
+
+    def run(self, jobs: list[tuple[str, dict[str, Any]]], done: Callable[[str, dict[str, Any]], None]) -> None:
+        if self._client is not None:
+            from distributed import as_completed
+
             # pure=False: equal jobs are still separate runs; each task holds one job's small dict
-            futures = {client.submit(_run_job, kind, job, pure=False): kind for kind, job in jobs}
+            futures = {self._client.submit(_run_job, kind, job, pure=False): kind for kind, job in jobs}
             for f in as_completed(list(futures)):
                 done(futures[f], f.result())
-            return len(client.scheduler_info(n_workers=-1).get("workers", {})) or (n or 0)
-    finally:
-        if cluster is not None:
-            cluster.close()
+        elif self._pool is not None:
+            pool_futures = {self._pool.submit(_run_job, kind, job): kind for kind, job in jobs}
+            pending = set(pool_futures)
+            while pending:
+                finished, pending = wait(pending, return_when=FIRST_COMPLETED)
+                for f in finished:
+                    done(pool_futures[f], f.result())
+        else:
+            for kind, job in jobs:
+                done(kind, _run_job(kind, job))
+
+    def __exit__(self, exc_type: Any, *_: Any) -> None:
+        if self._pool is not None:
+            if exc_type is None:
+                self._pool.shutdown()
+            else:
+                # interrupted (Ctrl-C, SIGTERM) or a job failed: the workers stop now, not after their running and
+                # queued jobs (ProcessPoolExecutor has no public way to end its running workers before 3.14)
+                procs = list((getattr(self._pool, "_processes", None) or {}).values())   # shutdown() forgets them
+                self._pool.shutdown(wait=False, cancel_futures=True)
+                for proc in procs:
+                    proc.terminate()
+        if self._client is not None:
+            self._client.close()
+        self._close_cluster()
+
+    def _close_cluster(self) -> None:
+        if self._cluster is not None:
+            self._cluster.close()
+            self._cluster = None
 
 
 def run_campaign(cfg: CampaignConfig, progress: Callable[[float], Any] | None = None) -> dict[str, Any]:
     """Run every job of `cfg` on a process pool (`cfg.workers`; 1 = in this process) or on Dask distributed
-    (`cfg.scheduler`) and collect the results: {"config", "contacts": [...], "free": [...], "wall_s", "sim_s",
-    "workers", "engine", "isolation_note"}. `progress(sim_seconds)` is called after each job. Rendered isolation
-    falls back to the oracle when this machine cannot render (`isolation_mode`; the note says why)."""
+    (`cfg.scheduler`) and collect the results: {"config", "contacts": [...], "free": [...], "robots": [...],
+    "wall_s", "sim_s", "workers", "engine", "isolation_note"}. The robots' calibrations (`cfg.robots` with
+    `cfg.calibrate`) run first and every later job gets its robot's overlay. `progress(sim_seconds)` is called after
+    each job. Rendered isolation falls back to the oracle when this machine cannot render (`isolation_mode`; the
+    note says why)."""
     mode, note = isolation_mode(cfg.isolation) if cfg.cases else (cfg.isolation, "")
     if mode != cfg.isolation:
         cfg = replace(cfg, isolation=mode)
     jobs = jobs_of(cfg)
-    workers = cfg.workers or os.cpu_count() or 1
     results: list[tuple[str, dict[str, Any]]] = []
     t0 = time.monotonic()
 
@@ -230,33 +304,16 @@ def run_campaign(cfg: CampaignConfig, progress: Callable[[float], Any] | None = 
         if progress:
             progress(r.get("sim_seconds", 0.0))
 
-    engine = "process pool" if workers > 1 else "in process"
-    if cfg.scheduler is not None:
-        engine = f"dask {cfg.scheduler}"
-        workers = _run_on_dask(cfg, jobs, done)
-    elif workers == 1:
-        for kind, job in jobs:
-            done(kind, _run_job(kind, job))
-    else:
-        # spawn: each worker imports MuJoCo afresh (no state inherited from a parent that may hold a GL context)
-        with ProcessPoolExecutor(max_workers=workers, mp_context=multiprocessing.get_context("spawn")) as pool:
-            futures = {pool.submit(_run_job, kind, job): kind for kind, job in jobs}
-            pending = set(futures)
-            try:
-                while pending:
-                    finished, pending = wait(pending, return_when=FIRST_COMPLETED)
-                    for f in finished:
-                        done(futures[f], f.result())
-            except BaseException:
-                # interrupted (Ctrl-C, SIGTERM) or a job failed: the workers stop now, not after their running and
-                # queued jobs (ProcessPoolExecutor has no public way to end its running workers before 3.14)
-                procs = list((getattr(pool, "_processes", None) or {}).values())   # shutdown() forgets them
-                pool.shutdown(wait=False, cancel_futures=True)
-                for proc in procs:
-                    proc.terminate()
-                raise
+    with _Engine(cfg) as engine:
+        engine.run([j for j in jobs if j[0] == "calibrate"], done)
+        overlays = {(r["realism"], r["robot_seed"]): r["overlay"] for k, r in results if k == "calibrate"}
+        engine.run([(k, {**j, "nodes_overlay": overlays[(j["realism"], j["robot_seed"])]}
+                     if (j["realism"], j.get("robot_seed")) in overlays else j) for k, j in jobs if k != "calibrate"],
+                   done)
     contacts = sorted((r for k, r in results if k == "contact"), key=lambda r: (r["realism"], r["index"]))
     free = sorted((r for k, r in results if k == "free"), key=lambda r: (r["realism"], r["trajectory"]))
-    return {"config": asdict(cfg), "contacts": contacts, "free": free, "workers": workers, "engine": engine,
-            "isolation_note": note, "wall_s": time.monotonic() - t0,
+    robots = sorted(({k: v for k, v in r.items() if k != "overlay"} for k, r in results if k == "calibrate"),
+                    key=lambda r: (r["realism"], r["robot_seed"]))
+    return {"config": asdict(cfg), "contacts": contacts, "free": free, "robots": robots, "workers": engine.workers,
+            "engine": engine.name, "isolation_note": note, "wall_s": time.monotonic() - t0,
             "sim_s": sum(r.get("sim_seconds", 0.0) for _, r in results)}

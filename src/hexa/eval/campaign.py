@@ -202,7 +202,8 @@ def simulate(collision: ScriptedCollision | None, trajectory: str, duration: flo
              seed: int, observer_config: ObserverConfig | None = None, identify: bool = True,
              desc: HexaDescription | None = None, detector: str = "threshold",
              cusum: CusumConfig | None = None, isolation: str = "rendered", nodes_desc: HexaDescription | None = None,
-             stream_rate_hz: float | None = None, command_phase: float = 0.0) -> RunRecord:
+             stream_rate_hz: float | None = None, command_phase: float = 0.0,
+             robot_seed: int | None = None) -> RunRecord:
     """Run the robot `duration` s of trajectory time (after LEAD_IN) with an optional scripted contact (its onset in
     trajectory time); see the module docstring for what runs. Free motion (no contact) loops the trajectory and
     ignores STARTs (it keeps moving, to count false alarms) and runs no isolation; with a contact a START holds the
@@ -212,7 +213,8 @@ def simulate(collision: ScriptedCollision | None, trajectory: str, duration: flo
     rnea tracker use (a calibration overlay of this robot; default `desc`, which builds the simulated robot);
     `stream_rate_hz`: the currents' rate (default the driver's `stream_rate_hz`); `command_phase` (s, in [0, 1/rate)):
     the commands go out this long after a current sample (0: each reaches the servos just after a sample, and the
-    next sample is the first to carry it — in the live graph the phase is wherever the host's scheduling puts it).
+    next sample is the first to carry it — in the live graph the phase is wherever the host's scheduling puts it);
+    `robot_seed`: the simulated robot's seed (default `seed`, which also seeds the noise and the phases).
 
     Raises:
         ValueError: an unknown isolation; hexa.sim.camera.RenderError: "rendered" without a GL context.
@@ -232,7 +234,7 @@ def simulate(collision: ScriptedCollision | None, trajectory: str, duration: flo
     ocfg = observer_config or ObserverConfig()
     render = collision is not None and isolation == "rendered"
     sim = Simulator(desc, seed=seed, scenario=collision, cameras=render, drive="external", lead_in=LEAD_IN,
-                    trajectory=None if collision is not None else trajectory, realism=realism)
+                    trajectory=None if collision is not None else trajectory, realism=realism, robot_seed=robot_seed)
     vision = None
     if render:
         from hexa.eval.rendered_isolation import RenderedIsolation
@@ -240,7 +242,7 @@ def simulate(collision: ScriptedCollision | None, trajectory: str, duration: flo
         vision = RenderedIsolation(sim, desc)
     rng = np.random.default_rng([int(seed), 11])
     jitter = realism.jitter
-    readout = CurrentReadout(sim, seed)
+    readout = CurrentReadout(sim)
     driver_cfg = readout.driver_config
     punctual = jitter.sample_sigma <= 0 and jitter.spike_rate <= 0
     nodes_desc = nodes_desc or desc
@@ -429,19 +431,49 @@ def plate_equivalent_every(d: Any, stride: int) -> np.ndarray:
 
 
 def _nodes_description(job: dict[str, Any], realism: RealismConfig) -> HexaDescription | None:
-    """The description the job's nodes use: with `calibrate` (an excitation file of `hexa calibrate excite`), an
-    overlay identified in-process on the job's own simulated robot (hexa.calibration.simulated); else None (the
-    description itself)."""
+    """The description the job's nodes use: its robot's calibration overlay (`nodes_overlay`, the YAML text of a
+    `run_calibration_job`), else with `calibrate` (an excitation file of `hexa calibrate excite`) an overlay
+    identified in-process on the job's own simulated robot (hexa.calibration.simulated); else None (the description
+    itself)."""
+    import tempfile
+
+    from hexa.robots.hexa_description import load_hexa
+
+    if job.get("nodes_overlay"):
+        with tempfile.TemporaryDirectory() as tmp:
+            path = f"{tmp}/calibration.yaml"
+            with open(path, "w", encoding="utf-8") as f:
+                f.write(job["nodes_overlay"])
+            return load_hexa(path)
     if not job.get("calibrate"):
         return None
+    from hexa.calibration.simulated import calibrate_simulated_robot
+
+    with tempfile.TemporaryDirectory() as tmp:
+        return calibrate_simulated_robot(job["calibrate"], job.get("robot_seed", job["sim_seed"]), realism,
+                                         load_hexa(), f"{tmp}/calibration.yaml")[0]
+
+
+def run_calibration_job(job: dict[str, Any]) -> dict[str, Any]:
+    """Worker: the calibration overlay of one simulated robot (`robot_seed`, `realism`) identified from the
+    excitation file `calibrate` as `hexa calibrate identify --simulate` does → {"robot_seed", "realism",
+    "overlay" (its YAML text, laid over the packaged description), "sim_seconds", "wall_s"}."""
     import tempfile
+    from pathlib import Path
 
     from hexa.calibration.simulated import calibrate_simulated_robot
     from hexa.robots.hexa_description import load_hexa
+    from hexa.sim.realism import RealismConfig
+    from hexa.trajectories import load_pose_file
 
+    t0 = time.perf_counter()
     with tempfile.TemporaryDirectory() as tmp:
-        return calibrate_simulated_robot(job["calibrate"], job["sim_seed"], realism, load_hexa(),
-                                         f"{tmp}/calibration.yaml")[0]
+        out = Path(tmp) / "calibration.yaml"
+        calibrate_simulated_robot(job["calibrate"], job["robot_seed"], RealismConfig.named(job["realism"]),
+                                  load_hexa(), out)
+        text = out.read_text(encoding="utf-8")
+    return {"robot_seed": job["robot_seed"], "realism": job["realism"], "overlay": text,
+            "sim_seconds": 2.0 * load_pose_file(job["calibrate"])[1], "wall_s": time.perf_counter() - t0}
 
 
 def _detector_settings(job: dict[str, Any]) -> tuple[Any, str, Any]:
@@ -497,8 +529,9 @@ def run_contact_job(job: dict[str, Any]) -> dict[str, Any]:
     """Worker: one contact case → its metrics (the demo's) with the live detector, and the detection of every
     replayed detector (`detectors`) at every scale.
 
-    job: campaign_seed and index (the drawn contact) or collision (ScriptedCollision fields), sim_seed, realism
-    ("ideal" | "realistic"), optional identify (bool), observer (ObserverConfig fields), detector ("cusum" |
+    job: campaign_seed and index (the drawn contact) or collision (ScriptedCollision fields), sim_seed, optional
+    robot_seed (the simulated robot; default sim_seed) and nodes_overlay (its calibration, `_nodes_description`),
+    realism ("ideal" | "realistic"), optional identify (bool), observer (ObserverConfig fields), detector ("cusum" |
     "threshold": the live one), cusum (CusumConfig fields) and isolation ("rendered", the default, or "oracle";
     rendered falls back to the oracle, saying why in `isolation.note`, when this process cannot render)."""
     from hexa.report.collision_demo import compute_metrics
@@ -513,7 +546,8 @@ def run_contact_job(job: dict[str, Any]) -> dict[str, Any]:
     duration = c.end_time + TAIL
     run = functools.partial(simulate, c, c.trajectory, duration, realism, seed=job["sim_seed"],
                             observer_config=ocfg, identify=job.get("identify", True), detector=kind, cusum=ccfg,
-                            nodes_desc=_nodes_description(job, realism), stream_rate_hz=job.get("stream_rate_hz"))
+                            nodes_desc=_nodes_description(job, realism), stream_rate_hz=job.get("stream_rate_hz"),
+                            robot_seed=job.get("robot_seed"))
     note = ""
     try:
         rec = run(isolation=job.get("isolation", "rendered"))
@@ -521,6 +555,7 @@ def run_contact_job(job: dict[str, Any]) -> dict[str, Any]:
         note = f"rendering unavailable ({exc}): oracle isolation"
         rec = run(isolation="oracle")
     out: dict[str, Any] = {"index": job["index"], "realism": job["realism"], "link": c.link, "chain": c.chain,
+                           "robot_seed": job.get("robot_seed", job["sim_seed"]),
                            "trajectory": c.trajectory, "trajectory_kind": trajectory_kind(c.trajectory),
                            "peak_force": c.peak_force, "onset": c.onset + LEAD_IN,
                            "rise_time": c.rise_time, "hold_time": c.hold_time, "release_time": c.release_time,
@@ -560,9 +595,10 @@ def run_free_job(job: dict[str, Any]) -> dict[str, Any]:
     ocfg, kind, ccfg = _detector_settings(job)
     rec = simulate(None, job["trajectory"], job["seconds"], realism, seed=job["sim_seed"], observer_config=ocfg,
                    identify=False, detector=kind, cusum=ccfg, nodes_desc=_nodes_description(job, realism),
-                   stream_rate_hz=job.get("stream_rate_hz"))
+                   stream_rate_hz=job.get("stream_rate_hz"), robot_seed=job.get("robot_seed"))
     moving = rec.t >= LEAD_IN
     out: dict[str, Any] = {"trajectory": job["trajectory"], "trajectory_kind": trajectory_kind(job["trajectory"]),
+                           "robot_seed": job.get("robot_seed", job["sim_seed"]),
                            "realism": job["realism"], "seconds": job["seconds"],
                            "sim_seconds": rec.sim_seconds, "live_starts": sum(1 for e in rec.events if e[1] == "START"),
                            "starts": {}, "detector": kind}

@@ -391,6 +391,17 @@ def _plots(result: dict[str, Any], summary: dict[str, Any], out: Path) -> dict[s
     return paths
 
 
+def _robots_sentence(result: dict[str, Any]) -> str:
+    """Which simulated robots the jobs ran on, and what calibrating them cost."""
+    n = int(result["config"].get("robots") or 0)
+    if n <= 0:
+        return "Simulated robots: one drawn per job."
+    walls = [r["wall_s"] for r in result.get("robots", [])]
+    cost = (f", each calibrated once before the jobs ({len(walls)} identifications, median "
+            f"{float(np.median(walls)):.0f} s wall)" if walls else "")
+    return f"Simulated robots: {n}, the jobs on each in turn{cost}."
+
+
 def write_report(result: dict[str, Any], out_dir: str | Path, plots: bool = True) -> Path:
     """Write report.md, report.json and the PNGs into `out_dir`; returns the Markdown's path."""
     out = Path(out_dir)
@@ -407,7 +418,7 @@ def write_report(result: dict[str, Any], out_dir: str | Path, plots: bool = True
              f"({result['sim_s'] / max(result['wall_s'], 1e-9):.1f}× real time).", "",
              "Nodes' model: " + (f"a calibration overlay identified on each robot from {cfg['calibrate']}"
                                  if cfg.get("calibrate") else "the description's (nominal)")
-             + f"; currents at {cfg.get('stream_rate_hz') or 200:g} Hz.", "",
+             + f"; currents at {cfg.get('stream_rate_hz') or 200:g} Hz. " + _robots_sentence(result), "",
              "Detection: a START from the observer's live detector no later than "
              f"{DETECT_GRACE * 1e3:.0f} ms after the contact's end. Delay: from the first instant a true force "
              "component exceeds r_low = 2 N (hexa.report.collision_demo.compute_metrics, as `hexa demo`). "

@@ -32,12 +32,13 @@ if TYPE_CHECKING:
 DEFAULT_LINK_DIR = Path("/tmp/hexa_sim")
 
 
-def board_offsets(sim: "Simulator", seed: int) -> np.ndarray:
-    """The virtual Mega's per-channel zero offsets I_0 (A) for `seed`: N(0, `sim.current_offset_sigma`), or none when
-    the simulator has a truth (the realistic robot carries its own, `RobotTruth.current_offset`)."""
+def board_offsets(sim: "Simulator") -> np.ndarray:
+    """The virtual Mega's per-channel zero offsets I_0 (A) of the simulator's robot (`sim.robot_seed`: the board is
+    part of the robot): N(0, `sim.current_offset_sigma`), or none when the simulator has a truth (the realistic
+    robot carries its own, `RobotTruth.current_offset`)."""
     if sim.truth is not None:
         return np.zeros(6)
-    return np.random.default_rng([int(seed), 2]).normal(0.0, sim.config.current_offset_sigma, 6)
+    return np.random.default_rng([int(sim.robot_seed), 2]).normal(0.0, sim.config.current_offset_sigma, 6)
 
 
 #: a ROS-free run's camera poses: the top camera's frame period (s) and the pose node's error (m, rad per axis)
@@ -56,12 +57,12 @@ class CurrentReadout:
     plus the Mega's zero offsets (`board_offsets`), through the ADC with the simulator's noise
     (`hexa.sim.realism.adc_counts`), back to amps by the driver's sensor model minus its configured offsets."""
 
-    def __init__(self, sim: "Simulator", seed: int) -> None:
+    def __init__(self, sim: "Simulator") -> None:
         self.sim = sim
         self.driver_config = load_driver_config()
         self.sensor = CurrentSensorModel.from_dict(self.driver_config.get("sensor", {}))
         self.driver_offsets = np.asarray(self.driver_config.get("current_offsets") or np.zeros(6), dtype=float)
-        self.offsets = board_offsets(sim, seed)
+        self.offsets = board_offsets(sim)
 
     def amps(self, tau: np.ndarray, rng: np.random.Generator) -> np.ndarray:
         """The driver's currents (A) for servo torques `tau` (N·m); ADC noise drawn from `rng`."""
@@ -80,7 +81,7 @@ class VirtualBoards:
         link_dir: directory for stable symlinks `uno` and `mega` to the ptys (the driver's default ports); None: none.
         driver_config: driver configuration mapping (default: hexa_driver/config/driver.yaml) for the servo
             calibration and the sensor model.
-        seed: draws the per-channel zero offsets and the ADC noise.
+        seed: draws the ADC noise (default the simulator's seed; the zero offsets are the robot's, `board_offsets`).
     """
 
     def __init__(self, sim: "Simulator", link_dir: str | os.PathLike | None = DEFAULT_LINK_DIR,
@@ -90,7 +91,7 @@ class VirtualBoards:
         self.servos = servo_calibrations_from_config(cfg["servos"])
         self.sensor = CurrentSensorModel.from_dict(cfg.get("sensor", {}))
         seed = sim.seed if seed is None else int(seed)
-        self.offsets = board_offsets(sim, seed)
+        self.offsets = board_offsets(sim)
         self.k_t = float(sim.desc.K_t)
         uno_link = mega_link = None
         if link_dir is not None:

@@ -180,16 +180,18 @@ class Simulator:
         servo_frame_period: overrides the description's `sim.servo.frame_period` (s; 0 = set-points at once) and the
             realism's.
         realism: hexa.sim.realism.RealismConfig (default: ideal — the robot is the description). With `truth` the
-            robot is built from `draw_truth(desc, seed)` (`self.truth`); with `servo_mechanics` the servos run the
+            robot is built from `draw_truth(desc, robot_seed)` (`self.truth`); with `servo_mechanics` the servos run the
             dead band and gear play of hexa.sim.realism.ServoMechanics; its frame period and ADC noise replace the
             description's.
+        robot_seed: the seed of the drawn robot (default `seed`): runs with different seeds (noise, phases) on one
+            robot, as a campaign that calibrates a few robots and runs many contacts on each does.
     """
 
     def __init__(self, desc: HexaDescription | None = None, seed: int = 0, scenario: Any = None, cameras: bool = True,
                  pose: np.ndarray | None = None, drive: str | None = None, randomize: bool = False,
                  settle: float = 0.5, trajectory: str | None = None, lead_in: float = 0.0,
                  contact_model: str = "scripted", servo_frame_period: float | None = None,
-                 realism: RealismConfig | None = None) -> None:
+                 realism: RealismConfig | None = None, robot_seed: int | None = None) -> None:
         self.desc = _desc_default(desc)
         self.config: SimConfig = sim_config_of(self.desc)
         self.realism = realism or RealismConfig.ideal()
@@ -205,7 +207,8 @@ class Simulator:
         self.seed = int(seed)
         self._rng = np.random.default_rng(self.seed)
         # the robot the world is built from (never read by a node); None: the description itself
-        self.truth: RobotTruth | None = (draw_truth(self.desc, self.seed, self.realism.tolerances)
+        self.robot_seed = self.seed if robot_seed is None else int(robot_seed)
+        self.truth: RobotTruth | None = (draw_truth(self.desc, self.robot_seed, self.realism.tolerances)
                                          if self.realism.truth else None)
         self._mech: ServoMechanics | None = None
         if self.realism.servo_mechanics:
