@@ -25,6 +25,19 @@ else:
     apply_defaults()
 
 REPO = Path(__file__).resolve().parents[1]
+
+
+def pytest_sessionfinish(session: pytest.Session, exitstatus: int) -> None:
+    """After the run (in the main process, not in an xdist worker): remove the Fast DDS shared-memory files that the
+    child processes killed at teardown left in /dev/shm; each holds RAM until the next boot."""
+    if hasattr(session.config, "workerinput"):
+        return
+    try:
+        from hexa_ros.shm import remove_stale
+    except ImportError:
+        return
+    remove_stale()
+
 TEST_DIR = Path(__file__).resolve().parent
 if str(TEST_DIR) not in sys.path:
     sys.path.insert(0, str(TEST_DIR))

@@ -1,6 +1,6 @@
 """`hexa doctor`: what a robot PC needs before `hexa bringup`, checked one line each — ROS middleware, the Fast DDS
-profile, domain and discovery range, the graph, serial ports, RealSense cameras, the firmware images and the
-firmware the running driver talks to."""
+profile and shared-memory files, domain and discovery range, the graph, serial ports, RealSense cameras, the firmware
+images and the firmware the running driver talks to."""
 from __future__ import annotations
 
 import argparse
@@ -31,8 +31,31 @@ def register(sub: argparse._SubParsersAction) -> None:
                                       "firmware (exit 1 when a check fails)")
     p.add_argument("--wait", type=float, default=2.0,
                    help="seconds to discover the graph and the driver's /diagnostics (0 = skip the graph)")
+    p.add_argument("--clean-shm", action="store_true",
+                   help="first remove the Fast DDS shared-memory files in /dev/shm that no living process holds "
+                        "(left by processes that were killed), as `fastdds shm clean` does")
     p.add_argument("--json", action="store_true")
     p.set_defaults(func=run)
+
+
+def check_shared_memory(clean: bool = False) -> list[Check]:
+    """Fast DDS's shared-memory files: segments and ports in use, and those left behind by processes that ended
+    without closing them (hexa_ros.shm), which hold RAM until removed (`clean`) or the next boot."""
+    from hexa_ros import shm
+
+    if clean:
+        gone = shm.remove_stale()
+        freed = (f"removed {gone.stale_owners} stale segments and ports ({gone.stale_bytes / 2**20:.0f} MB); "
+                 if gone.stale_owners else "")
+    else:
+        freed = ""
+    r = shm.scan()
+    if not r.stale_owners:
+        return [Check("dds shared memory", OK, f"{freed}{r.in_use} segments and ports in use in {shm.SHM_DIR}, "
+                                               "none left behind")]
+    return [Check("dds shared memory", WARN, f"{freed}{r.stale_owners} segments and ports in {shm.SHM_DIR} "
+                                             f"({r.stale_bytes / 2**20:.0f} MB of RAM) belong to no living process "
+                                             f"(killed ones); `hexa doctor --clean-shm` removes them")]
 
 
 def check_environment() -> list[Check]:
@@ -199,7 +222,8 @@ def check_graph(wait: float) -> list[Check]:
 
 
 def run(args: argparse.Namespace) -> int:
-    checks = check_environment() + check_serial_ports() + check_cameras() + check_firmware()
+    checks = (check_environment() + check_shared_memory(args.clean_shm) + check_serial_ports() + check_cameras()
+              + check_firmware())
     if args.wait > 0:
         try:
             checks += check_graph(args.wait)
