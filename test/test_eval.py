@@ -439,3 +439,29 @@ def test_a_campaign_on_a_few_robots_calibrates_each_once_and_runs_its_jobs_on_it
     assert sorted(identified) == pool                 # once per robot, before any job
     (sim_seed, robot, mass), = ran
     assert robot in pool and sim_seed != robot and mass == pytest.approx(0.2 + 0.01 * (robot - pool[0]))
+
+
+def test_the_report_counts_false_alarms_and_detections_per_robot():
+    """summarize_robots groups free motion and contacts by their robot: false alarms of each detector at × 1 and the
+    live detector's STARTs, hours, and strong contacts detected, each on its own robot only."""
+    from hexa.eval.report import STRONG_N, summarize_robots
+
+    one = THRESHOLD_SCALES.index(1.0)
+
+    def free(seed, live, fa):
+        starts = {n: [0] * len(THRESHOLD_SCALES) for n in DETECTOR_NAMES}
+        starts["threshold"][one] = fa
+        return {"robot_seed": seed, "seconds": 1800.0, "live_starts": live, "starts": starts}
+
+    def contact(seed, detect_time):
+        return {"robot_seed": seed, "peak_force": STRONG_N + 1.0, "onset": 1.0, "rise_time": 0.1, "hold_time": 0.2,
+                "release_time": 0.1, "metrics": {"detect_time": detect_time}}
+
+    r = summarize_robots([contact(1, 1.05), contact(2, float("nan")), contact(2, 1.02)],
+                         [free(1, 0, 0), free(1, 2, 3), free(2, 1, 1)])
+    assert r[1]["free_hours"] == 1.0 and r[2]["free_hours"] == 0.5
+    assert (r[1]["live_false_starts_free"], r[2]["live_false_starts_free"]) == (2, 1)
+    assert (r[1]["false_alarms"]["threshold"], r[2]["false_alarms"]["threshold"]) == (3, 1)
+    assert r[1]["false_alarms"]["paper"] == 0
+    assert (r[1]["strong_detected"], r[1]["strong_cases"], r[2]["strong_detected"], r[2]["strong_cases"]) == (1, 1,
+                                                                                                              1, 2)
