@@ -158,7 +158,7 @@ def test_progress_bar_counts_jobs_and_simulated_time():
 
     buf = io.StringIO()
     bar = ProgressBar(2, 20.0, stream=buf, width=10)
-    bar.update(8.0)
+    assert "[####      ]" in bar.update(8.0) and "1/2 jobs" in buf.getvalue()   # 8 of 20 s: the bar follows time
     line = bar.update(12.0)
     assert "2/2 jobs" in line and "20 s simulated" in line and "[##########]" in line
     assert buf.getvalue().endswith("\n")

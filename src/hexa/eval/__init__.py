@@ -188,7 +188,9 @@ def _run_job(kind: str, job: dict[str, Any]) -> dict[str, Any]:
 
 
 class ProgressBar:
-    """A one-line progress bar on a stream (stderr): jobs done, simulated seconds, speed against real time, ETA."""
+    """A one-line progress bar on a stream (stderr): jobs done, simulated seconds, speed against real time, ETA. The
+    bar and the ETA follow the simulated seconds (`total_sim_s` expected), not the job count: a campaign's jobs run
+    from a few seconds (a contact) to a minute (a free-motion chunk, a robot's calibration)."""
 
     def __init__(self, total_jobs: int, total_sim_s: float, stream: Any = None, width: int = 30) -> None:
         self.total, self.total_sim, self.width = total_jobs, total_sim_s, width
@@ -199,7 +201,9 @@ class ProgressBar:
         self.done += 1
         self.sim_s += sim_seconds
         wall = max(time.monotonic() - self.t0, 1e-9)
-        frac = self.done / max(self.total, 1)
+        frac = min(1.0, self.sim_s / self.total_sim) if self.total_sim > 0 else self.done / max(self.total, 1)
+        if self.done == self.total:
+            frac = 1.0
         eta = wall / frac - wall if frac > 0 else float("nan")
         bar = "#" * int(round(frac * self.width))
         line = (f"\rhexa eval [{bar:<{self.width}}] {self.done}/{self.total} jobs, {self.sim_s:.0f} s simulated, "
