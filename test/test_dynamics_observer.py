@@ -161,6 +161,26 @@ def test_detector_hysteresis_and_minimum_duration():
     assert [e.kind for e in ev] == ["START", "END"] and ev[1].peak == 3.0
 
 
+def test_a_start_needs_one_channel_over_for_min_duration_not_spikes_passed_between_channels():
+    """Short spikes that move from servo to servo (a model error at each new set-point) keep some channel over the
+    threshold for longer than min_duration, but no channel for min_duration: no START. A push that keeps one
+    channel over starts, with the onset and the axis of that channel, while another channel spikes beside it."""
+    det = CollisionDetector(ObserverConfig(servo_thresholds=(0.3,) * 6, min_duration=0.005))
+    zero, ev, t = np.zeros(6), [], 0.0
+    for k in range(60):        # servo 1, 2, 3, 4, … over for 2 samples each, one after another
+        t += 0.001
+        servo = np.zeros(6)
+        servo[(k // 2) % 6] = 0.5
+        ev += det.update(t, zero, servo)[1]
+    assert ev == []
+    onset = t + 0.001
+    for k in range(10):        # servo 3 held over; servo 6 spikes every other sample, higher
+        t += 0.001
+        ev += det.update(t, zero, np.array([0, 0, 0.4, 0, 0, 0.9 * (k % 2)]))[1]
+    assert [e.kind for e in ev] == ["START"] and ev[0].axis_name == "servo3"
+    assert ev[0].onset == pytest.approx(onset) and ev[0].time == pytest.approx(onset + 0.005)
+
+
 def test_bad_input_is_rejected_counted_and_leaves_the_state_intact():
     clean = _run(ResidualObserver(PRM, CFG), DATA)
     obs = ResidualObserver(PRM, CFG)

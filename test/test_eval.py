@@ -465,3 +465,33 @@ def test_the_report_counts_false_alarms_and_detections_per_robot():
     assert r[1]["false_alarms"]["paper"] == 0
     assert (r[1]["strong_detected"], r[1]["strong_cases"], r[2]["strong_detected"], r[2]["strong_cases"]) == (1, 1,
                                                                                                               1, 2)
+
+
+def test_lost_sample_bursts_leave_gaps_in_board_time_and_commands_keep_their_order():
+    """JitterConfig.loss_rate / loss_max: a stalled host loses bursts of samples, which the nodes see as gaps in board
+    time (none without). Commands share one serial link: whatever their delays, the servos receive them in the
+    order they were sent, so the set-points the samples carry follow the trajectory without stepping back."""
+    from hexa.eval.campaign import simulate
+    from hexa.sim.realism import JitterConfig, RealismConfig
+
+    ideal = RealismConfig.ideal()
+    lossy = dataclasses.replace(ideal, jitter=JitterConfig(loss_rate=0.02, loss_max=0.05))
+    spans = {}
+    for name, real in (("clean", ideal), ("lossy", lossy)):
+        rec = simulate(None, "circle", 2.0, real, 3, identify=False)
+        spans[name] = np.diff(rec.t[rec.t > 0.2])
+    assert spans["clean"].max() < 0.0075 and spans["lossy"].max() > 0.015
+    assert len(spans["lossy"]) < len(spans["clean"])
+
+    from hexa.eval.campaign import CommandLink
+
+    link, rng, got = CommandLink(), np.random.default_rng(4), []
+    jitter = JitterConfig(command_mean=0.02, command_max=0.07)
+    for k in range(400):                      # commands every 10 ms with delays far above that
+        now = 0.01 * k
+        link.send(now + jitter.command_delay(rng), None, k)
+        for step in range(10):
+            arrived = link.arrived(now + 0.001 * step)
+            if arrived is not None:
+                got.append(arrived[1])
+    assert got == sorted(got) and len(set(got)) == len(got) and 50 < len(got) < 400   # in order, some skipped

@@ -176,8 +176,12 @@ class ResidualSample:
 
 class CollisionDetector:
     """|r_j| > r_low, or |τ_r,i| over its servo threshold, with hysteresis (release at release_ratio·threshold) and a
-    minimum duration; START/END events. The twelve channels are one detector: a START needs some channel over its
-    threshold for min_duration without a break, an END every channel below release for min_duration."""
+    minimum duration; START/END events. The twelve channels are one detector: a START needs one channel over its
+    threshold for min_duration without a break, an END every channel below release for min_duration.
+
+    The run is counted per channel: a contact's residual stays over on the channels its force loads, while the
+    model's errors spike for a sample or two on one servo, then on another (a servo answering a new set-point of its
+    pulse frame: docs/realism.md). Runs chained across channels would add those spikes up into a START."""
 
     def __init__(self, config: ObserverConfig) -> None:
         self.config = config
@@ -190,7 +194,7 @@ class CollisionDetector:
 
     def reset(self) -> None:
         self.active = False
-        self._cand_onset: float | None = None
+        self._cand = [math.inf] * 12    # per channel: since when it is over its threshold (inf: it is not)
         self._release_since: float | None = None
         self._onset = 0.0
         self._peak = [0.0] * 12
@@ -234,20 +238,29 @@ class CollisionDetector:
         over = np.array([v > 1.0 for v in ratio])
         md = self.config.min_duration
         if not self.active:
-            if top > 1.0:
-                if self._cand_onset is None:
-                    self._cand_onset = t
-                if t - self._cand_onset >= md - 1e-12:
-                    self.active = True
-                    self.count += 1
-                    self._onset = self._cand_onset
-                    self._peak = mag
-                    self._release_since = None
-                    ax = ratio.index(top)   # the first of the largest, as numpy's argmax
-                    return over, (CollisionEvent("START", self.count, t, self._onset, ax, float(value[ax]),
-                                                 float(self._peak[ax]), 0.0),)
-            else:
-                self._cand_onset = None
+            if top <= 1.0:
+                if min(self._cand) < math.inf:
+                    self._cand = [math.inf] * 12
+                return over, ()
+            cand = self._cand
+            fired = -1
+            for j, v in enumerate(ratio):
+                if v > 1.0:
+                    if cand[j] == math.inf:
+                        cand[j] = t
+                    if t - cand[j] >= md - 1e-12 and (fired < 0 or v > ratio[fired]):
+                        fired = j   # of the channels over for min_duration, the first of the largest
+                else:
+                    cand[j] = math.inf
+            if fired >= 0:
+                self.active = True
+                self.count += 1
+                self._onset = cand[fired]
+                self._cand = [math.inf] * 12
+                self._peak = mag
+                self._release_since = None
+                return over, (CollisionEvent("START", self.count, t, self._onset, fired, float(value[fired]),
+                                             float(self._peak[fired]), 0.0),)
             return over, ()
         self._peak = [max(p, m) for p, m in zip(self._peak, mag)]
         if top < self.config.release_ratio:
@@ -255,7 +268,6 @@ class CollisionDetector:
                 self._release_since = t
             if t - self._release_since >= md - 1e-12:
                 self.active = False
-                self._cand_onset = None
                 peak_ratio = [p * k for p, k in zip(self._peak, self._scale_list)]
                 ax = peak_ratio.index(max(peak_ratio))
                 return over, (CollisionEvent("END", self.count, t, self._onset, ax, float(value[ax]),

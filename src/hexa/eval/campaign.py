@@ -29,6 +29,7 @@ from __future__ import annotations
 
 import dataclasses
 import functools
+import math
 import time
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any
@@ -198,6 +199,31 @@ class RunRecord:
     truth_tau: np.ndarray = field(default_factory=lambda: np.zeros((0, 6)))   # servo torques (N·m), at truth_t
 
 
+class CommandLink:
+    """The servo board's serial link in an offline run: commands arrive after their host delays, in the order they
+    were sent (one byte stream: a late command holds back the ones behind it)."""
+
+    def __init__(self) -> None:
+        self._queue: list[tuple[float, Any, int]] = []
+
+    def send(self, arrival: float, zeta: Any, tag: int) -> None:
+        """Queue a command that the host's delay would deliver at `arrival` (s)."""
+        if self._queue:
+            arrival = max(arrival, self._queue[-1][0])
+        self._queue.append((arrival, zeta, tag))
+
+    def arrived(self, now: float) -> tuple[Any, int] | None:
+        """(set-points, tag) of the last command arrived by `now` since the previous call, None if none has."""
+        n = 0
+        while n < len(self._queue) and self._queue[n][0] <= now + 1e-12:
+            n += 1
+        if not n:
+            return None
+        last = self._queue[n - 1]
+        del self._queue[:n]
+        return last[1], last[2]
+
+
 def simulate(collision: ScriptedCollision | None, trajectory: str, duration: float, realism: RealismConfig,
              seed: int, observer_config: ObserverConfig | None = None, identify: bool = True,
              desc: HexaDescription | None = None, detector: str = "threshold",
@@ -254,7 +280,7 @@ def simulate(collision: ScriptedCollision | None, trajectory: str, duration: flo
         trajectory=trajectory, start_time=LEAD_IN, loop=collision is None,
         collision_policy="ignore" if collision is None else "hold"))
     command_period = 1.0 / TrajectorySettings().rate_hz
-    pending: list[tuple[float, np.ndarray, int]] = []
+    link = CommandLink()
     next_cmd, next_cam, seq = float(command_phase), 0.0, 0
     rec: dict[str, list] = {k: [] for k in ("t", "res", "servo", "zd", "wt", "wf", "wp")}
     events: list[tuple[float, str, int, str]] = []
@@ -264,7 +290,7 @@ def simulate(collision: ScriptedCollision | None, trajectory: str, duration: flo
     steps_per_sample = max(1, int(round(1.0 / (rate * sim.timestep))))
     if not 0.0 <= command_phase < 1.0 / rate:
         raise ValueError(f"command_phase must be in [0, {1.0 / rate:g}) s, got {command_phase!r}")
-    k = 0
+    k, lost_until = 0, -math.inf
 
     def keep(forces: list[Any]) -> None:
         for f in forces:
@@ -291,14 +317,11 @@ def simulate(collision: ScriptedCollision | None, trajectory: str, duration: flo
                 tick = runner.tick(now)
                 if tick.zeta is not None:
                     seq = (seq + 1) & 0xFF
-                    pending.append((now + jitter.command_delay(rng), tick.zeta, seq))
+                    link.send(now + jitter.command_delay(rng), tick.zeta, seq)
                 next_cmd += command_period
-            if pending:
-                due = [c for c in pending if c[0] <= now + 1e-12]
-                if due:
-                    pending = [c for c in pending if c[0] > now + 1e-12]
-                    _, zeta_cmd, tag = due[-1]
-                    sim.set_servo_targets(zeta_cmd, tag=tag)
+            latest = link.arrived(now)
+            if latest is not None:
+                sim.set_servo_targets(latest[0], tag=latest[1])
             sim.step(1)
             k += 1
             if vision is not None:
@@ -309,8 +332,11 @@ def simulate(collision: ScriptedCollision | None, trajectory: str, duration: flo
             t = s.time
             amps = readout.amps(s.tau, rng)
             stamp = t + jitter.sample_delay(rng)
-            out = watch.push_currents(stamp, int(round(t * 1e6)), amps)
-            out += watch.push_states(stamp, sim.servo_setpoints(), None, None)
+            lost_until = max(lost_until, t + jitter.loss(rng))
+            out = []
+            if t >= lost_until:
+                out += watch.push_currents(stamp, int(round(t * 1e6)), amps)
+                out += watch.push_states(stamp, sim.servo_setpoints(), None, None)
             if t >= next_cam - 1e-12:
                 pose = camera_pose(s.pose, rng)
                 out += watch.push_pose(t, pose)

@@ -170,18 +170,28 @@ def draw_truth(desc: HexaDescription, seed: int, tolerances: Tolerances | None =
 class JitterConfig:
     """Host timing of the offline runs (`hexa eval`): a command reaches the servo board `command_mean` s late on
     average (exponential, capped at `command_max`), a sample's host receive stamp is late by |N(0, sample_sigma)| plus,
-    with probability `spike_rate` per sample, a scheduling spike up to `spike_max` s. Board times are exact."""
+    with probability `spike_rate` per sample, a scheduling spike up to `spike_max` s. Board times are exact. With
+    probability `loss_rate` per sample the host loses the samples of the next U(0, `loss_max`) s (a stalled host whose
+    serial buffer overflowed): the nodes see a gap in board time. Both presets lose none."""
 
     command_mean: float = 0.0
     command_max: float = 0.0
     sample_sigma: float = 0.0
     spike_rate: float = 0.0
     spike_max: float = 0.0
+    loss_rate: float = 0.0
+    loss_max: float = 0.0
 
     def command_delay(self, rng: np.random.Generator) -> float:
         if self.command_mean <= 0.0:
             return 0.0
         return float(min(rng.exponential(self.command_mean), self.command_max))
+
+    def loss(self, rng: np.random.Generator) -> float:
+        """Seconds of samples lost from this one on (0: none; draws from `rng` only when losses are on)."""
+        if self.loss_rate <= 0.0 or rng.random() >= self.loss_rate:
+            return 0.0
+        return float(rng.uniform(0.0, self.loss_max))
 
     def sample_delay(self, rng: np.random.Generator) -> float:
         d = abs(rng.normal(0.0, self.sample_sigma)) if self.sample_sigma > 0 else 0.0
