@@ -77,7 +77,7 @@ def run(args: argparse.Namespace) -> int:
     if note:   # run_campaign falls back to the oracle and the report says so too
         print(f"hexa eval: {note}", file=sys.stderr)
     jobs = jobs_of(cfg)
-    bar = ProgressBar(len(jobs), sum(j.get("seconds", 60.0 if k == "calibrate" else 8.0) for k, j in jobs))
+    bar = ProgressBar(len(jobs), sum(j.get("seconds", 8.0) for _, j in jobs))
     from hexa_ros.node import install_signal_handlers
 
     install_signal_handlers()     # SIGTERM (`kill`) as Ctrl-C: KeyboardInterrupt, and run_campaign stops the workers

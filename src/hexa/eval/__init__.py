@@ -126,10 +126,16 @@ def local_workers(scheduler: str) -> int | None:
     return n
 
 
+def pool_robot_seed(cfg: CampaignConfig, n: int) -> int:
+    """The seed of robot n mod `cfg.robots` of a campaign on a few robots: seed·100003 + 90000 + n mod robots, apart
+    from every simulator seed."""
+    return cfg.seed * 100003 + 90000 + n % cfg.robots
+
+
 def robot_seed(cfg: CampaignConfig, n: int, sim_seed: int) -> int:
-    """The simulated robot of a campaign's n-th job of a kind: its own (`sim_seed`) without `cfg.robots`, else robot
-    n mod robots (seed·100003 + 90000 + n mod robots, apart from every simulator seed)."""
-    return sim_seed if cfg.robots <= 0 else cfg.seed * 100003 + 90000 + n % cfg.robots
+    """The simulated robot of a campaign's n-th job of a kind: its own (`sim_seed`) without `cfg.robots`, else
+    `pool_robot_seed`."""
+    return sim_seed if cfg.robots <= 0 else pool_robot_seed(cfg, n)
 
 
 def jobs_of(cfg: CampaignConfig) -> list[tuple[str, dict[str, Any]]]:
@@ -142,10 +148,15 @@ def jobs_of(cfg: CampaignConfig) -> list[tuple[str, dict[str, Any]]]:
     jobs: list[tuple[str, dict[str, Any]]] = []
     contacts: list[tuple[str, dict[str, Any]]] = []
     kinds = kinds_of(cfg.trajectories)
+    if cfg.calibrate and cfg.robots > 0:
+        from hexa.trajectories import load_pose_file
+
+        excitation = 2.0 * load_pose_file(cfg.calibrate)[1]   # s simulated per robot: the file, twice
     for realism in cfg.realisms:
         if cfg.calibrate and cfg.robots > 0:
             calibrations += [("calibrate", {"calibrate": os.path.abspath(cfg.calibrate), "realism": realism,
-                                            "robot_seed": robot_seed(cfg, n, 0)}) for n in range(cfg.robots)]
+                                            "robot_seed": pool_robot_seed(cfg, n), "seconds": excitation})
+                             for n in range(cfg.robots)]
         for i in range(cfg.cases):
             sim_seed = cfg.seed * 100003 + i
             contacts.append(("contact", {"campaign_seed": cfg.seed, "index": i, "sim_seed": sim_seed,
@@ -312,7 +323,7 @@ def run_campaign(cfg: CampaignConfig, progress: Callable[[float], Any] | None = 
         engine.run([j for j in jobs if j[0] == "calibrate"], done)
         overlays = {(r["realism"], r["robot_seed"]): r["overlay"] for k, r in results if k == "calibrate"}
         engine.run([(k, {**j, "nodes_overlay": overlays[(j["realism"], j["robot_seed"])]}
-                     if (j["realism"], j.get("robot_seed")) in overlays else j) for k, j in jobs if k != "calibrate"],
+                     if (j["realism"], j["robot_seed"]) in overlays else j) for k, j in jobs if k != "calibrate"],
                    done)
     contacts = sorted((r for k, r in results if k == "contact"), key=lambda r: (r["realism"], r["index"]))
     free = sorted((r for k, r in results if k == "free"), key=lambda r: (r["realism"], r["trajectory"]))

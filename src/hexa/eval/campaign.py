@@ -456,42 +456,38 @@ def plate_equivalent_every(d: Any, stride: int) -> np.ndarray:
     return np.stack([np.interp(d.truth_t, sub.truth_t, W[:, k]) for k in range(6)], axis=1)
 
 
-def _nodes_description(job: dict[str, Any], realism: RealismConfig) -> HexaDescription | None:
+def _nodes_description(job: dict[str, Any]) -> HexaDescription | None:
     """The description the job's nodes use: its robot's calibration overlay (`nodes_overlay`, the YAML text of a
-    `run_calibration_job`), else with `calibrate` (an excitation file of `hexa calibrate excite`) an overlay
-    identified in-process on the job's own simulated robot (hexa.calibration.simulated); else None (the description
-    itself)."""
+    `run_calibration_job`), else with `calibrate` (an excitation file of `hexa calibrate excite`) the overlay
+    `run_calibration_job` identifies now on the job's own simulated robot; else None (the description itself)."""
     import tempfile
 
     from hexa.robots.hexa_description import load_hexa
 
-    if job.get("nodes_overlay"):
-        with tempfile.TemporaryDirectory() as tmp:
-            path = f"{tmp}/calibration.yaml"
-            with open(path, "w", encoding="utf-8") as f:
-                f.write(job["nodes_overlay"])
-            return load_hexa(path)
-    if not job.get("calibrate"):
+    text = job.get("nodes_overlay")
+    if not text and job.get("calibrate"):
+        text = run_calibration_job({"calibrate": job["calibrate"], "realism": job["realism"],
+                                    "robot_seed": job.get("robot_seed", job["sim_seed"])})["overlay"]
+    if not text:
         return None
-    from hexa.calibration.simulated import calibrate_simulated_robot
-
-    with tempfile.TemporaryDirectory() as tmp:
-        return calibrate_simulated_robot(job["calibrate"], job.get("robot_seed", job["sim_seed"]), realism,
-                                         load_hexa(), f"{tmp}/calibration.yaml")[0]
+    with tempfile.TemporaryDirectory() as tmp:   # load_hexa reads files: the overlay lays itself over its base
+        path = f"{tmp}/calibration.yaml"
+        with open(path, "w", encoding="utf-8") as f:
+            f.write(text)
+        return load_hexa(path)
 
 
 def run_calibration_job(job: dict[str, Any]) -> dict[str, Any]:
     """Worker: the calibration overlay of one simulated robot (`robot_seed`, `realism`) identified from the
-    excitation file `calibrate` as `hexa calibrate identify --simulate` does → {"robot_seed", "realism",
-    "overlay" (its YAML text, laid over the packaged description), "sim_seconds", "wall_s"}."""
+    excitation file `calibrate` as `hexa calibrate identify --simulate` does (optional `seconds`: what that
+    simulates) → {"robot_seed", "realism", "overlay" (its YAML text, laid over the packaged description),
+    "sim_seconds", "wall_s"}."""
     import tempfile
     from pathlib import Path
 
     from hexa.calibration.simulated import calibrate_simulated_robot
     from hexa.robots.hexa_description import load_hexa
     from hexa.sim.realism import RealismConfig
-    from hexa.trajectories import load_pose_file
-
     t0 = time.perf_counter()
     with tempfile.TemporaryDirectory() as tmp:
         out = Path(tmp) / "calibration.yaml"
@@ -499,7 +495,7 @@ def run_calibration_job(job: dict[str, Any]) -> dict[str, Any]:
                                   load_hexa(), out)
         text = out.read_text(encoding="utf-8")
     return {"robot_seed": job["robot_seed"], "realism": job["realism"], "overlay": text,
-            "sim_seconds": 2.0 * load_pose_file(job["calibrate"])[1], "wall_s": time.perf_counter() - t0}
+            "sim_seconds": float(job.get("seconds", 0.0)), "wall_s": time.perf_counter() - t0}
 
 
 def _detector_settings(job: dict[str, Any]) -> tuple[Any, str, Any]:
@@ -572,7 +568,7 @@ def run_contact_job(job: dict[str, Any]) -> dict[str, Any]:
     duration = c.end_time + TAIL
     run = functools.partial(simulate, c, c.trajectory, duration, realism, seed=job["sim_seed"],
                             observer_config=ocfg, identify=job.get("identify", True), detector=kind, cusum=ccfg,
-                            nodes_desc=_nodes_description(job, realism), stream_rate_hz=job.get("stream_rate_hz"),
+                            nodes_desc=_nodes_description(job), stream_rate_hz=job.get("stream_rate_hz"),
                             robot_seed=job.get("robot_seed"))
     note = ""
     try:
@@ -620,7 +616,7 @@ def run_free_job(job: dict[str, Any]) -> dict[str, Any]:
     realism = RealismConfig.named(job["realism"])
     ocfg, kind, ccfg = _detector_settings(job)
     rec = simulate(None, job["trajectory"], job["seconds"], realism, seed=job["sim_seed"], observer_config=ocfg,
-                   identify=False, detector=kind, cusum=ccfg, nodes_desc=_nodes_description(job, realism),
+                   identify=False, detector=kind, cusum=ccfg, nodes_desc=_nodes_description(job),
                    stream_rate_hz=job.get("stream_rate_hz"), robot_seed=job.get("robot_seed"))
     moving = rec.t >= LEAD_IN
     out: dict[str, Any] = {"trajectory": job["trajectory"], "trajectory_kind": trajectory_kind(job["trajectory"]),
