@@ -495,3 +495,11 @@ def test_lost_sample_bursts_leave_gaps_in_board_time_and_commands_keep_their_ord
             if arrived is not None:
                 got.append(arrived[1])
     assert got == sorted(got) and len(set(got)) == len(got) and 50 < len(got) < 400   # in order, some skipped
+
+
+def test_an_excitation_file_that_is_no_pose_file_is_refused_by_name(tmp_path):
+    """`--calibrate FILE` with a file that is not `hexa calibrate excite`'s pose file: one clear error, first."""
+    bad = tmp_path / "notes.csv"
+    bad.write_text("garbage\n", encoding="utf-8")
+    with pytest.raises(ValueError, match="notes.csv is not a pose file of `hexa calibrate excite`"):
+        CampaignConfig(calibrate=str(bad), robots=2)

@@ -76,9 +76,16 @@ class CampaignConfig:
             raise ValueError(f"workers must be >= 1, got {self.workers}")
         for r in self.realisms:
             RealismConfig.named(r)   # raises ValueError naming the presets
-        if self.calibrate is not None and not os.path.isfile(self.calibrate):
-            raise ValueError(f"no excitation file {self.calibrate} (write one with `hexa calibrate excite --out "
-                             f"{self.calibrate}`)")
+        if self.calibrate is not None:
+            if not os.path.isfile(self.calibrate):
+                raise ValueError(f"no excitation file {self.calibrate} (write one with `hexa calibrate excite "
+                                 f"--out {self.calibrate}`)")
+            from hexa.trajectories import load_pose_file
+
+            try:
+                load_pose_file(self.calibrate)
+            except (ValueError, OSError) as exc:
+                raise ValueError(f"{self.calibrate} is not a pose file of `hexa calibrate excite` ({exc})") from exc
         if self.stream_rate_hz is not None and not (math.isfinite(self.stream_rate_hz) and self.stream_rate_hz > 0):
             raise ValueError(f"stream_rate_hz must be > 0, got {self.stream_rate_hz}")
         if self.scheduler is not None:
