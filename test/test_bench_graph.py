@@ -232,7 +232,7 @@ def test_the_replay_reports_every_figure_with_counts(bench_run):
 
 def test_at_a_slow_rate_nearly_every_current_sample_gets_its_residual(bench_run):
     """Counted from the observer's first residual, which waits for the first camera pose. The pose node's
-    best-effort image readers can miss the first frames of a replay (one CI run: its first top frame came 30 frames
+    best-effort image readers can miss the first frames of a replay (seen: its first top frame came 30 frames
     after the isolation node's, both matched by the player before it played), and the first residual waits for
     them; half the samples is the floor for the whole count."""
     rows = _rows(bench_run["result"], "graph replay")
