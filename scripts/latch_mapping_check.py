@@ -1,14 +1,18 @@
 """How well the driver's `joint_states.position` matches the set-points the simulated servos really acted on, with the
 servo board's 20 ms pulse frame simulated: with the Uno's latch report (default) and without (commands as sent).
 
-    python scripts/latch_mapping_check.py [--seconds 6] [--rtf 0.3] [--frame 0.02] [--cameras] [--no-sync]
+    python scripts/latch_mapping_check.py [--seconds 6] [--rtf 0.3] [--frame 0.02] [--cameras] [--no-sync] [--load N]
 
 Runs the MuJoCo Hexa (no cameras) with the virtual boards and the real driver node (its own process, a private ROS
 domain on loopback), streams the circle trajectory's IK to `joint_commands` at 100 Hz of sim time, and compares each
 published sample's set-points with the simulator's own at the sample's board time (the Mega's board clock is sim
 time). Prints, per mode, the share of samples with some servo one command off, the servo-sample mismatches, and those
-of them more than 1 ms from a change of that servo's set-point (not a switch placed slightly early or late);
-LATCH_CHECK_DEBUG=1 lists those on stderr.
+of them more than 1 ms from a change of that servo's set-point (not a switch placed slightly early or late); the
+servo-samples whose published set-point went back to an older command than the servo's previous sample had (a pulse
+frame predicted with a command the board did not have yet, which its LATCH report corrected); and the driver's
+`latch_predicted_wrong` (servos whose reported command differed from the one predicted). `--load N` runs N busy
+processes beside it. LATCH_CHECK_DEBUG=1 lists the far mismatches and the reversals on stderr; LATCH_CHECK_DUMP=FILE
+writes, per sample and servo, the commands the published and the simulated set-points can be (JSON).
 """
 from __future__ import annotations
 
@@ -28,6 +32,7 @@ import numpy as np
 def run(latch: bool, seconds: float, rtf: float, frame: float, domain: int, cameras: bool = False,
         sync: bool = True) -> dict:
     import rclpy
+    from diagnostic_msgs.msg import DiagnosticArray
     from hexa_msgs.msg import MotorCurrents
     from rclpy.qos import QoSProfile, ReliabilityPolicy
     from sensor_msgs.msg import JointState
@@ -47,6 +52,7 @@ def run(latch: bool, seconds: float, rtf: float, frame: float, domain: int, came
     link = Path(tempfile.mkdtemp())
     boards = VirtualBoards(sim, link_dir=link).start()
     log: list[tuple[float, np.ndarray]] = []          # (sim time, set-points) after every change
+    sent_log: list[tuple[float, int]] = []             # (sim time, trajectory index) of every command
     stop = threading.Event()
     driver = subprocess.Popen([str(Path(sys.executable).with_name("hexa-driver")), "--ros-args", "-r", "__ns:=/hexa",
                                "-p", f"uno_port:={link / 'uno'}", "-p", f"mega_port:={link / 'mega'}",
@@ -59,6 +65,13 @@ def run(latch: bool, seconds: float, rtf: float, frame: float, domain: int, came
     states, currents = [], []
     node.create_subscription(JointState, "/hexa/joint_states", states.append, qos)
     node.create_subscription(MotorCurrents, "/hexa/motor_currents", currents.append, qos)
+    latch_diag: dict[str, str] = {}
+
+    def on_diag(msg: DiagnosticArray) -> None:
+        for st in msg.status:
+            latch_diag.update({kv.key: kv.value for kv in st.values if kv.key.startswith("latch_")})
+
+    node.create_subscription(DiagnosticArray, "/diagnostics", on_diag, 10)
     pub = node.create_publisher(JointState, "/hexa/joint_commands", 10)
     spin = threading.Thread(target=lambda: [rclpy.spin_once(node, timeout_sec=0.05) for _ in iter(stop.is_set, True)],
                             daemon=True)
@@ -87,6 +100,7 @@ def run(latch: bool, seconds: float, rtf: float, frame: float, domain: int, came
             k = int((sim.time - t0) * 100.0) % len(zetas)
             if k != k_last:
                 command(zetas[k])
+                sent_log.append((sim.time, k))
                 k_last = k
             if cameras and sim.time >= next_render:    # both cameras at 30 Hz: the sim clock stops meanwhile
                 for cam in ("cam_top", "cam_side"):
@@ -110,7 +124,14 @@ def run(latch: bool, seconds: float, rtf: float, frame: float, domain: int, came
     by_stamp = {(m.header.stamp.sec, m.header.stamp.nanosec): m.board_time_us for m in currents}
     t_log = np.array([t for t, _ in log])
     sp_log = np.array([s for _, s in log])
-    wrong_samples = wrong_servos = wrong_far = n = 0
+    wrong_samples = wrong_servos = wrong_far = n = reversals = 0
+    t_sent = np.array([t for t, _ in sent_log])
+    k_sent = np.array([k for _, k in sent_log])
+    # per servo, the command indices (into sent_log) whose whole-µs pulse equals each published set-point
+    pulses = np.array([[c.pulse_from_angle(z[j]) for j, c in enumerate(boards.servos)] for z in zetas[k_sent]]) \
+        if len(k_sent) else np.zeros((0, 6))
+    prev: list[np.ndarray | None] = [None] * 6
+    dump: list | None = [] if os.environ.get("LATCH_CHECK_DUMP") else None
     # per servo, the sim times its set-point changed
     changes = [t_log[1:][np.abs(np.diff(sp_log[:, j])) > 1e-9] for j in range(6)]
     for js in states:
@@ -126,6 +147,22 @@ def run(latch: bool, seconds: float, rtf: float, frame: float, domain: int, came
         # the driver publishes angles; the servos got them as whole-µs pulses (the virtual Uno's calibration)
         sent = boards.angles_from_pulses(tuple(c.pulse_from_angle(z) for c, z in zip(boards.servos, js.position)))
         err = np.abs(sent - sp_log[i]) > 1e-6
+        # a set-point that steps back: every command it can be is older than every one the servo's previous
+        # published set-point could be (the commands sent in the 0.3 s before the sample)
+        lo, hi = np.searchsorted(t_sent, t_sim - 0.3), np.searchsorted(t_sent, t_sim + 0.02)
+        for j in range(6):
+            pj = boards.servos[j].pulse_from_angle(js.position[j])
+            idx = lo + np.flatnonzero(pulses[lo:hi, j] == pj)
+            if idx.size and prev[j] is not None and prev[j].size and idx.max() < prev[j].min():
+                reversals += 1
+                if os.environ.get("LATCH_CHECK_DEBUG"):
+                    print("back", round(t_sim, 4), j, "commands", idx.tolist(), "after", prev[j].tolist(),
+                          file=sys.stderr)
+            if idx.size:
+                prev[j] = idx
+            if dump is not None:
+                true_idx = lo + np.flatnonzero(pulses[lo:hi, j] == boards.servos[j].pulse_from_angle(sp_log[i][j]))
+                dump.append((float(t_sim), j, idx.tolist(), true_idx.tolist(), int(b)))
         wrong_samples += int(err.any())
         wrong_servos += int(err.sum())
         for j in np.nonzero(err)[0]:      # a set-point change placed a little early or late, or a wrong command?
@@ -138,11 +175,16 @@ def run(latch: bool, seconds: float, rtf: float, frame: float, domain: int, came
                       "next change", round(float(changes[j][k_true]), 4) if k_true < len(changes[j]) else None,
                       "values", [round(float(v), 4) for v in sp_log[max(i - 3, 0):i + 3, j]], file=sys.stderr)
         n += 1
+    if dump is not None:
+        Path(os.environ["LATCH_CHECK_DUMP"]).write_text(json.dumps(dump))
     return {"latch_report": latch, "command_sync": sync and latch, "frame_s": frame, "cameras": cameras, "samples": n,
             "samples_with_a_servo_off": round(wrong_samples / max(n, 1), 3),
             "servo_samples_off": round(wrong_servos / max(6 * n, 1), 3),
             # off where the servo's set-point had not changed within 1 ms: a command the servo never had then
-            "servo_samples_off_far_from_a_change": round(wrong_far / max(6 * n, 1), 4)}
+            "servo_samples_off_far_from_a_change": round(wrong_far / max(6 * n, 1), 4),
+            # a servo's published set-point went back to an older command (a prediction the report corrected)
+            "set_point_reversals": reversals,
+            "latch_predicted_wrong": latch_diag.get("latch_predicted_wrong")}
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -153,9 +195,20 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--domain", type=int, default=77)
     ap.add_argument("--mode", choices=["latch", "commands", "both"], default="both")
     ap.add_argument("--cameras", action="store_true", help="render both cameras at 30 Hz (the sim clock stops)")
+    ap.add_argument("--load", type=int, default=0, help="busy processes beside the run (a loaded host)")
     ap.add_argument("--no-sync", action="store_true", help="driver command_sync:=false (commands sent as they come)")
     args = ap.parse_args(argv)
     modes = {"latch": [True], "commands": [False], "both": [True, False]}[args.mode]
+    hogs = [subprocess.Popen([sys.executable, "-c", "while True: pass"]) for _ in range(args.load)]
+    try:
+        _modes(args, modes)
+    finally:
+        for h in hogs:
+            h.kill()
+    return 0
+
+
+def _modes(args: argparse.Namespace, modes: list[bool]) -> None:
     for latch in modes:   # one process per mode: rclpy is initialised once per process
         if len(modes) > 1:
             out = subprocess.run([sys.executable, __file__, "--mode", "latch" if latch else "commands",
@@ -167,7 +220,6 @@ def main(argv: list[str] | None = None) -> int:
         else:
             print(json.dumps(run(latch, args.seconds, args.rtf, args.frame, args.domain, args.cameras,
                                  sync=not args.no_sync)), flush=True)
-    return 0
 
 
 if __name__ == "__main__":
