@@ -3,16 +3,18 @@ servo board's 20 ms pulse frame simulated: with the Uno's latch report (default)
 
     python scripts/latch_mapping_check.py [--seconds 6] [--rtf 0.3] [--frame 0.02] [--cameras] [--no-sync] [--load N]
 
-Runs the MuJoCo Hexa (no cameras) with the virtual boards and the real driver node (its own process, a private ROS
-domain on loopback), streams the circle trajectory's IK to `joint_commands` at 100 Hz of sim time, and compares each
-published sample's set-points with the simulator's own at the sample's board time (the Mega's board clock is sim
-time). Prints, per mode, the share of samples with some servo one command off, the servo-sample mismatches, and those
-of them more than 1 ms from a change of that servo's set-point (not a switch placed slightly early or late); the
-servo-samples whose published set-point went back to an older command than the servo's previous sample had (a pulse
-frame predicted with a command the board did not have yet, which its LATCH report corrected); and the driver's
-`latch_predicted_wrong` (servos whose reported command differed from the one predicted). `--load N` runs N busy
-processes beside it. LATCH_CHECK_DEBUG=1 lists the far mismatches and the reversals on stderr; LATCH_CHECK_DUMP=FILE
-writes, per sample and servo, the commands the published and the simulated set-points can be (JSON).
+Runs the MuJoCo Hexa, paced as the sim node paces it (`hexa.sim.pacing.Pacer`: a stall, such as the renders of
+`--cameras`, is dropped instead of caught up), with the virtual boards and the real driver node (its own process, a
+private ROS domain on loopback), streams the circle trajectory's IK to `joint_commands` at 100 Hz of sim time, and
+compares each published sample's set-points with the simulator's own at the sample's board time (the Mega's board
+clock is sim time). Prints, per mode, the share of samples with some servo one command off, the servo-sample
+mismatches, and those of them more than 1 ms from a change of that servo's set-point (not a switch placed slightly
+early or late); the servo-samples whose published set-point went back to an older command than the servo's previous
+sample had (a pulse frame predicted with a command the board did not have yet, which its LATCH report corrected); and
+the driver's `latch_predicted_wrong` (servos whose reported command differed from the one predicted). `--load N` runs
+N busy processes beside it. LATCH_CHECK_DEBUG=1 lists the far mismatches and the reversals on stderr;
+LATCH_CHECK_DUMP=FILE writes, per sample and servo, the commands the published and the simulated set-points can be
+(JSON).
 """
 from __future__ import annotations
 
@@ -40,6 +42,7 @@ def run(latch: bool, seconds: float, rtf: float, frame: float, domain: int, came
     from hexa.kinematics import hexa6rus as kin
     from hexa.sim import Simulator
     from hexa.sim.boards import VirtualBoards
+    from hexa.sim.pacing import Pacer
     from hexa.trajectories import sample
     from hexa_bringup.rosenv import ros_env
 
@@ -95,7 +98,8 @@ def run(latch: bool, seconds: float, rtf: float, frame: float, domain: int, came
         t0 = sim.time
         k_last = -1
         next_render = t0
-        wall0 = time.monotonic()
+        pacer = Pacer(rtf)   # as the sim node paces: stalls over max_lag are dropped, not caught up in a burst
+        pacer.start(t0)
         while sim.time - t0 < seconds:
             k = int((sim.time - t0) * 100.0) % len(zetas)
             if k != k_last:
@@ -110,9 +114,7 @@ def run(latch: bool, seconds: float, rtf: float, frame: float, domain: int, came
             sp = sim._setpoints.copy() if sim._latch_at is not None else sim._targets.copy()
             if not log or np.any(sp != log[-1][1]):
                 log.append((sim.time, sp))
-            ahead = (sim.time - t0) / rtf - (time.monotonic() - wall0)
-            if ahead > 0:
-                time.sleep(ahead)
+            pacer.pace(sim.time)
         time.sleep(0.5)
     finally:
         stop.set()
