@@ -147,14 +147,14 @@ def run(latch: bool, seconds: float, rtf: float, frame: float, domain: int, came
         if i < 0:
             continue
         # the driver publishes angles; the servos got them as whole-µs pulses (the virtual Uno's calibration)
-        sent = boards.angles_from_pulses(tuple(c.pulse_from_angle(z) for c, z in zip(boards.servos, js.position)))
+        published = tuple(c.pulse_from_angle(z) for c, z in zip(boards.servos, js.position))
+        sent = boards.angles_from_pulses(published)
         err = np.abs(sent - sp_log[i]) > 1e-6
         # a set-point that steps back: every command it can be is older than every one the servo's previous
         # published set-point could be (the commands sent in the 0.3 s before the sample)
         lo, hi = np.searchsorted(t_sent, t_sim - 0.3), np.searchsorted(t_sent, t_sim + 0.02)
         for j in range(6):
-            pj = boards.servos[j].pulse_from_angle(js.position[j])
-            idx = lo + np.flatnonzero(pulses[lo:hi, j] == pj)
+            idx = lo + np.flatnonzero(pulses[lo:hi, j] == published[j])
             if idx.size and prev[j] is not None and prev[j].size and idx.max() < prev[j].min():
                 reversals += 1
                 if os.environ.get("LATCH_CHECK_DEBUG"):
