@@ -165,3 +165,28 @@ def test_a_kept_frame_state_renders_later_as_its_instant_did():
             np.testing.assert_array_equal(rgb_later, rgb)
             np.testing.assert_array_equal(depth_later, depth)
             assert np.abs(sim.render(cam, noise=False)[1].astype(int) - depth.astype(int)).max() > 20   # moved on
+
+
+def test_the_image_noise_in_place_equals_the_plain_formulas(sim):
+    """noisy_rgb and depth_image_mm run fused (one saturated add, in-place float32 operations); their output is the
+    module's formulas written out plainly, from the same draws of the bank."""
+    from hexa.sim.camera import NoiseBank, depth_image_mm, noisy_rgb
+
+    rgb, depth = sim.render_raw("cam_top")
+    cfg = sim.config.cameras["cam_top"]
+    for sigma, rel in ((2.0, 0.01), (3.5, 0.02)):
+        fused, plain = NoiseBank(rgb.size * 2, seed=4), NoiseBank(rgb.size * 2, seed=4)
+        for _ in range(3):
+            n = plain.draw(rgb.size).reshape(rgb.shape)
+            want = np.clip(rgb.astype(np.int32) + np.rint(np.float32(sigma) * n).astype(np.int32), 0, 255)
+            got = noisy_rgb(rgb, sigma, fused)
+            np.testing.assert_array_equal(got, want.astype(np.uint8))
+            assert 0 < np.count_nonzero(got != rgb)
+            z = depth
+            valid = np.isfinite(z) & (z >= cfg.depth_min) & (z <= cfg.depth_max)
+            zn = np.where(valid, z, 0.0) * (1.0 + rel * plain.draw(z.size).reshape(z.shape))
+            want_mm = np.clip(np.rint(zn * 1000.0), 0, 65535).astype(np.uint16)
+            want_mm[~valid] = 0
+            got_mm = depth_image_mm(depth, cfg, rel, fused)
+            np.testing.assert_array_equal(got_mm, want_mm)
+            assert np.count_nonzero(got_mm) > 0.5 * got_mm.size

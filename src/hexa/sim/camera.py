@@ -3,12 +3,14 @@
 Depth model (per pixel, z = range along the optical axis in m):
     z_noisy = z * (1 + depth_noise_rel * n),  n ~ N(0, 1)        (sigma grows with range: 1 % of z by default)
     depth_mm = round(1000 * z_noisy)  (uint16),  0 where z < depth_min, z > depth_max or nothing was hit
-Colour model: rgb = clip(render + rgb_noise_sigma * n, 0, 255) (uint8), n ~ N(0, 1) per channel.
+Colour model: rgb = clip(render + round(rgb_noise_sigma * n), 0, 255) (uint8), n ~ N(0, 1) per channel.
 Noise is drawn from a seeded bank of standard normals read at a random offset each frame (fast and deterministic).
 """
 from __future__ import annotations
 
 import os
+
+import cv2
 import numpy as np
 
 from hexa.sim.config import CameraConfig
@@ -62,6 +64,7 @@ class NoiseBank:
         self._rng = np.random.default_rng(seed)
         self._bank = self._rng.standard_normal(2 * size).astype(np.float32)
         self._size = size
+        self._levels: dict[float, np.ndarray] = {}
 
     def draw(self, n: int) -> np.ndarray:
         """n standard normals (a view; do not modify)."""
@@ -69,6 +72,17 @@ class NoiseBank:
             return self._rng.standard_normal(n).astype(np.float32)
         off = int(self._rng.integers(0, self._size))
         return self._bank[off:off + n]
+
+    def draw_levels(self, n: int, sigma: float) -> np.ndarray:
+        """The draw `draw(n)` would make, scaled by `sigma` and rounded to whole levels (int16; a view, do not
+        modify): the same offset, so the noise stream is the same as `draw`'s."""
+        if n > self._size:
+            return np.rint(sigma * self.draw(n)).astype(np.int16)
+        levels = self._levels.get(sigma)
+        if levels is None:
+            levels = self._levels[sigma] = np.rint(np.float32(sigma) * self._bank).astype(np.int16)
+        off = int(self._rng.integers(0, self._size))
+        return levels[off:off + n]
 
     @property
     def rng(self) -> np.random.Generator:
@@ -144,15 +158,19 @@ def depth_image_mm(depth_m: np.ndarray, cfg: CameraConfig, rel_sigma: float, noi
                    ) -> np.ndarray:
     """uint16 depth in mm with range-proportional Gaussian noise and 1 mm quantisation; 0 = invalid (see module)."""
     z = depth_m
-    valid = np.isfinite(z) & (z >= cfg.depth_min) & (z <= cfg.depth_max)
+    invalid = ~((z >= cfg.depth_min) & (z <= cfg.depth_max))      # also inf (nothing hit) and NaN
     if noise is not None and rel_sigma > 0:
-        n = noise.draw(z.size).reshape(z.shape)
-        zn = np.where(valid, z, 0.0) * (1.0 + rel_sigma * n)
+        zn = np.multiply(noise.draw(z.size).reshape(z.shape), rel_sigma, dtype=np.float32)
+        zn += 1.0
+        zn *= z                                                     # z (1 + rel_sigma n), in place
     else:
-        zn = np.where(valid, z, 0.0)
-    mm = np.rint(zn * 1000.0)
-    mm = np.clip(mm, 0, 65535).astype(np.uint16)
-    mm[~valid] = 0
+        zn = z.astype(np.float32)
+    zn *= 1000.0
+    with np.errstate(invalid="ignore"):
+        np.rint(zn, out=zn)
+        np.clip(zn, 0, 65535, out=zn)
+        mm = zn.astype(np.uint16)
+    mm[invalid] = 0
     return mm
 
 
@@ -160,6 +178,6 @@ def noisy_rgb(rgb: np.ndarray, sigma: float, noise: NoiseBank | None) -> np.ndar
     """uint8 colour with additive Gaussian noise of `sigma` levels (see module)."""
     if noise is None or sigma <= 0:
         return rgb
-    n = noise.draw(rgb.size).reshape(rgb.shape)
-    out = rgb.astype(np.float32) + sigma * n
-    return np.clip(np.rint(out), 0, 255).astype(np.uint8)
+    levels = noise.draw_levels(rgb.size, sigma).reshape(rgb.shape)
+    # rgb + round(sigma n) saturated to 0..255 in one pass: round(x + y) = x + round(y) for whole x
+    return cv2.add(np.ascontiguousarray(rgb), levels, dtype=cv2.CV_8U)
