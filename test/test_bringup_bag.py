@@ -72,14 +72,19 @@ def test_record_refuses_to_overwrite_an_existing_bag(procs, ros_env, tmp_path):
     assert rec.returncode == 2 and "exists already" in err
 
 
-def test_play_publishes_the_recorded_messages_to_a_subscriber(procs, ros_env, tmp_path):
+def _collision_bag(procs, ros_env, bag):
+    """Two seconds of the peer's /hexa/collision recorded into `bag`; every process stopped after."""
     procs.start([PY, "test/roundtrip_peer.py", "collision"], ros_env)
-    bag = tmp_path / "b3"
     rec = procs.start([PY, "-m", "hexa_bringup.cli", "record", "/hexa/collision", "-o", str(bag),
                        "--duration", "2"], ros_env)
     rec.communicate(timeout=60)
     procs.stop_all()
     procs.procs.clear()
+    return bag
+
+
+def test_play_publishes_the_recorded_messages_to_a_subscriber(procs, ros_env, tmp_path):
+    bag = _collision_bag(procs, ros_env, tmp_path / "b3")
     echo = procs.start([PY, "-m", "hexa_bringup.cli", "topic", "echo", "/hexa/collision",
                         "hexa_msgs/msg/CollisionEvent", "-n", "3", "--json", "--timeout", "40"], ros_env)
     time.sleep(2.0)
@@ -133,3 +138,20 @@ def test_a_sigkilled_recording_is_recovered_losing_at_most_the_last_second(procs
     pout, perr = play.communicate(timeout=60)
     assert play.returncode == 0, perr
     assert json.loads(pout.strip().splitlines()[-1])["published"] == len(ids)
+
+
+def test_play_waits_for_as_many_subscribers_as_asked_and_says_which_topic_had_too_few(procs, ros_env, tmp_path):
+    bag = _collision_bag(procs, ros_env, tmp_path / "b4")
+    bad = procs.start([PY, "-m", "hexa_bringup.cli", "play", str(bag), "--subscribers", "/hexa/collision=0"],
+                      ros_env)
+    _out, err = bad.communicate(timeout=60)
+    assert bad.returncode == 2 and "TOPIC=N" in err and "Traceback" not in err
+    procs.start([PY, "-m", "hexa_bringup.cli", "topic", "echo", "/hexa/collision", "hexa_msgs/msg/CollisionEvent",
+                 "-n", "1", "--timeout", "40"], ros_env)
+    t0 = time.monotonic()
+    play = procs.start([PY, "-m", "hexa_bringup.cli", "play", str(bag), "--wait", "6", "--wait-subscribers",
+                        "--subscribers", "hexa/collision=2"], ros_env)
+    _out, err = play.communicate(timeout=60)
+    assert play.returncode == 0, err
+    assert "too few subscribers after 6 s on /hexa/collision (1 of 2)" in err
+    assert time.monotonic() - t0 >= 6.0       # one matched reader did not end the wait

@@ -261,6 +261,7 @@ class Probe:
                                     priority=priority)
         self.lines: queue.Queue[str] = queue.Queue()
         self.ready = False
+        self.subscribers: dict[str, int] = {}    # input topic → its readers in the graph, said before READY
         self.waiting: list[str] = []
         self.rx = 0
         self.rx_changed = time.monotonic()
@@ -272,6 +273,8 @@ class Probe:
             line = line.strip()
             if line == "READY":
                 self.ready = True
+            elif line.startswith("SUBSCRIBERS "):
+                self.subscribers = json.loads(line[12:])
             elif line.startswith("WAITING "):
                 self.waiting = json.loads(line[8:])
             elif line.startswith("RX "):
@@ -642,7 +645,7 @@ def replay_once(info: BagInputs, index: dict, rate: float, env: dict[str, str], 
                                         "count": True} for t, ty in OUTPUTS.items()]
                   + [{"topic": "/diagnostics", "type": "diagnostic_msgs/msg/DiagnosticArray", "qos": "reliable"}],
                   "nodes": [n for names in nodes.values() for n in names],
-                  "ready_publishers": [f"{ns}/{t}" for t in OUTPUTS]}
+                  "ready_publishers": [f"{ns}/{t}" for t in OUTPUTS], "subscribers_of": list(info.topics)}
     log = work / "player.log"
     what = f"replay at {rate:g}x"
     t_start = time.monotonic()
@@ -657,6 +660,9 @@ def replay_once(info: BagInputs, index: dict, rate: float, env: dict[str, str], 
         player_cmd = [sys.executable, "-m", "hexa_bringup.cli", "play", str(info.path), "--clock", "--rate",
                       f"{rate:g}", "--wait", "30", "--wait-subscribers", "--log", str(log), "--topics",
                       *info.topics]
+        shared = [f"{t}={n}" for t, n in probe.subscribers.items() if n > 1]
+        if shared:   # every reader matched, not one of several: pose and isolation both read cam_top's images
+            player_cmd += ["--subscribers", *shared]
         player = ch.start("player", player_cmd, log=work / "player.out", priority=priority)
         pids["player"] = player.pid
         pids["probe"] = probe.proc.pid

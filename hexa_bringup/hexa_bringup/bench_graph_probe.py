@@ -99,6 +99,7 @@ def run_probe(spec_path: str, out_path: str) -> int:
     executor.add_node(node)
     want_nodes = {(spec["ns"].rstrip("/") or "/", n) for n in spec.get("nodes", [])}
     ready = False
+    last_counts: dict[str, int] | None = None
     next_check = 0.0
     try:
         while not stop.requested:
@@ -115,8 +116,13 @@ def run_probe(spec_path: str, out_path: str) -> int:
             missing = [f"node {n}" for _, n in sorted(want_nodes - have)]
             missing += [f"publisher of {t}" for t in spec.get("ready_publishers", []) if node.count_publishers(t) == 0]
             missing += [f"a message on {t}" for t in spec.get("ready_messages", []) if not received.get(t)]
+            counts = {t: node.count_subscribers(t) for t in spec.get("subscribers_of", [])}
+            if not missing and counts != last_counts:      # the readers of the inputs: unchanged for 1 s
+                missing, last_counts = ["steady subscriber counts"], counts
             if not missing:
                 ready = True
+                if counts:
+                    _say("SUBSCRIBERS " + json.dumps(counts))
                 _say("READY")
             else:
                 _say("WAITING " + json.dumps(missing))

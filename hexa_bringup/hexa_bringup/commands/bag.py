@@ -42,6 +42,9 @@ def register(sub: argparse._SubParsersAction) -> None:
                     help="end the --wait early once every topic (and /clock) has a matched subscriber and the "
                          "number of matches held still for 0.5 s; when --wait runs out first, name the topics "
                          "without a subscriber and play anyway")
+    pp.add_argument("--subscribers", nargs="+", default=[], metavar="TOPIC=N",
+                    help="with --wait-subscribers: wait also until TOPIC has at least N matched subscribers (a "
+                         "topic read by several nodes: one matched reader alone does not end the wait)")
     pp.add_argument("--log", metavar="FILE",
                     help="write one line per published message: monotonic ns just before publishing, the message's "
                          "bag timestamp (ns) and its topic")
@@ -163,6 +166,11 @@ def run_play(args: argparse.Namespace) -> int:
     from hexa_ros.cdr import motor_currents_with_setpoint_field
 
     try:
+        least = _subscriber_counts(args.subscribers)
+    except ValueError as exc:
+        print(f"hexa play: {exc}", file=sys.stderr)
+        return 2
+    try:
         topics = bag_topics(args.bag)
     except Exception as exc:  # noqa: BLE001
         print(f"hexa play: cannot open bag {args.bag}: {exc}", file=sys.stderr)
@@ -196,6 +204,7 @@ def run_play(args: argparse.Namespace) -> int:
     clock_pub = node.create_publisher(Clock, "/clock", 10) if args.clock else None
     end = time.monotonic() + args.wait
     watched = list(pubs.items()) + ([("/clock", clock_pub)] if clock_pub is not None else [])
+    wanted_n = {**dict.fromkeys((t for t, _p in watched), 1), **least}
     matches, steady_since = -1, time.monotonic()
     while time.monotonic() < end:
         rclpy.spin_once(node, timeout_sec=0.05)
@@ -203,12 +212,14 @@ def run_play(args: argparse.Namespace) -> int:
             counts = [p.get_subscription_count() for _t, p in watched]
             if sum(counts) != matches:
                 matches, steady_since = sum(counts), time.monotonic()
-            elif all(counts) and time.monotonic() - steady_since >= 0.5:
+            elif all(c >= wanted_n[t] for (t, _p), c in zip(watched, counts)) and \
+                    time.monotonic() - steady_since >= 0.5:
                 break
     if args.wait_subscribers:
-        lonely = [t for t, p in watched if p.get_subscription_count() == 0]
+        lonely = [f"{t} ({p.get_subscription_count()} of {wanted_n[t]})" for t, p in watched
+                  if p.get_subscription_count() < wanted_n[t]]
         if lonely:
-            print(f"hexa play: no subscriber after {args.wait:g} s on {', '.join(lonely)}; playing anyway",
+            print(f"hexa play: too few subscribers after {args.wait:g} s on {', '.join(lonely)}; playing anyway",
                   file=sys.stderr)
     sent = 0
     counts = dict.fromkeys(selected, 0)
@@ -244,6 +255,21 @@ def run_play(args: argparse.Namespace) -> int:
     else:
         print(f"hexa play: published {sent} messages from {args.bag}")
     return 0
+
+
+def _subscriber_counts(items: list[str]) -> dict[str, int]:
+    """`--subscribers` TOPIC=N items as {"/topic": N}.
+
+    Raises:
+        ValueError: an item that is not TOPIC=N with N >= 1.
+    """
+    out = {}
+    for item in items:
+        topic, sep, n = item.rpartition("=")
+        if not sep or not topic or not n.isdigit() or int(n) < 1:
+            raise ValueError(f"--subscribers takes TOPIC=N with N >= 1, got {item!r}")
+        out[topic if topic.startswith("/") else "/" + topic] = int(n)
+    return out
 
 
 def bag_summary(path: str) -> dict:
