@@ -75,3 +75,15 @@ def test_of_the_pairs_before_the_first_camera_info_the_newest_is_held_the_older_
     frame = fa.set_camera_info(8, 6, K)
     assert frame is not None and frame.stamp == 2.0
     assert fa.rejects == {"no camera_info": 1} and fa.frames == 1
+
+
+def test_an_image_whose_partner_never_comes_is_dropped_and_counted_once_the_queue_is_full() -> None:
+    fa = _assembler()                                   # keeps 5 unpaired images of each kind
+    rgb = np.zeros((6, 8, 3), np.uint8)
+    for k in range(7):                                  # colour only: the depth topic lost these
+        assert fa.add_color(float(k), *_fields(rgb, "rgb8")) is None
+    assert fa.rejects == {"unpaired colour image": 2}
+    assert fa.add_depth(1.0, *_fields(np.full((6, 8), 500, np.uint16), "16UC1")) is None   # its colour was dropped
+    f = fa.add_depth(6.0, *_fields(np.full((6, 8), 500, np.uint16), "16UC1"))
+    assert f is not None and f.stamp == 6.0 and fa.frames == 1
+    assert fa.rejects == {"unpaired colour image": 2}

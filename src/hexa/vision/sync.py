@@ -120,7 +120,7 @@ class FrameAssembler:
         rgb = self._rgb(height, width, encoding, is_bigendian, step, data)
         if rgb is None:
             return None
-        self._color.append((stamp, rgb))
+        self._keep(self._color, (stamp, rgb), "unpaired colour image")
         return self._match()
 
     def add_depth(self, stamp: float, height: int, width: int, encoding: str, is_bigendian: int, step: int,
@@ -128,8 +128,14 @@ class FrameAssembler:
         depth = self._depth_m(height, width, encoding, is_bigendian, step, data)
         if depth is None:
             return None
-        self._depth.append((stamp, depth))
+        self._keep(self._depth, (stamp, depth), "unpaired depth image")
         return self._match()
+
+    def _keep(self, queue: deque, item: tuple[float, np.ndarray], reason: str) -> None:
+        """Queue an image for pairing; the oldest one, whose partner never came, is dropped and counted."""
+        if len(queue) == queue.maxlen:
+            self.rejects[reason] += 1
+        queue.append(item)
 
     def assemble(self, raw: RawFrame) -> RGBDFrame | None:
         """Decode a paired colour/depth frame (bad input is counted in `rejects` like `add_color`/`add_depth`;
