@@ -21,19 +21,6 @@ class FakeWall:
         self.t += s
 
 
-class _StepSim:
-    """What SimRunner steps: 1 ms steps, each costing `step_wall` s of `wall` (a FakeWall)."""
-    timestep = 0.001
-
-    def __init__(self, wall: FakeWall | None = None, step_wall: float = 0.0) -> None:
-        self.time, self.wall, self.step_wall = 0.0, wall, step_wall
-
-    def step(self, n: int) -> None:
-        self.time += n * self.timestep
-        if self.wall is not None:
-            self.wall.t += self.step_wall * n
-
-
 def _run(max_lag: float, rtf: float = 0.3, sim_s: float = 1.0, render_every: float = 1 / 30,
          render_wall: float = 0.044, step_wall: float = 0.0002):
     """Step 1 ms at a time (each costing step_wall), pace every step as sim_node does, 'render' every render_every
@@ -100,7 +87,14 @@ def test_factor_zero_never_sleeps_and_bad_values_are_refused():
 def test_sim_runner_publishes_clock_truth_and_cameras_at_their_sim_rates():
     from hexa.sim.pacing import SimRunner
 
-    Sim = _StepSim
+    class Sim:
+        timestep = 0.001
+
+        def __init__(self) -> None:
+            self.time = 0.0
+
+        def step(self, n: int) -> None:
+            self.time += n * self.timestep
 
     class Out:
         def __init__(self, sim: Sim) -> None:
@@ -140,7 +134,18 @@ def _camera_run(pieces: list[float], rtf: float = 1.0, sim_s: float = 1.0):
     from hexa.sim.pacing import SimRunner
 
     wall = FakeWall()
-    sim = _StepSim(wall, step_wall=0.00005)
+
+    class Sim:
+        timestep = 0.001
+
+        def __init__(self) -> None:
+            self.time = 0.0
+
+        def step(self, n: int) -> None:
+            self.time += n * self.timestep
+            wall.t += 0.00005 * n
+
+    sim = Sim()
 
     class Out:
         def __init__(self) -> None:
