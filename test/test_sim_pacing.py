@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import math
 
-import numpy as np
 import pytest
 
 from hexa.sim.pacing import Pacer
@@ -126,75 +125,3 @@ def test_sim_runner_publishes_clock_truth_and_cameras_at_their_sim_rates():
     cams = [t for k, t in stepped if k == "cameras"]
     assert cams[0] == pytest.approx(1 / 30, abs=1e-3) and all(b - a < 0.035 for a, b in zip(cams, cams[1:]))
     assert sim.time == pytest.approx(1.0) and wall.t == pytest.approx(1.2 + 1.0, abs=0.01)
-
-
-def _camera_run(pieces: list[float], rtf: float = 1.0, sim_s: float = 1.0):
-    """SimRunner at `rtf` on a fake wall, 1 ms steps costing 0.05 ms, a frame pair at 30 Hz whose work is `pieces`
-    (wall seconds each, one piece per `next`). Returns the runner and its log of (event, frame instant, sim time)."""
-    from hexa.sim.pacing import SimRunner
-
-    wall = FakeWall()
-
-    class Sim:
-        timestep = 0.001
-
-        def __init__(self) -> None:
-            self.time = 0.0
-
-        def step(self, n: int) -> None:
-            self.time += n * self.timestep
-            wall.t += 0.00005 * n
-
-    sim = Sim()
-
-    class Out:
-        def __init__(self) -> None:
-            self.log: list[tuple[str, float, float]] = []
-            self.walls: list[float] = []          # wall time at each kept instant
-
-        def clock(self) -> None: ...
-
-        def truth(self) -> None: ...
-
-        def spin(self) -> None: ...
-
-        def cameras(self):
-            instant = round(sim.time, 6)          # kept when asked, done later
-            self.log.append(("kept", instant, instant))
-            self.walls.append(wall.t)
-
-            def work():
-                for k, cost in enumerate(pieces):
-                    wall.t += cost
-                    self.log.append((f"piece {k}", instant, round(sim.time, 6)))
-                    if k < len(pieces) - 1:
-                        yield
-            return work()
-
-    runner = SimRunner(sim, Pacer(rtf, clock=wall.clock, sleep=wall.sleep), clock_rate=0, truth_rate=0,
-                       camera_rate=30, duration=sim_s, clock=wall.clock, sleep=wall.sleep)
-    out = Out()
-    runner.run(out, lambda: True)
-    return runner, out.log, np.diff(out.walls[1:])       # after the held first pair: wall between instants
-
-
-def test_a_frame_pair_done_in_pieces_between_steps_costs_the_loop_no_wall_time():
-    """Eight pieces of ≤ 4.5 ms (a pair's GL renders, noise and publications: 20 ms in all) fit in the loop's
-    sleeps at 1×: no stall, no dropped time, every pair done in order, each within its frame period."""
-    runner, log, periods = _camera_run([0.0045, 0.001, 0.001, 0.0005] * 2)
-    assert runner.pacer.stalls == 0 and runner.pacer.dropped == 0.0
-    assert periods == pytest.approx(1 / 30, abs=0.002)             # sim time at 1x of wall time (1 ms steps)
-    kept = [t for e, t, _ in log if e == "kept"]
-    assert len(kept) == 31                                         # 0 (held) and 30 stepped
-    done = {}
-    for event, instant, at in log:
-        if event.startswith("piece"):
-            assert instant == max(t for t in kept if t <= at)      # the newest kept frame's work, none older left
-            done.setdefault(instant, []).append((event, at))
-    for instant, events in done.items():
-        assert [e for e, _ in events] == [f"piece {k}" for k in range(8)]
-        assert events[-1][1] - instant < 1 / 30                    # finished before the next instant
-    # the same 20 ms as one block at each instant: the loop falls behind and drops that time (the run gets longer);
-    # 29 stalls: the pair at the last instant is done after the final step
-    blocked, _, periods_b = _camera_run([0.020])
-    assert blocked.pacer.stalls == 29 and periods_b == pytest.approx(1 / 30 + 0.020, abs=0.002)

@@ -12,7 +12,6 @@ docs/simulator.md.
 from __future__ import annotations
 
 import sys
-from collections.abc import Iterator
 from typing import Any
 
 from geometry_msgs.msg import PoseStamped, WrenchStamped
@@ -32,7 +31,7 @@ from hexa.sim import Simulator
 from hexa.sim.boards import VirtualBoards
 from hexa.sim.pacing import MAX_LAG, Pacer, SimRunner
 from hexa.sim.realism import RealismConfig
-from hexa.sim.simulator import LINK_CODES, FrameState
+from hexa.sim.simulator import LINK_CODES
 
 
 PARAMETERS = {
@@ -105,31 +104,21 @@ class SimNode(Node):
     def clock(self) -> None:
         self.clock_pub.publish(Clock(clock=to_stamp(self.sim.time)))
 
-    def cameras(self) -> Iterator[None]:
-        """This instant's frame pair, kept now and rendered and published in pieces the stepping loop takes while it
-        would sleep (hexa.sim.pacing)."""
-        return self._frame_pair(to_stamp(self.sim.time), self.sim.frame_state())
-
-    def _frame_pair(self, st: Any, kept: FrameState) -> Iterator[None]:
-        """Each camera with a subscriber to its images is rendered once (colour and depth) and published
-        serialized; a camera nobody listens to is not rendered (its noise advances as if it were: the frames stay
-        the seed's)."""
+    def cameras(self) -> None:
+        """Each camera with a subscriber to its images: render once (colour and depth), publish serialized; a camera
+        nobody listens to is not rendered (its noise advances as if it were: the frames stay those of the seed)."""
+        st = to_stamp(self.sim.time)
         for name, (pub, info, frame) in self.cam_pubs.items():
             color, depth_pub = pub["color/image_raw"], pub["aligned_depth_to_color/image_raw"]
             if color.get_subscription_count() + depth_pub.get_subscription_count() == 0:
                 self.sim.skip_render(name)
             else:
-                raw = self.sim.render_frame_raw(name, kept)            # GL render and read-back
-                yield
-                rgb, depth = self.sim.camera_images(name, *raw)         # the noise
-                yield
+                rgb, depth = self.sim.render(name)
                 color.publish(image_to_cdr(st.sec, st.nanosec, frame, rgb, "rgb8"))
-                yield
                 depth_pub.publish(image_to_cdr(st.sec, st.nanosec, frame, depth, "16UC1"))
             info.header.stamp = st
             pub["color/camera_info"].publish(info)
             pub["aligned_depth_to_color/camera_info"].publish(info)
-            yield
 
     def truth(self) -> None:
         s, g = self.sim.state(), self.sim.ground_truth()

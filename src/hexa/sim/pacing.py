@@ -9,20 +9,11 @@ gaps of 20–50 ms followed by a burst of set-point steps, which the arms really
 sees as unmodelled torque (docs/history/observer_node.md, "Command timing"). So when the loop is more than `max_lag`
 wall seconds behind, the lost wall time is dropped instead: the run gets longer, and sim time never runs ahead of the
 requested factor.
-
-A camera frame pair is therefore not rendered in one block at its instant. The owner keeps the instant (joints and
-placements) and hands back the pair's work as an iterator of pieces, each shorter than `max_lag` (one camera's GL
-render, its noise, one image's publication); the loop takes one piece whenever it is ahead of the pace, where it
-would otherwise sleep, and finishes what is left before the next frame's instant. The frames, their stamps and their
-order stay those of a run that rendered each pair at its instant; the loop loses no wall time while the pieces fit
-between the steps, and the images reach the graph a fraction of a frame period after the /clock of their stamp, as
-a real camera's do.
 """
 from __future__ import annotations
 
 import math
 import time
-from collections.abc import Iterator
 from typing import Callable, Protocol
 
 
@@ -61,17 +52,11 @@ class Pacer:
         self._wall0 = self._clock()
         self._sim0 = float(sim_time)
 
-    def ahead(self, sim_time: float) -> float:
-        """Wall seconds the loop is ahead of the pace at `sim_time` (negative: behind; inf without pacing)."""
-        if self.rtf <= 0.0:
-            return math.inf
-        return (sim_time - self._sim0) / self.rtf - (self._clock() - self._wall0)
-
     def pace(self, sim_time: float) -> None:
         """Called every step: sleep while ahead of the pace; re-anchor when more than max_lag behind."""
         if self.rtf <= 0.0:
             return
-        ahead = self.ahead(sim_time)
+        ahead = (sim_time - self._sim0) / self.rtf - (self._clock() - self._wall0)
         if ahead > MIN_SLEEP:
             self._sleep(ahead)
         elif ahead < -self.max_lag:
@@ -99,9 +84,7 @@ class SimOutputs(Protocol):
 
     def truth(self) -> None: ...
 
-    def cameras(self) -> Iterator[None] | None:
-        """Keep this instant's camera frame pair; its rendering and publication done now (None) or in the pieces
-        of the returned iterator (each `next` one piece shorter than the pacer's max_lag)."""
+    def cameras(self) -> None: ...
 
     def spin(self) -> None: ...
 
@@ -140,19 +123,18 @@ class SimRunner:
         sim = self.sim
         next_cam = 0.0
         if self.camera_period is not None:
-            _finish(outputs.cameras())
+            outputs.cameras()
             next_cam = self.camera_period
         hold_until = self._clock() + self.start_delay
         while ok() and self._clock() < hold_until:   # sim time frozen while the graph starts
             outputs.clock()
             outputs.truth()
             if self.camera_period is not None:
-                _finish(outputs.cameras())
+                outputs.cameras()
             outputs.spin()
             self._sleep(min(0.5, max(0.0, hold_until - self._clock())))
         self.pacer.start(sim.time)
         k = 0
-        work: Iterator[None] | None = None     # the kept camera frame's pieces not done yet
         while ok():
             sim.step(1)
             k += 1
@@ -162,31 +144,12 @@ class SimRunner:
             if self.truth_every and k % self.truth_every == 0:
                 outputs.truth()
             if self.camera_period is not None and sim.time + 1e-9 >= next_cam:
-                _finish(work)                # frames stay in order: the previous pair first
-                work = outputs.cameras()
+                outputs.cameras()
                 next_cam += self.camera_period
             if self.duration > 0 and sim.time >= self.duration:
                 break
-            if work is not None and self.pacer.ahead(sim.time) > 0.0:
-                work = _piece(work)          # in the time the loop would sleep
-            # every step: the virtual boards' threads run while the loop sleeps, so the servos take each
-            # command within 1 ms of sim time; after a stall the loop does not catch up in a burst (Pacer)
+            # every step: the virtual boards' threads run while the loop sleeps, so the servos take each command
+            # within 1 ms of sim time; after a render the loop does not catch up in a burst (Pacer)
             self.pacer.pace(sim.time)
             if k % self.spin_every == 0:
                 outputs.spin()
-        _finish(work)                            # the last kept frame is published too
-
-
-def _piece(work: Iterator[None]) -> Iterator[None] | None:
-    """Do the next piece of `work`; None once it is done."""
-    try:
-        next(work)
-    except StopIteration:
-        return None
-    return work
-
-
-def _finish(work: Iterator[None] | None) -> None:
-    """Do every piece of `work` left."""
-    while work is not None:
-        work = _piece(work)

@@ -766,20 +766,11 @@ class Simulator:
         with self._lock:
             self._place_object()
             rgb, depth = renderer.render(self.data, cam_id)
-        return self.camera_images(camera, rgb, depth, noise)
+        return self._camera_images(camera, rgb, depth, noise)
 
     def render_frame(self, camera: str, frame: FrameState, noise: bool = True) -> tuple[np.ndarray, np.ndarray]:
         """`render` of an earlier instant kept by `frame_state`: the same colour and depth images (the noise is the
         camera's next draw), rendered off the physics' data.
-
-        Raises:
-            SimulatorError: unknown camera; RenderError: the simulator was built with cameras=False.
-        """
-        return self.camera_images(camera, *self.render_frame_raw(camera, frame), noise=noise)
-
-    def render_frame_raw(self, camera: str, frame: FrameState) -> tuple[np.ndarray, np.ndarray]:
-        """The GL part of `render_frame`: noise-free colour and metric depth (float32 m, inf = nothing hit) of an
-        instant kept by `frame_state`, the image noise untouched (`camera_images` adds it).
 
         Raises:
             SimulatorError: unknown camera; RenderError: the simulator was built with cameras=False.
@@ -793,7 +784,8 @@ class Simulator:
             s.mocap_quat[:] = frame.mocap_quat
             mujoco.mj_kinematics(self.model, s)
             mujoco.mj_camlight(self.model, s)          # the cameras' and lights' poses (a fresh MjData has none)
-            return renderer.render(s, cam_id)
+            rgb, depth = renderer.render(s, cam_id)
+        return self._camera_images(camera, rgb, depth, noise)
 
     def _renderer_of(self, camera: str) -> tuple[RGBDRenderer, int]:
         """The renderer and the MuJoCo id of `camera`.
@@ -807,10 +799,9 @@ class Simulator:
             raise RenderError("this Simulator was built with cameras=False")
         return self._renderer, self._cam_ids[camera]
 
-    def camera_images(self, camera: str, rgb: np.ndarray, depth: np.ndarray, noise: bool = True
-                      ) -> tuple[np.ndarray, np.ndarray]:
-        """A raw render's buffers (`render_frame_raw`) cut to the camera's size, with its image noise (the camera's
-        next draw): uint8 colour, uint16 depth (mm, 0 = invalid)."""
+    def _camera_images(self, camera: str, rgb: np.ndarray, depth: np.ndarray, noise: bool
+                       ) -> tuple[np.ndarray, np.ndarray]:
+        """The rendered buffers cut to the camera's size, with its image noise: uint8 colour, uint16 depth (mm)."""
         cfg = self.config.cameras[camera]
         rgb = rgb[:cfg.height, :cfg.width]
         depth = depth[:cfg.height, :cfg.width]
