@@ -770,6 +770,19 @@ def cpu_rows(cpu: dict[str, float], nodes: dict[str, list[str]], pids: dict[str,
     return rows
 
 
+def machine_speed_row(duration: float = 3.0) -> BenchRow:
+    """The collision monitor's CPU per current sample in this process, now (`hexa bench realtime`'s first row on
+    `duration` s of the plate case): this machine's speed varies by hour and day, and every CPU and latency figure of
+    the graph moves with it, so each run says where it stood."""
+    from hexa.benchmarks.realtime import cpu_per_call, plate_case_stream, run_monitor
+
+    stream = plate_case_stream(duration=duration)
+    n = len(stream.samples)
+    t = cpu_per_call(lambda: run_monitor(stream), n, repeat=2)
+    return BenchRow("machine: collision monitor per current sample (CPU, in-process)", t * 1e6, "us", "", None,
+                    note=f"`hexa bench realtime`'s first row on {n} samples; the graph's CPU figures scale with it")
+
+
 def replay_rows(r: ReplayResult, info: BagInputs, ref: dict | None, ref_note: str) -> list[BenchRow]:
     """The replay's figures beside their targets (and the reference replay's counts)."""
     out = r.outputs
@@ -863,6 +876,8 @@ def run(opts: Options) -> dict[str, Any]:
         with held_domain(opts.domain_id) as domain:
             env = ros_env(domain)
             info_out["ros_domain_id"] = domain
+            say("the machine's speed now: the collision monitor in-process")
+            results["graph machine"] = [machine_speed_row().as_dict()]
             if opts.replay or opts.robot:
                 bag = opts.bag if opts.bag is not None else record_default_bag(cache, opts.stream_rate)
                 info = bag_inputs(bag)
