@@ -774,13 +774,13 @@ def machine_speed_row(duration: float = 3.0) -> BenchRow:
     """The collision monitor's CPU per current sample in this process, now (`hexa bench realtime`'s first row on
     `duration` s of the plate case): this machine's speed varies by hour and day, and every CPU and latency figure of
     the graph moves with it, so each run says where it stood."""
-    from hexa.benchmarks.realtime import cpu_per_call, plate_case_stream, run_monitor
+    from hexa.benchmarks.realtime import monitor_cpu_per_sample, plate_case_stream
 
     stream = plate_case_stream(duration=duration)
-    n = len(stream.samples)
-    t = cpu_per_call(lambda: run_monitor(stream), n, repeat=2)
+    t = monitor_cpu_per_sample(stream, repeat=2)
     return BenchRow("machine: collision monitor per current sample (CPU, in-process)", t * 1e6, "us", "", None,
-                    note=f"`hexa bench realtime`'s first row on {n} samples; the graph's CPU figures scale with it")
+                    note=f"`hexa bench realtime`'s first row on {len(stream.samples)} samples; the graph's CPU "
+                         f"figures move with it")
 
 
 def replay_rows(r: ReplayResult, info: BagInputs, ref: dict | None, ref_note: str) -> list[BenchRow]:

@@ -8,6 +8,8 @@ import signal
 import sys
 import time
 
+from hexa_bringup.commands._ros import absolute
+
 SKIP_BY_DEFAULT = {"/rosout", "/parameter_events"}
 
 
@@ -96,7 +98,7 @@ def run_record(args: argparse.Namespace) -> int:
     signal.signal(signal.SIGINT, on_signal)
     signal.signal(signal.SIGTERM, on_signal)
     rclpy, node = _init("hexa_record", args.use_sim_time)
-    wanted = {t if t.startswith("/") else "/" + t for t in args.topics}
+    wanted = {absolute(t) for t in args.topics}
     if args.sensor_inputs:
         from hexa_bringup.graphs import SENSOR_INPUTS
 
@@ -189,8 +191,8 @@ def run_play(args: argparse.Namespace) -> int:
     signal.signal(signal.SIGINT, on_signal)
     signal.signal(signal.SIGTERM, on_signal)
     rclpy, node = _init("hexa_play")
-    excluded = {t if t.startswith("/") else "/" + t for t in args.exclude}
-    wanted = {t if t.startswith("/") else "/" + t for t in args.topics or []}
+    excluded = {absolute(t) for t in args.exclude}
+    wanted = {absolute(t) for t in args.topics or []}
     selected = [t for t in topics if (not wanted or t in wanted) and t not in excluded]
     absent = sorted(wanted - set(topics))
     if absent:
@@ -205,6 +207,9 @@ def run_play(args: argparse.Namespace) -> int:
     end = time.monotonic() + args.wait
     watched = list(pubs.items()) + ([("/clock", clock_pub)] if clock_pub is not None else [])
     wanted_n = {**dict.fromkeys((t for t, _p in watched), 1), **least}
+    unplayed = sorted(set(least) - {t for t, _p in watched})
+    if unplayed:
+        print(f"hexa play: --subscribers names {', '.join(unplayed)}, which is not played; ignored", file=sys.stderr)
     matches, steady_since = -1, time.monotonic()
     while time.monotonic() < end:
         rclpy.spin_once(node, timeout_sec=0.05)
@@ -268,7 +273,7 @@ def _subscriber_counts(items: list[str]) -> dict[str, int]:
         topic, sep, n = item.rpartition("=")
         if not sep or not topic or not n.isdigit() or int(n) < 1:
             raise ValueError(f"--subscribers takes TOPIC=N with N >= 1, got {item!r}")
-        out[topic if topic.startswith("/") else "/" + topic] = int(n)
+        out[absolute(topic)] = int(n)
     return out
 
 
