@@ -205,3 +205,78 @@ def test_filters_on_the_box_around_their_pixels_equal_the_whole_frame_ones_also_
         rows, cols = _box(vv, uu, 7 // 2 + 1, values.shape)
         assert np.array_equal(cv2.boxFilter(values[rows, cols], -1, (7, 7), normalize=False)[
             vv - rows.start, uu - cols.start], cv2.boxFilter(values, -1, (7, 7), normalize=False)[vv, uu])
+
+
+# ----------------------------------------------------------------------------------------------------------------
+# a pushing stick, ray-cast: a camera above the plate (looking down), the floor, the plate's top face, the stick
+_W, _H = 320, 240
+_STICK_RADIUS = 0.015
+
+
+def _stick_scene(geom: RobotGeometry, cam: CameraModel, stick: tuple[np.ndarray, np.ndarray] | None
+                 ) -> tuple[np.ndarray, np.ndarray]:
+    """Colour and depth (m) of the scene; the stick (a capsule between two points) is found by sphere tracing."""
+    uu, vv = np.meshgrid(np.arange(_W), np.arange(_H))
+    ray = np.stack([(uu - cam.K[0, 2]) / cam.K[0, 0], (vv - cam.K[1, 2]) / cam.K[1, 1], np.ones((_H, _W))], -1)
+    o, w = cam.T_base_camera[:3, 3], ray.reshape(-1, 3) @ cam.T_base_camera[:3, :3].T   # depth t: o + t w
+    floor = (-0.8 - o[2]) / w[:, 2]
+    z_top = geom.T_plate[2, 3] + geom.plate_half_thickness
+    t_top = (z_top - o[2]) / w[:, 2]
+    on_plate = plate_distance(o + t_top[:, None] * w, geom) <= 1e-9
+    depth = np.where(on_plate, t_top, floor)
+    rgb = np.where(on_plate[:, None], 30, 150).astype(np.uint8).repeat(3, axis=1)
+    if stick is not None:
+        t = np.full(len(w), 0.3)
+        for _ in range(60):
+            d, _ = segment_distance(o + t[:, None] * w, *stick)
+            t += d - _STICK_RADIUS
+        hit = (d - _STICK_RADIUS < 1e-4) & (t < depth)
+        depth[hit] = t[hit]
+        rgb[hit] = (255, 140, 0)
+    return rgb.reshape(_H, _W, 3), depth.reshape(_H, _W).astype(np.float32)
+
+
+def _isolate_stick(geom: RobotGeometry, stick: tuple[np.ndarray, np.ndarray], **config: float):
+    from hexa.vision.isolation import IsolationConfig
+
+    cam = CameraModel(intrinsics(_W, _H, np.radians(40)), _W, _H, look_at([0, 0, 0], [0, 0, -0.5]), "cam_top")
+    iso = CollisionIsolator({"cam_top": cam}, IsolationConfig(**config))
+    iso.set_background("cam_top", *_stick_scene(geom, cam, None))
+    return iso.isolate_camera("cam_top", *_stick_scene(geom, cam, stick), geom)
+
+
+def test_a_stick_along_a_rod_pushing_the_plate_behind_it_is_a_plate_contact() -> None:
+    """The stick's end pushes the plate's far face near an edge, hidden behind the plate; its body runs beside a
+    rod, nearer to the rod over its length than its visible part is to the plate. The nearest points alone say
+    "rod"; the stick's axis, followed out of its end, meets the plate first."""
+    from hexa.vision.isolation import LINK_PLATE, LINK_ROD
+
+    g = _geometry()
+    edge_mid, normal = np.array([0.075, 0.0433]), np.array([np.cos(np.pi / 6), np.sin(np.pi / 6)])
+    push = np.array([*(-normal * np.cos(np.radians(60))), np.sin(np.radians(60))])       # up, into the plate
+    apex = np.array([*(edge_mid - 0.02 * normal), g.T_plate[2, 3] - g.plate_half_thickness])
+    near = apex - _STICK_RADIUS * push
+    stick = (near, near - 0.25 * push)
+    beside = near + 0.026 * np.array([-normal[1], normal[0], 0.0])                       # rod 1, parallel
+    rods = g.rods.copy()
+    rods[0] = (beside - 0.3 * push, beside + 0.01 * push)
+    g = RobotGeometry(g.arms, rods, g.T_plate, g.hexagon, g.arm_radius, g.rod_radius, g.plate_half_thickness)
+
+    nearest_only = _isolate_stick(g, stick, tip_gap=0.0)
+    assert (nearest_only.link, nearest_only.chain) == (LINK_ROD, 1), nearest_only.reason
+    res = _isolate_stick(g, stick)
+    assert (res.link, res.chain) == (LINK_PLATE, 0), res.reason
+    assert np.linalg.norm(res.point[:2] - edge_mid) <= 0.005
+
+
+def test_a_stick_pushing_a_rod_with_its_end_stays_a_rod_contact() -> None:
+    """The axis rule does not move a plain rod contact: the stick's visible end touches rod 1 from the side."""
+    from hexa.vision.isolation import LINK_ROD
+
+    g = _geometry()
+    on_rod = g.rods[0, 0] + 0.7 * (g.rods[0, 1] - g.rods[0, 0])
+    push = np.array([0.0, -1.0, 0.0])
+    near = on_rod - (g.rod_radius + _STICK_RADIUS) * push
+    res = _isolate_stick(g, (near, near - 0.25 * push))
+    assert (res.link, res.chain) == (LINK_ROD, 1), res.reason
+    assert np.linalg.norm(res.point - (on_rod - g.rod_radius * push)) <= 0.008

@@ -212,6 +212,9 @@ class IsolationConfig:
     axis_contact: bool = True           # arm/rod: the contact lies where the object's axis crosses the link
     axis_max_shift: float = 0.03        # m: largest move along the link from the nearest points' mean
     tip_length: float = 0.02            # m of the object's ends compared to find its pushing end
+    tip_gap: float = 0.006              # m: an elongated object's axis, followed out of its end, meets a link when
+    #                                     it passes this near its surface (0: the nearest points alone decide)
+    tip_reach: float = 0.04             # m beyond the object's visible end that its axis is followed
     min_confidence: float = 0.5         # a camera earlier in `order` wins unless its confidence is below this
     min_touch_points: int = 12          # fewer candidates → no contact in this camera
     min_object_area: int = 30           # px, smaller object blobs are noise
@@ -507,6 +510,10 @@ class CollisionIsolator:
             res.reason = (f"object comes no closer than {1e3 * float(np.min(closest)):.0f} mm to a link "
                           f"(contact gap {1e3 * cfg.contact_gap:.0f} mm)")
             return res
+        obj_axis = self._object_axis(pts, cam)
+        pushing = self._pushing_end_link(pts, obj_axis, seg_ends, links, geom, closest, best)
+        if pushing is not None:
+            best = pushing
         order = np.sort(closest)
         if debug:
             res.layers["closest"] = closest
@@ -516,7 +523,6 @@ class CollisionIsolator:
         d_sel = np.maximum(D[best][sel] - closest[best], 0.0)
         wk = np.exp(-0.5 * (d_sel / sig) ** 2)
         mean_pt = (wk[:, None] * pts[sel]).sum(axis=0) / wk.sum()
-        obj_axis = self._object_axis(pts, cam)
         if best == len(links):
             res.link, res.chain = LINK_PLATE, 0
             R, t = geom.T_plate[:3, :3], geom.T_plate[:3, 3]
@@ -600,6 +606,44 @@ class CollisionIsolator:
             r_est = 0.5 * float(np.percentile(off, 95) - np.percentile(off, 5))
             c = c - wv * (2.0 / np.pi) * r_est
         return a, c, ratio
+
+    def _pushing_end_link(self, pts: np.ndarray, axis: tuple[np.ndarray, np.ndarray, float] | None,
+                          seg_ends: np.ndarray, links: list[tuple[int, int, np.ndarray, float]], geom: RobotGeometry,
+                          closest: np.ndarray, best: int) -> int | None:
+        """Row of `closest` (links, then the plate) that the elongated object pushes with its end, when it is not
+        `best` (the link of the nearest points); else None.
+
+        A stick pushes with its end, and its body may lie along another link, nearer over its length than the
+        pushed link is to the stick's visible surface: a stick along a rod whose end, hidden behind the plate,
+        pushes the plate's edge. The object's axis (`_object_axis`) is followed out of each of its visible ends
+        (the 1st and 99th percentiles of its points along it), from `tip_reach` / 4 inside to `tip_reach` beyond;
+        the first link surface it passes within `tip_gap` of is the one that end pushes. The pushing end is the
+        one that meets its link first. The answer needs the pixel support of `closest` (finite). None: no axis,
+        neither end meets a link, or the end meets `best`.
+        """
+        cfg = self.config
+        if axis is None or cfg.tip_gap <= 0:
+            return None
+        a, c, _ = axis
+        s = (pts - c) @ a
+        ends = np.percentile(s, [1.0, 99.0])
+        steps = np.arange(-0.25 * cfg.tip_reach, cfg.tip_reach + 1e-9, 0.002)
+        radii = np.array([radius for *_, radius in links])[:, None]
+        first: list[tuple[float, int]] = []
+        for end, out in zip(ends, (-1.0, 1.0)):
+            q = c + np.outer(end + out * steps, a)                                # (S, 3) along the axis, outwards
+            d = np.empty((len(links) + 1, len(q)))
+            d[:-1], _ = segment_distances(q, seg_ends[:, 0], seg_ends[:, 1])
+            d[:-1] -= radii
+            d[-1] = plate_distance(q, geom)
+            d[~np.isfinite(closest)] = np.inf
+            hit = np.nonzero((d <= cfg.tip_gap).any(axis=0))[0]
+            if hit.size:
+                first.append((float(steps[hit[0]]), int(np.argmin(d[:, hit[0]]))))
+        if not first:
+            return None
+        k = min(first)[1]
+        return k if k != best else None
 
     @staticmethod
     def _axis_crossing(axis: tuple[np.ndarray, np.ndarray, float] | None, seg: np.ndarray) -> float | None:
