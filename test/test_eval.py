@@ -503,3 +503,20 @@ def test_an_excitation_file_that_is_no_pose_file_is_refused_by_name(tmp_path):
     bad.write_text("garbage\n", encoding="utf-8")
     with pytest.raises(ValueError, match="notes.csv is not a pose file of `hexa calibrate excite`"):
         CampaignConfig(calibrate=str(bad), robots=2)
+
+
+def test_the_report_tells_contacts_the_detector_could_see_and_its_own_delay():
+    """within_reach: of the strong contacts, those whose true load crossed the thresholds (plate_exceed_time
+    finite) and how many were detected; the detector's own delay over the detected ones only."""
+    from hexa.eval.report import STRONG_N, within_reach
+
+    def case(peak, exceed, own):
+        return {"peak_force": peak, "metrics": {"plate_exceed_time": exceed, "observer_delay_ms": own}}
+
+    nan = float("nan")
+    cases = [case(STRONG_N + 1, 1.0, 30.0), case(STRONG_N + 1, 1.0, nan), case(STRONG_N + 1, nan, nan),
+             case(STRONG_N - 1, 1.0, 50.0), case(STRONG_N + 2, 1.2, 40.0)]
+    r = within_reach(cases, [True, False, False, True, True])
+    assert (r["strong_reach_detected"], r["strong_reach_cases"]) == (2, 3)
+    assert r["own_delay_median_ms"] == 40.0 and r["own_delay_p95_ms"] == pytest.approx(49.0)
+    assert within_reach([], [])["strong_reach_cases"] == 0
