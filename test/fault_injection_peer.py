@@ -18,6 +18,7 @@ import threading
 import time
 
 from hexa_bringup.rosenv import apply_defaults
+from hexa_ros.diagnostics import values_of
 
 NS = "/hexa"
 NAMES = [f"arm_{i}" for i in range(1, 7)]
@@ -95,7 +96,7 @@ class Peer:
                             pass
                 self.diag[st.name] = {"level": int.from_bytes(st.level, "little") if isinstance(st.level, bytes)
                                       else int(st.level), "message": st.message,
-                                      "values": {kv.key: kv.value for kv in st.values}}
+                                      "values": values_of(st)}
 
     # ------------------------------------------------------------------ messages
     def stamp(self, t: float):

@@ -62,6 +62,7 @@ def main() -> int:
     apply_defaults()
     import rclpy
     from diagnostic_msgs.msg import DiagnosticArray
+    from hexa_ros.diagnostics import values_of
     from geometry_msgs.msg import PoseStamped
     from hexa_msgs.msg import CollisionEvent, Contact, ContactWrench, Residual
     from rcl_interfaces.msg import Parameter, ParameterType, ParameterValue
@@ -95,7 +96,7 @@ def main() -> int:
 
     def on_diag(m: DiagnosticArray) -> None:
         for st in m.status:
-            diags[st.name] = {kv.key: kv.value for kv in st.values}
+            diags[st.name] = values_of(st)
 
     node.create_subscription(CollisionEvent, "collision", on_collision, ev_qos)
     node.create_subscription(Residual, "residual",

@@ -28,6 +28,20 @@ def test_stamps_round_trip_and_never_carry_a_billion_nanoseconds():
         to_stamp(float("nan"))
 
 
+def test_counters_with_rejects_warn_and_their_values_read_back_as_strings():
+    from hexa_ros.diagnostics import OK, WARN, counter_status, rejects, status, values_of
+
+    counters = {"frames": 12, "reject: nan": 2, "reject: size": 1, "note": "x"}
+    assert rejects(counters) == 3
+    st = counter_status("pose", counters, "tracking")
+    assert (st.level, st.message) == (WARN, "3 input(s) rejected")
+    assert values_of(st) == {"frames": "12", "note": "x", "reject: nan": "2", "reject: size": "1"}
+    assert [kv.key for kv in st.values] == sorted(counters)          # sorted: a stable display
+    clean = counter_status("pose", {"frames": 3}, "tracking", hardware_id="cam_top")
+    assert (clean.level, clean.message, clean.hardware_id) == (OK, "tracking", "cam_top")
+    assert values_of(status("n", OK, "", {})) == {}
+
+
 def test_malloc_thresholds_are_in_the_child_environment_and_applied_in_process():
     from hexa_ros.env import MALLOC_THRESHOLDS, ros_env, tune_malloc
 

@@ -47,6 +47,7 @@ from hexa_bringup.bench_graph_analysis import (cdr_stamp_ns, compare_contacts, c
 # the inputs played from a bag, relative to the graph's namespace: the replay graph's sensor inputs (one definition)
 from hexa_bringup.graphs import CAMERA_TOPICS, CAMERAS  # noqa: F401 - bench_graph_robot takes them from here
 from hexa_bringup.graphs import SENSOR_INPUTS as INPUTS
+from hexa_ros.diagnostics import values_of
 from hexa_ros.realtime import REALTIME_PRIORITY, REALTIME_PRIORITY_PARAM, set_realtime_priority
 
 
@@ -556,7 +557,7 @@ def parse_outputs(received: dict[str, list[tuple[int, bytes]]], ns: str) -> dict
         except Exception:  # noqa: BLE001 - diagnostics are informative only
             continue
         for st in m.status:
-            diags[st.name] = {kv.key: kv.value for kv in st.values}
+            diags[st.name] = values_of(st)
             said = diags[st.name].get("board_clock_offset_s", "") if st.name == f"{t}observer" else ""
             if said:
                 offsets.append((r * 1e-9, float(said)))

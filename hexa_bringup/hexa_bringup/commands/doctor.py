@@ -193,6 +193,7 @@ def check_firmware() -> list[Check]:
 def check_graph(wait: float) -> list[Check]:
     """Nodes in the graph, and the firmware versions a running driver reports in /diagnostics."""
     from diagnostic_msgs.msg import DiagnosticArray
+    from hexa_ros.diagnostics import values_of
 
     from hexa_bringup.commands._ros import RosCli
 
@@ -204,7 +205,7 @@ def check_graph(wait: float) -> list[Check]:
 
         def on_diag(msg: DiagnosticArray) -> None:
             for st in msg.status:
-                values = {kv.key: kv.value for kv in st.values}
+                values = values_of(st)
                 if "firmware_version" in values:
                     boards[st.name] = f"{values['firmware_version']} ({st.message}, {values.get('port', '?')})"
 

@@ -16,6 +16,11 @@ def status(name: str, level: int, message: str, values: Mapping[str, Any], hardw
     return st
 
 
+def values_of(st: Any) -> dict[str, str]:
+    """A received DiagnosticStatus's key/value pairs as a dict (any message class with `values` of key/value)."""
+    return {kv.key: kv.value for kv in st.values}
+
+
 def rejects(counters: Mapping[str, Any]) -> int:
     """The number of rejected inputs among `counters`: the values of keys that name a reject."""
     return int(sum(v for k, v in counters.items() if "reject" in k and isinstance(v, (int, float))))
