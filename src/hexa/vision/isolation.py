@@ -9,7 +9,9 @@ Per camera (the paper's flow, Figure 4):
      inside the robot's workspace (the paper's "objects in the workspace", Fig. 12d / 17b);
   3. external object = changed, in-workspace pixels minus the robot mask (Fig. 12e);
   4. object pixels touching a link with consistent depth (their 3D point within `touch_distance` of the link's
-     surface) are the contact candidates (Fig. 12f / 17f / 22f); the link with the most, closest candidates wins;
+     surface) are the contact candidates (Fig. 12f / 17f / 22f); the link with the most, closest candidates wins,
+     unless an elongated object's axis, followed out of its end, meets another link first (not in the paper: a
+     stick pushes with its end, and its body may lie along a link it does not push);
   5. contact point: plate — mean of the candidates, the line from the plate centre through it, intersected with
      the hexagonal border (Fig. 12g); rod/arm — mean of the candidates projected on the link axis, moved to the
      surface facing the object (Fig. 17g / 22g).
