@@ -510,13 +510,16 @@ def test_the_report_tells_contacts_the_detector_could_see_and_its_own_delay():
     finite) and how many were detected; the detector's own delay over the detected ones only."""
     from hexa.eval.report import STRONG_N, within_reach
 
-    def case(peak, exceed, own):
-        return {"peak_force": peak, "metrics": {"plate_exceed_time": exceed, "observer_delay_ms": own}}
+    def case(peak, exceed, own, load):
+        return {"peak_force": peak, "metrics": {"plate_exceed_time": exceed, "observer_delay_ms": own,
+                                                "load_peak": load}}
 
     nan = float("nan")
-    cases = [case(STRONG_N + 1, 1.0, 30.0), case(STRONG_N + 1, 1.0, nan), case(STRONG_N + 1, nan, nan),
-             case(STRONG_N - 1, 1.0, 50.0), case(STRONG_N + 2, 1.2, 40.0)]
-    r = within_reach(cases, [True, False, False, True, True])
+    cases = [case(STRONG_N + 1, 1.0, 30.0, 2.0), case(STRONG_N + 1, 1.0, nan, 1.1), case(STRONG_N + 1, nan, nan, 0.6),
+             case(STRONG_N - 1, 1.0, 50.0, 3.0), case(STRONG_N + 2, 1.2, 40.0, 1.5), case(STRONG_N + 1, nan, nan, nan)]
+    r = within_reach(cases, [True, False, False, True, True, False])
     assert (r["strong_reach_detected"], r["strong_reach_cases"]) == (2, 3)
     assert r["own_delay_median_ms"] == 40.0 and r["own_delay_p95_ms"] == pytest.approx(49.0)
+    # the strong ones with a measured load: 2.0, 1.1, 0.6, 1.5 (the weak one and the one without a pose left out)
+    assert r["strong_load_cases"] == 4 and r["strong_load_at"] == {"0.5": 4, "0.75": 3, "1": 3}
     assert within_reach([], [])["strong_reach_cases"] == 0

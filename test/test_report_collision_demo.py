@@ -80,6 +80,8 @@ def test_observer_lag_is_measured_from_the_plate_equivalent_wrench():
     assert m.plate_exceed_time == pytest.approx(1.19) and m.observer_delay_ms == pytest.approx(80.0)
     assert "| 1.190 | 80.0 |" in markdown_table([m])
     assert math.isnan(compute_metrics(_case()).observer_delay_ms)          # no pose: not measured, not invented
+    assert m.load_peak == pytest.approx(0.1 * 7.92 / 0.15)          # the moment's peak over its threshold
+    assert math.isnan(compute_metrics(_case()).load_peak)
     from hexa.report.collision_demo import plate_equivalent_truth
 
     W = plate_equivalent_truth(d)                   # computed once, given to both (the demo does)

@@ -77,6 +77,8 @@ class CaseMetrics:
     plate_exceed_time: float     # first time the true plate-equivalent wrench exceeds a threshold, on the plate
                                  # axes or as servo torques (NaN: no pose)
     observer_delay_ms: float     # detect_time − plate_exceed_time: the observer's own lag
+    load_peak: float             # largest ratio of that wrench (or its servo torques) to its threshold during the
+                                 # contact: below 1 the true force never crosses a threshold (NaN: no pose)
     false_starts: int            # STARTs before the true onset
     found_link: str
     found_chain: int
@@ -179,16 +181,18 @@ def compute_metrics(d: CaseData, r_low: float = 2.0, desc: HexaDescription | Non
     after = [(t, i) for t, i in starts if t >= onset - 1e-9]
     detect, cid = (after[0] if after else (float("nan"), -1))
     delay_ms = (detect - exceed) * 1e3 if after and np.isfinite(exceed) else float("nan")
-    plate_exceed, observer_delay_ms = float("nan"), float("nan")
+    plate_exceed, observer_delay_ms, load_peak = float("nan"), float("nan"), float("nan")
     if d.truth_pose is not None:
         W = plate_equivalent_truth(d, desc) if plate_equivalent is None else plate_equivalent
-        w_over = np.nanmax(np.abs(W) / np.asarray(d.threshold, dtype=float), axis=1) > 1.0
+        load = np.nan_to_num(np.nanmax(np.abs(W) / np.asarray(d.threshold, dtype=float), axis=1))
         tau_w = servo_equivalent_truth(d, W, desc)
         th_s = np.asarray(d.servo_threshold, dtype=float)
         if tau_w is not None and np.any(th_s > 0):
             inv = np.divide(1.0, th_s, out=np.zeros(6), where=th_s > 0)
-            w_over |= np.nan_to_num(np.abs(tau_w) * inv).max(axis=1) > 1.0
-        w_over &= d.truth_t >= onset
+            load = np.maximum(load, np.nan_to_num(np.abs(tau_w) * inv).max(axis=1))
+        during = d.truth_t >= onset
+        load_peak = float(load[during].max()) if during.any() else float("nan")
+        w_over = (load > 1.0) & during
         if w_over.any():
             plate_exceed = float(d.truth_t[int(np.argmax(w_over))])
             if after:
@@ -218,7 +222,8 @@ def compute_metrics(d: CaseData, r_low: float = 2.0, desc: HexaDescription | Non
     return CaseMetrics(
         case=d.case, true_link=true_link, true_chain=true_chain, onset_true=onset, exceed_time=exceed,
         detect_time=float(detect), delay_ms=float(delay_ms), plate_exceed_time=plate_exceed,
-        observer_delay_ms=float(observer_delay_ms), false_starts=false_starts, found_link=found_link,
+        observer_delay_ms=float(observer_delay_ms), load_peak=load_peak, false_starts=false_starts,
+        found_link=found_link,
         found_chain=found_chain,
         point_error_median_mm=float(np.median(errs)) if errs.size else float("nan"),
         point_error_p90_mm=float(np.percentile(errs, 90)) if errs.size else float("nan"),
