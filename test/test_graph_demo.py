@@ -103,8 +103,8 @@ def test_another_ros_process_receives_collision_events_and_contact_wrenches_with
 def test_the_live_cases_agree_with_hexa_eval_on_the_same_seed(demo_run):
     """The demo's plate and arm cases through `hexa eval`'s simulate on the same seed and robot (ideal, nominal
     scenario) agree with the live graph: same link and chain, force RMSE per axis within 2 × the offline run's + 0.05 N
-    when the force passed r_low at the same time (the same contact; live plate runs gave 0.92–1.77 × the offline x,
-    docs/eval_live.md), and the live detection time within 20 ms
+    when the force passed r_low at the same time and no servo stalled 0.1 s longer on one side (the same contact;
+    live plate runs gave 0.92–1.77 × the offline x, docs/eval_live.md), and the live detection time within 20 ms
     (arm: 40 ms) of the offline ones over the command phase — when in each 5 ms current-sample period the 100 Hz
     commands reach the servos: 0 offline by default, wherever the host's scheduling puts each command live. The
     arm's offline detection moves 80 ms with the phase (6.484-6.564 s), the plate's not at all (4.604 s); live, 5 arm
@@ -120,12 +120,20 @@ def test_the_live_cases_agree_with_hexa_eval_on_the_same_seed(demo_run):
         assert a.same_link, (live[case], offline)
         # the force RMSE compares the same contact: where the commands' timing moved the arm's contact itself (the
         # force passes r_low at another time; live arm runs split between 6.409 and 6.429 s), it is not comparable.
-        # The live time comes from sim/wrench_truth at 100 Hz: within one period + 2 ms is the same contact.
-        if abs(float(live[case]["exceed_time"]) - float(offline["exceed_time"])) <= 0.012:
+        # The live time comes from sim/wrench_truth at 100 Hz: within one period + 2 ms is the same contact. Nor is
+        # it where a servo stalled for longer on one side: the plate push brings servo 5 to its stall torque, for
+        # 0.09-0.10 s live in most runs and 0.13 s offline, while a live run whose START came one sample earlier
+        # stalled it for 0.35 s, and a back-driven servo's angle is not measured (docs/eval_findings.md): x RMSE
+        # 0.80 N against 0.14-0.16 N in the others.
+        same_time = abs(float(live[case]["exceed_time"]) - float(offline["exceed_time"])) <= 0.012
+        same_stall = abs(float(live[case]["stall_s"]) - float(offline["stall_s"])) <= 0.1
+        assert math.isfinite(live[case]["stall_s"]) and math.isfinite(offline["stall_s"])
+        if same_time and same_stall:
             assert all(abs(x - y) <= 2.0 * y + 0.05 for x, y in zip(a.rmse_live, a.rmse_offline)), a
         else:
             print(f"{case}: force past r_low live {live[case]['exceed_time']:.3f} s, offline "
-                  f"{offline['exceed_time']:.3f} s: another contact, RMSE not compared")
+                  f"{offline['exceed_time']:.3f} s; a servo stalled live {live[case]['stall_s']:.2f} s, offline "
+                  f"{offline['stall_s']:.2f} s: another contact, RMSE not compared")
         times = [offline["detect_time"]] + [offline_case(case, 0, "ideal", phase, isolation="oracle",
                                                          identify=False)["detect_time"] for phase in phases]
         slack = 0.020 if case == "plate" else 0.040   # the arm's live START also moves with the graph's scheduling

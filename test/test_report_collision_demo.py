@@ -85,6 +85,9 @@ def test_observer_lag_is_measured_from_the_plate_equivalent_wrench():
     from hexa.report.collision_demo import plate_equivalent_truth
 
     W = plate_equivalent_truth(d)                   # computed once, given to both (the demo does)
+    d.truth_tau = np.zeros((len(d.truth_t), 6))     # every field finite, so that the two compare equal
+    m = compute_metrics(d)
+    assert m.stall_s == 0.0
     assert compute_metrics(d, plate_equivalent=W) == m
     assert math.isnan(compute_metrics(d, plate_equivalent=np.zeros_like(W)).plate_exceed_time)   # it is the one used
 
@@ -122,3 +125,21 @@ def test_observer_lag_counts_the_servo_torque_criterion():
     assert m.plate_exceed_time == pytest.approx(1.13) and m.observer_delay_ms == pytest.approx(140.0)
     d.servo_threshold = np.zeros(6)                  # servo criterion off: nothing crosses
     assert math.isnan(compute_metrics(d, desc=desc, plate_equivalent=W).plate_exceed_time)
+
+
+def test_stalled_seconds_count_the_contact_samples_with_a_servo_at_its_stall_torque():
+    from hexa.report.collision_demo import SATURATION, stalled_seconds
+
+    d = _case()
+    tau = np.zeros((len(d.truth_t), 6))
+    tau[(d.truth_t >= 1.5) & (d.truth_t < 1.7), 4] = -0.94          # servo 5 held at its stall torque for 0.2 s
+    tau[(d.truth_t >= 2.5) & (d.truth_t < 2.6), 1] = 0.94           # after the contact: not counted
+    tau[(d.truth_t >= 1.2) & (d.truth_t < 1.3), 2] = 0.94 * (SATURATION - 0.01)   # just below: not counted
+    d.truth_tau = tau
+    from hexa.robots.hexa_description import load_hexa
+
+    desc = load_hexa()
+    assert desc.torque_max == pytest.approx(0.94)
+    assert compute_metrics(d, desc=desc).stall_s == pytest.approx(0.2)
+    assert math.isnan(compute_metrics(_case()).stall_s)                  # no true torques: not measured
+    assert math.isnan(stalled_seconds(d.truth_t, tau[:5], d.truth_t > 0, 0.94))   # misaligned: not measured

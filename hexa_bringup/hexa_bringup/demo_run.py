@@ -2,6 +2,7 @@
 record a bag, and turn the bag into the arrays of hexa.report.collision_demo."""
 from __future__ import annotations
 
+import math
 import os
 import sys
 import threading
@@ -198,7 +199,8 @@ def case_data_from_bag(case: str, bag: Path, ns: str = "/hexa"):
         elif name == "sim/plate_pose_truth":
             rows["pose_truth"].append((_stamp(m.header), *hexa_pose_from_msg(m.pose)))
         elif name == "sim/joint_states_truth":
-            rows["zeta_truth"].append((_stamp(m.header), *[float(v) for v in m.position[:6]]))
+            effort = [float(v) for v in m.effort[:6]] if len(m.effort) >= 6 else [math.nan] * 6
+            rows["zeta_truth"].append((_stamp(m.header), *[float(v) for v in m.position[:6]], *effort))
         elif name == "residual":
             w = m.wrench
             rows["res"].append((_stamp(m.header), w.force.x, w.force.y, w.force.z, w.torque.x, w.torque.y,
@@ -220,10 +222,13 @@ def case_data_from_bag(case: str, bag: Path, ns: str = "/hexa"):
         pt = np.array(sorted(rows["pose_truth"]), dtype=float)
         pose = np.stack([np.interp(truth[:, 0], pt[:, 0], np.unwrap(pt[:, k]) if k > 3 else pt[:, k])
                          for k in range(1, 7)], axis=1)
-    zeta = None
+    zeta, tau = None, None
     if len(rows["zeta_truth"]) > 1:
         zt = np.array(sorted(rows["zeta_truth"]), dtype=float)
         zeta = np.stack([np.interp(truth[:, 0], zt[:, 0], zt[:, k]) for k in range(1, 7)], axis=1)
+        if np.isfinite(zt[:, 7:13]).all():   # the servos' true torques (effort), nearest truth sample
+            idx = np.clip(np.searchsorted(zt[:, 0], truth[:, 0]), 0, len(zt) - 1)
+            tau = zt[idx, 7:13]
     res = np.array(sorted(rows["res"]), dtype=float) if rows["res"] else np.zeros((0, 25))
     con = np.array(sorted(rows["contact"]), dtype=float) if rows["contact"] else np.zeros((0, 6))
     wr = np.array(sorted(rows["wrench"]), dtype=float) if rows["wrench"] else np.zeros((0, 4))
@@ -231,6 +236,7 @@ def case_data_from_bag(case: str, bag: Path, ns: str = "/hexa"):
         case=case, truth_t=truth[:, 0], truth_force=force, truth_point=truth[:, 3:6],
         truth_link=truth[:, 1].astype(int), truth_chain=truth[:, 2].astype(int), truth_pose=pose,
         residual_t=res[:, 0], residual=res[:, 1:7], threshold=res[0, 7:13] if len(res) else np.full(6, 2.0),
-        truth_zeta=zeta, residual_servo=res[:, 13:19], servo_threshold=res[0, 19:25] if len(res) else np.zeros(6),
+        truth_zeta=zeta, truth_tau=tau, residual_servo=res[:, 13:19],
+        servo_threshold=res[0, 19:25] if len(res) else np.zeros(6),
         events=sorted(rows["ev"]), contact_t=con[:, 0], contact_link=con[:, 1].astype(int),
         contact_chain=con[:, 2].astype(int), contact_point=con[:, 3:6], wrench_t=wr[:, 0], wrench_force=wr[:, 1:4])

@@ -414,6 +414,7 @@ def case_data(name: str, rec: RunRecord, events: list, thresholds: Any, servo_th
     d = CaseData(case=name, truth_t=rec.truth_t, truth_force=rec.truth_force, truth_point=rec.truth_point,
                  truth_link=rec.truth_link, truth_chain=rec.truth_chain, events=events,
                  threshold=np.asarray(thresholds, float), servo_threshold=np.asarray(servo_thresholds, float))
+    d.truth_tau = rec.truth_tau if len(rec.truth_tau) == len(rec.truth_t) else None
     if with_outputs:
         d.truth_pose, d.truth_zeta = rec.truth_pose, rec.truth_zeta
         d.residual_t, d.residual, d.residual_servo = rec.t, rec.residual, rec.servo
@@ -507,20 +508,13 @@ def _detector_settings(job: dict[str, Any]) -> tuple[Any, str, Any]:
             CusumConfig(**job.get("cusum", {})))
 
 
-#: a servo torque at least this fraction of the stall torque counts as saturated
-SATURATION = 0.98
-
-
 def saturated_seconds(rec: RunRecord, during: np.ndarray) -> float:
-    """Seconds of the truth samples selected by `during` at which some servo is at its stall torque (the
-    description's `torque_max`, × SATURATION): the contact overpowers the servos and back-drives the robot."""
+    """Seconds of the truth samples selected by `during` at which some servo is at its stall torque
+    (`hexa.report.collision_demo.stalled_seconds` with the description's `torque_max`)."""
+    from hexa.report.collision_demo import stalled_seconds
     from hexa.robots.hexa_description import load_hexa
 
-    if len(rec.truth_tau) != len(rec.truth_t) or len(rec.truth_t) < 2:
-        return float("nan")
-    limit = SATURATION * load_hexa().torque_max
-    hit = during & (np.abs(rec.truth_tau).max(axis=1) >= limit)
-    return float(hit.sum() * np.median(np.diff(rec.truth_t)))
+    return stalled_seconds(rec.truth_t, rec.truth_tau, during, load_hexa().torque_max)
 
 
 #: s between the truth samples checked for a type II singularity (type2_crossings)

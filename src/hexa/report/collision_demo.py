@@ -61,6 +61,21 @@ class CaseData:
     contact_point: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)))
     wrench_t: np.ndarray = field(default_factory=lambda: np.zeros(0))
     wrench_force: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)))
+    truth_tau: np.ndarray | None = None     # (N, 6) the servos' true torques at truth_t (N·m)
+
+
+#: a servo torque at least this fraction of the stall torque counts as saturated
+SATURATION = 0.98
+
+
+def stalled_seconds(t: np.ndarray, tau: np.ndarray | None, during: np.ndarray, torque_max: float) -> float:
+    """Seconds of the samples `t` selected by `during` at which some servo's true torque `tau` (N, 6) is at its stall
+    torque (`torque_max` × SATURATION): the contact overpowers the servos and back-drives the robot, and the arm
+    angle is then not measured. NaN without torques."""
+    if tau is None or len(tau) != len(t) or len(t) < 2:
+        return float("nan")
+    hit = during & (np.abs(np.asarray(tau, float)).max(axis=1) >= SATURATION * torque_max)
+    return float(hit.sum() * np.median(np.diff(t)))
 
 
 @dataclass
@@ -79,6 +94,7 @@ class CaseMetrics:
     observer_delay_ms: float     # detect_time − plate_exceed_time: the observer's own lag
     load_peak: float             # largest ratio of that wrench (or its servo torques) to its threshold during the
                                  # contact: below 1 the true force never crosses a threshold (NaN: no pose)
+    stall_s: float               # s of the contact with some servo at its stall torque (NaN: no true torques)
     false_starts: int            # STARTs before the true onset
     found_link: str
     found_chain: int
@@ -197,6 +213,13 @@ def compute_metrics(d: CaseData, r_low: float = 2.0, desc: HexaDescription | Non
             plate_exceed = float(d.truth_t[int(np.argmax(w_over))])
             if after:
                 observer_delay_ms = (detect - plate_exceed) * 1e3
+    if desc is None and d.truth_tau is not None:
+        from hexa.robots.hexa_description import load_hexa
+
+        desc = load_hexa()
+    last_touch = float(d.truth_t[np.nonzero(touching)[0][-1]])
+    stall_s = (stalled_seconds(d.truth_t, d.truth_tau, (d.truth_t >= onset) & (d.truth_t <= last_touch),
+                               float(desc.torque_max)) if desc is not None else float("nan"))
     # link / chain: the most frequent answer of the isolation during the true contact
     in_contact_c = np.zeros(len(d.contact_t), dtype=bool)
     if len(d.contact_t):
@@ -222,7 +245,7 @@ def compute_metrics(d: CaseData, r_low: float = 2.0, desc: HexaDescription | Non
     return CaseMetrics(
         case=d.case, true_link=true_link, true_chain=true_chain, onset_true=onset, exceed_time=exceed,
         detect_time=float(detect), delay_ms=float(delay_ms), plate_exceed_time=plate_exceed,
-        observer_delay_ms=float(observer_delay_ms), load_peak=load_peak, false_starts=false_starts,
+        observer_delay_ms=float(observer_delay_ms), load_peak=load_peak, stall_s=stall_s, false_starts=false_starts,
         found_link=found_link,
         found_chain=found_chain,
         point_error_median_mm=float(np.median(errs)) if errs.size else float("nan"),
