@@ -414,8 +414,8 @@ def case_data(name: str, rec: RunRecord, events: list, thresholds: Any, servo_th
     d = CaseData(case=name, truth_t=rec.truth_t, truth_force=rec.truth_force, truth_point=rec.truth_point,
                  truth_link=rec.truth_link, truth_chain=rec.truth_chain, events=events,
                  threshold=np.asarray(thresholds, float), servo_threshold=np.asarray(servo_thresholds, float))
-    d.truth_tau = rec.truth_tau if len(rec.truth_tau) == len(rec.truth_t) else None
     if with_outputs:
+        d.truth_tau = rec.truth_tau if len(rec.truth_tau) == len(rec.truth_t) else None
         d.truth_pose, d.truth_zeta = rec.truth_pose, rec.truth_zeta
         d.residual_t, d.residual, d.residual_servo = rec.t, rec.residual, rec.servo
         d.wrench_t, d.wrench_force = rec.wrench_t, rec.wrench_force
