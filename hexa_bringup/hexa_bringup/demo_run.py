@@ -226,9 +226,8 @@ def case_data_from_bag(case: str, bag: Path, ns: str = "/hexa"):
     if len(rows["zeta_truth"]) > 1:
         zt = np.array(sorted(rows["zeta_truth"]), dtype=float)
         zeta = np.stack([np.interp(truth[:, 0], zt[:, 0], zt[:, k]) for k in range(1, 7)], axis=1)
-        if np.isfinite(zt[:, 7:13]).all():   # the servos' true torques (effort), nearest truth sample
-            idx = np.clip(np.searchsorted(zt[:, 0], truth[:, 0]), 0, len(zt) - 1)
-            tau = zt[idx, 7:13]
+        if np.isfinite(zt[:, 7:13]).all():   # the servos' true torques (effort), as ζ
+            tau = np.stack([np.interp(truth[:, 0], zt[:, 0], zt[:, k]) for k in range(7, 13)], axis=1)
     res = np.array(sorted(rows["res"]), dtype=float) if rows["res"] else np.zeros((0, 25))
     con = np.array(sorted(rows["contact"]), dtype=float) if rows["contact"] else np.zeros((0, 6))
     wr = np.array(sorted(rows["wrench"]), dtype=float) if rows["wrench"] else np.zeros((0, 4))

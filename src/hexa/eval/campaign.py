@@ -508,15 +508,6 @@ def _detector_settings(job: dict[str, Any]) -> tuple[Any, str, Any]:
             CusumConfig(**job.get("cusum", {})))
 
 
-def saturated_seconds(rec: RunRecord, during: np.ndarray) -> float:
-    """Seconds of the truth samples selected by `during` at which some servo is at its stall torque
-    (`hexa.report.collision_demo.stalled_seconds` with the description's `torque_max`)."""
-    from hexa.report.collision_demo import stalled_seconds
-    from hexa.robots.hexa_description import load_hexa
-
-    return stalled_seconds(rec.truth_t, rec.truth_tau, during, load_hexa().torque_max)
-
-
 #: s between the truth samples checked for a type II singularity (type2_crossings)
 TYPE2_STEP = 0.005
 
@@ -583,10 +574,10 @@ def run_contact_job(job: dict[str, Any]) -> dict[str, Any]:
     if not touching.any():   # cannot happen with a scripted contact unless the run ended before it
         out["error"] = "no contact in the ground truth"
         return out
-    out["servo_saturated_s"] = saturated_seconds(rec, touching)
     out["type2_crossings"] = type2_crossings(rec, touching)
     d = case_data(c.name, rec, rec.events, ocfg.thresholds, ocfg.servo_thresholds)
     m = compute_metrics(d, r_low=R_LOW, plate_equivalent=plate_equivalent_every(d, PLATE_EQUIVALENT_STRIDE))
+    out["servo_saturated_s"] = m.stall_s
     out["metrics"] = m.as_dict()
     out["detect"] = {}
     for spec in detectors(ocfg, ccfg):

@@ -188,6 +188,11 @@ def compute_metrics(d: CaseData, r_low: float = 2.0, desc: HexaDescription | Non
         raise ValueError(f"case {d.case}: the ground truth has no contact")
     k0 = int(np.argmax(touching))
     onset = float(d.truth_t[k0])
+    last_touch = float(d.truth_t[np.nonzero(touching)[0][-1]])
+    if desc is None and (d.truth_pose is not None or d.truth_tau is not None):   # loaded once, for every use below
+        from hexa.robots.hexa_description import load_hexa
+
+        desc = load_hexa()
     over = np.max(np.abs(d.truth_force), axis=1) > r_low
     exceed = float(d.truth_t[int(np.argmax(over))]) if over.any() else float("nan")
     true_link = LINK_NAMES.get(int(d.truth_link[k0]), "unknown")
@@ -213,18 +218,12 @@ def compute_metrics(d: CaseData, r_low: float = 2.0, desc: HexaDescription | Non
             plate_exceed = float(d.truth_t[int(np.argmax(w_over))])
             if after:
                 observer_delay_ms = (detect - plate_exceed) * 1e3
-    if desc is None and d.truth_tau is not None:
-        from hexa.robots.hexa_description import load_hexa
-
-        desc = load_hexa()
-    last_touch = float(d.truth_t[np.nonzero(touching)[0][-1]])
     stall_s = (stalled_seconds(d.truth_t, d.truth_tau, (d.truth_t >= onset) & (d.truth_t <= last_touch),
                                float(desc.torque_max)) if desc is not None else float("nan"))
     # link / chain: the most frequent answer of the isolation during the true contact
     in_contact_c = np.zeros(len(d.contact_t), dtype=bool)
     if len(d.contact_t):
-        last = float(d.truth_t[np.nonzero(touching)[0][-1]])
-        in_contact_c = (d.contact_t >= onset) & (d.contact_t <= last + 0.05)
+        in_contact_c = (d.contact_t >= onset) & (d.contact_t <= last_touch + 0.05)
     found_link, found_chain = "none", 0
     errs = np.zeros(0)
     if in_contact_c.any():
@@ -236,8 +235,7 @@ def compute_metrics(d: CaseData, r_low: float = 2.0, desc: HexaDescription | Non
     rmse: tuple[float, ...] = (float("nan"),) * 3
     n_w = 0
     if len(d.wrench_t):
-        last = float(d.truth_t[np.nonzero(touching)[0][-1]])
-        sel = (d.wrench_t >= onset) & (d.wrench_t <= last)
+        sel = (d.wrench_t >= onset) & (d.wrench_t <= last_touch)
         n_w = int(sel.sum())
         if n_w:
             ft = _interp_rows(d.truth_t, d.wrench_t[sel], d.truth_force)

@@ -136,6 +136,17 @@ def segment_distances(points: np.ndarray, a: np.ndarray, b: np.ndarray) -> tuple
     return np.sqrt(np.maximum(d2, 0.0)), s
 
 
+def surface_distances(points: np.ndarray, seg_ends: np.ndarray, radii: np.ndarray, geom: RobotGeometry
+                      ) -> tuple[np.ndarray, np.ndarray]:
+    """Distances (K + 1, N) of points (N, 3) to the surfaces of K capsules (`seg_ends` (K, 2, 3), `radii` (K,)) and,
+    in the last row, to the plate prism; and the capsules' segment parameters (K, N) of the closest points."""
+    d = np.empty((len(seg_ends) + 1, len(points)))
+    d[:-1], s = segment_distances(points, seg_ends[:, 0], seg_ends[:, 1])
+    d[:-1] -= np.asarray(radii, float)[:, None]
+    d[-1] = plate_distance(points, geom)
+    return d, s
+
+
 def plate_distance(points: np.ndarray, geom: RobotGeometry) -> np.ndarray:
     """Distances (N,) of points in base to the plate prism (0 inside)."""
     R, t = geom.T_plate[:3, :3], geom.T_plate[:3, 3]
@@ -488,11 +499,9 @@ class CollisionIsolator:
 
         # distances of object points to every link surface
         links = geom.link_segments(rod_end_clearance=cfg.rod_end_clearance)
-        D = np.empty((len(links) + 1, len(pts)))
         seg_ends = np.array([seg for _, _, seg, _ in links])
-        D[:-1], S = segment_distances(pts, seg_ends[:, 0], seg_ends[:, 1])
-        D[:-1] -= np.array([radius for *_, radius in links])[:, None]
-        D[-1] = plate_distance(pts, geom)
+        radii = np.array([radius for *_, radius in links])
+        D, S = surface_distances(pts, seg_ends, radii, geom)
         nearest = np.argmin(D, axis=0)
         dmin = D[nearest, np.arange(len(pts))]
         touching = dmin <= cfg.touch_distance
@@ -513,7 +522,7 @@ class CollisionIsolator:
                           f"(contact gap {1e3 * cfg.contact_gap:.0f} mm)")
             return res
         obj_axis = self._object_axis(pts, cam)
-        pushing = self._pushing_end_link(pts, obj_axis, seg_ends, links, geom, closest, best)
+        pushing = self._pushing_end_link(pts, obj_axis, seg_ends, radii, geom, closest, best)
         if pushing is not None:
             best = pushing
         order = np.sort(closest)
@@ -610,8 +619,8 @@ class CollisionIsolator:
         return a, c, ratio
 
     def _pushing_end_link(self, pts: np.ndarray, axis: tuple[np.ndarray, np.ndarray, float] | None,
-                          seg_ends: np.ndarray, links: list[tuple[int, int, np.ndarray, float]], geom: RobotGeometry,
-                          closest: np.ndarray, best: int) -> int | None:
+                          seg_ends: np.ndarray, radii: np.ndarray, geom: RobotGeometry, closest: np.ndarray,
+                          best: int) -> int | None:
         """Row of `closest` (links, then the plate) that the elongated object pushes with its end, when it is not
         `best` (the link of the nearest points); else None.
 
@@ -630,14 +639,10 @@ class CollisionIsolator:
         s = (pts - c) @ a
         ends = np.percentile(s, [1.0, 99.0])
         steps = np.arange(-0.25 * cfg.tip_reach, cfg.tip_reach + 1e-9, 0.002)
-        radii = np.array([radius for *_, radius in links])[:, None]
         first: list[tuple[float, int]] = []
         for end, out in zip(ends, (-1.0, 1.0)):
             q = c + np.outer(end + out * steps, a)                                # (S, 3) along the axis, outwards
-            d = np.empty((len(links) + 1, len(q)))
-            d[:-1], _ = segment_distances(q, seg_ends[:, 0], seg_ends[:, 1])
-            d[:-1] -= radii
-            d[-1] = plate_distance(q, geom)
+            d, _ = surface_distances(q, seg_ends, radii, geom)
             d[~np.isfinite(closest)] = np.inf
             hit = np.nonzero((d <= cfg.tip_gap).any(axis=0))[0]
             if hit.size:
