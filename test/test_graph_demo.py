@@ -122,9 +122,9 @@ def test_the_live_cases_agree_with_hexa_eval_on_the_same_seed(demo_run):
         # force passes r_low at another time; live arm runs split between 6.409 and 6.429 s), it is not comparable.
         # The live time comes from sim/wrench_truth at 100 Hz: within one period + 2 ms is the same contact. Nor is
         # it where a servo stalled for longer on one side: the plate push brings servo 5 to its stall torque, for
-        # 0.09-0.10 s live in most runs and 0.13 s offline, while a live run whose START came one sample earlier
-        # stalled it for 0.35 s, and a back-driven servo's angle is not measured (docs/eval_findings.md): x RMSE
-        # 0.80 N against 0.14-0.16 N in the others.
+        # 0.09-0.12 s live in most runs and 0.13 s offline, while one live run stalled it for 0.35 s, and a
+        # back-driven servo's angle is not measured (docs/eval_findings.md): x RMSE 0.80 N against 0.14-0.16 N in
+        # the others.
         same_time = abs(float(live[case]["exceed_time"]) - float(offline["exceed_time"])) <= 0.012
         same_stall = abs(float(live[case]["stall_s"]) - float(offline["stall_s"])) <= 0.1
         assert math.isfinite(live[case]["stall_s"]) and math.isfinite(offline["stall_s"])
