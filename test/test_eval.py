@@ -10,7 +10,8 @@ import numpy as np
 import pytest
 
 from hexa.eval import CampaignConfig, ProgressBar, jobs_of, run_campaign
-from hexa.eval.campaign import DETECTOR_NAMES, THRESHOLD_SCALES, draw_contact, run_contact_job
+from hexa.eval.campaign import (DETECTOR_NAMES, GRID_MIN_DURATIONS, GRID_SCALES, THRESHOLD_SCALES, draw_contact,
+                                run_contact_job)
 from hexa.eval.report import matched_delay, summarize, write_report
 
 pytestmark = pytest.mark.slow   # a campaign on worker processes: left out of `make check`
@@ -129,6 +130,21 @@ def test_smoke_campaign_on_two_worker_processes_writes_the_report(tmp_path):
         assert det == sorted(det, reverse=True)
         fa = [r["false_alarms"] for r in rows]
         assert fa == sorted(fa, reverse=True)
+    # the minimum-duration grid: every minimum duration at every grid scale, the node's own from its DET rows; a
+    # shorter wait never STARTs later on a contact without an earlier START (the same run over the threshold)
+    grid = s["min_duration_grid"]
+    assert [(r["min_duration"], r["scale"]) for r in grid] == [
+        (md, sc) for md in (*GRID_MIN_DURATIONS, 0.02) for sc in GRID_SCALES]
+    node = {r["scale"]: r for r in s["det"]["threshold"]}
+    assert all(r["false_alarms"] == node[r["scale"]]["false_alarms"] for r in grid if r["min_duration"] == 0.02)
+    for c in result["contacts"]:
+        for k, scale in enumerate(GRID_SCALES):
+            times = [c["detect_grid"][f"{md:g}"][k] for md in GRID_MIN_DURATIONS]
+            times.append(next(r for r in c["detect"]["threshold"] if r["scale"] == scale))
+            if all(r["false_starts"] == 0 for r in times):
+                t = [r["detect_time"] if np.isfinite(r["detect_time"]) else np.inf for r in times]
+                assert t == sorted(t), (c["index"], scale, t)
+    assert "minimum duration and threshold scale" in text
     # the campaign's contacts: the drawn ones, so the summary counts them per link
     links = [draw_contact(5, i).link for i in range(6)]
     assert {k: v["cases"] for k, v in s["links"].items()} == {k: links.count(k) for k in ("plate", "arm", "rod")}

@@ -58,6 +58,10 @@ TAIL = 0.8
 THRESHOLD_SCALES = (0.5, 0.6, 0.7, 0.8, 0.9, 1.0, 1.15, 1.3, 1.5, 1.75, 2.0, 2.5)
 #: the detectors replayed on every run (`detectors`)
 DETECTOR_NAMES = ("cusum", "threshold", "paper")
+#: the threshold detector is also replayed with these minimum durations (s) at GRID_SCALES × its thresholds
+#: (`grid_specs`: each run's `detect_grid` and `starts_grid`), to weigh the START's wait against false alarms
+GRID_MIN_DURATIONS = (0.005, 0.01, 0.015)
+GRID_SCALES = (0.6, 0.7, 0.8, 0.9, 1.0, 1.15, 1.3)
 #: the paper's detector: r_low on the plate axes only (seed 000 §3.1), no servo-torque criterion
 PAPER_THRESHOLDS = (2.0, 2.0, 2.0, 0.2, 0.2, 0.2)
 R_LOW = 2.0
@@ -78,10 +82,12 @@ class DetectorSpec:
     servo_thresholds: tuple[float, ...]
     kind: str = "threshold"
     cusum: CusumConfig | None = None
+    min_duration: float | None = None    # s; None: the live detector's
 
     def config(self, base: ObserverConfig, scale: float = 1.0) -> ObserverConfig:
+        md = base.min_duration if self.min_duration is None else self.min_duration
         return dataclasses.replace(base, thresholds=tuple(scale * v for v in self.thresholds),
-                                   servo_thresholds=tuple(scale * v for v in self.servo_thresholds))
+                                   servo_thresholds=tuple(scale * v for v in self.servo_thresholds), min_duration=md)
 
 
 def detectors(observer_config: ObserverConfig, cusum: CusumConfig | None = None) -> tuple[DetectorSpec, ...]:
@@ -93,6 +99,12 @@ def detectors(observer_config: ObserverConfig, cusum: CusumConfig | None = None)
     return (DetectorSpec("cusum", th, servo, "cusum", cusum or CusumConfig()),
             DetectorSpec("threshold", th, servo),
             DetectorSpec("paper", PAPER_THRESHOLDS, (0.0,) * 6))
+
+
+def grid_specs(observer_config: ObserverConfig) -> dict[str, DetectorSpec]:
+    """The threshold detector at each of GRID_MIN_DURATIONS, keyed by that minimum duration ("0.01")."""
+    th, servo = tuple(observer_config.thresholds), tuple(observer_config.servo_thresholds)
+    return {f"{md:g}": DetectorSpec("threshold", th, servo, min_duration=md) for md in GRID_MIN_DURATIONS}
 
 
 def kinds_of(trajectories: str) -> tuple[str, ...]:
@@ -589,6 +601,15 @@ def run_contact_job(job: dict[str, Any]) -> dict[str, Any]:
             rows.append({"scale": scale, "detect_time": mm.detect_time, "delay_ms": mm.delay_ms,
                          "false_starts": mm.false_starts})
         out["detect"][spec.name] = rows
+    out["detect_grid"] = {}
+    for key, spec in grid_specs(ocfg).items():
+        rows = []
+        for scale in GRID_SCALES:
+            mm = compute_metrics(case_data(c.name, rec, replay(rec, spec, ocfg, scale), ocfg.thresholds,
+                                           ocfg.servo_thresholds, False), r_low=R_LOW)
+            rows.append({"scale": scale, "detect_time": mm.detect_time, "delay_ms": mm.delay_ms,
+                         "false_starts": mm.false_starts})
+        out["detect_grid"][key] = rows
     out["wall_s"] = time.perf_counter() - t0
     return out
 
@@ -614,4 +635,6 @@ def run_free_job(job: dict[str, Any]) -> dict[str, Any]:
     for spec in detectors(ocfg, ccfg):
         out["starts"][spec.name] = [sum(1 for e in replay(rec_moving, spec, ocfg, s) if e[1] == "START")
                                     for s in THRESHOLD_SCALES]
+    out["starts_grid"] = {key: [sum(1 for e in replay(rec_moving, spec, ocfg, s) if e[1] == "START")
+                                for s in GRID_SCALES] for key, spec in grid_specs(ocfg).items()}
     return out

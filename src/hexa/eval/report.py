@@ -9,7 +9,9 @@ from typing import Any
 
 import numpy as np
 
-from hexa.eval.campaign import DETECTOR_NAMES, LINKS, THRESHOLD_SCALES, TRAJECTORY_KINDS, trajectory_kind
+from hexa.eval.campaign import (DETECTOR_NAMES, GRID_SCALES, LINKS, THRESHOLD_SCALES, TRAJECTORY_KINDS,
+                                trajectory_kind)
+from hexa.dynamics.observer import ObserverConfig
 from hexa.report.collision_demo import PAPER_RMSE
 
 #: a START counts as the contact's detection if it comes no later than this after the contact's end (s)
@@ -199,6 +201,38 @@ def matched_delay(rows: list[dict[str, Any]], paper1: dict[str, Any], hours: flo
             "detection_arm_strong": best["detection_arm_strong"]}
 
 
+def summarize_grid(cases: list[dict[str, Any]], free: list[dict[str, Any]], hours: float,
+                   node_min_duration: float) -> list[dict[str, Any]]:
+    """The threshold detector over minimum duration × threshold scale (the runs' `detect_grid` and `starts_grid`,
+    and its DET rows at the node's own minimum duration): per row the false alarms in free motion (and per hour),
+    the median and p95 delay after r_low of the detected contacts, the arms' median, and detection ≥ STRONG_N per
+    link. Empty when some run has no grid (results written before it existed)."""
+    if not cases or not all("detect_grid" in c for c in cases) or not all("starts_grid" in f for f in free):
+        return []
+    keys = sorted(cases[0]["detect_grid"], key=float) + [f"{node_min_duration:g}"]
+    rows = []
+    for key in keys:
+        for k, scale in enumerate(GRID_SCALES):
+            if key in cases[0]["detect_grid"]:
+                dd = [(detected(c, c["detect_grid"][key][k]["detect_time"]), c["detect_grid"][key][k]["delay_ms"])
+                      for c in cases]
+                fa = int(sum(f["starts_grid"][key][k] for f in free))
+            else:
+                dd = [_detect_at(c, "threshold", scale) for c in cases]
+                fa = int(sum(f["starts"]["threshold"][THRESHOLD_SCALES.index(scale)] for f in free))
+            delays = _finite([d for ok, d in dd if ok])
+            arm = _finite([d for c, (ok, d) in zip(cases, dd) if ok and c["link"] == "arm"])
+            strong = {link: [ok for c, (ok, _) in zip(cases, dd) if c["peak_force"] >= STRONG_N and c["link"] == link]
+                      for link in LINKS}
+            rows.append({"min_duration": float(key), "scale": scale, "false_alarms": fa,
+                         "fa_per_hour": fa / hours if hours > 0 else float("nan"),
+                         "delay_median_ms": _pct(delays, 50), "delay_p95_ms": _pct(delays, 95),
+                         "delay_arm_median_ms": _pct(arm, 50),
+                         "detection_strong": {link: sum(v) / len(v) if v else float("nan")
+                                              for link, v in strong.items()}})
+    return rows
+
+
 def summarize(result: dict[str, Any]) -> dict[str, Any]:
     """Per robot (realism): per-link detection and delays, free-motion false alarms, the DET curves of every replayed
     detector (the CUSUM, the threshold detector, the paper's), force RMSE against the paper's, the live detector
@@ -291,6 +325,8 @@ def summarize(result: dict[str, Any]) -> dict[str, Any]:
         s["rmse_cases"] = rmse_n
         s["rmse_by_servos"] = {k: {"below": v[0], "cases": v[1]} for k, v in rmse_split.items()}
         s["live_false_starts_free"] = sum(f["live_starts"] for f in free)
+        node_md = result["config"].get("observer", {}).get("min_duration", ObserverConfig().min_duration)
+        s["min_duration_grid"] = summarize_grid(cases, free, hours, float(node_md))
         s["kinds"] = summarize_kinds(cases, free)
         if int(result["config"].get("robots") or 0) > 0:
             s["robots"] = summarize_robots(cases, free)
@@ -557,6 +593,17 @@ def write_report(result: dict[str, Any], out_dir: str | Path, plots: bool = True
                 r = s["det"][n][k]
                 cells += [_fmt(r["fa_per_hour"]), _fmt(r["delay_median_ms"]), _fmt(r["detection_strong"])]
             lines.append(f"| {scale:g} | " + " | ".join(cells) + " |")
+        if s.get("min_duration_grid"):
+            lines += ["", "The threshold detector over its minimum duration and threshold scale (the same runs; "
+                      "delay after r_low of the detected contacts; detection ≥ 3 N per link):", "",
+                      "| min_duration (ms) | scale | false alarms (per h) | delay median / p95 (ms) | arm median "
+                      "(ms) | det ≥ 3 N plate / rod / arm |", "|---|---|---|---|---|---|"]
+            for r in s["min_duration_grid"]:
+                ds = r["detection_strong"]
+                lines.append(f"| {r['min_duration'] * 1e3:g} | {r['scale']:g} | {r['false_alarms']} "
+                             f"({_fmt(r['fa_per_hour'])}) | {_fmt(r['delay_median_ms'])} / "
+                             f"{_fmt(r['delay_p95_ms'])} | {_fmt(r['delay_arm_median_ms'])} | "
+                             f"{_fmt(ds['plate'])} / {_fmt(ds['rod'])} / {_fmt(ds['arm'])} |")
         lines.append("")
     if plots and summary:
         paths = _plots(result, summary, out)
