@@ -205,7 +205,8 @@ def compute_metrics(d: CaseData, r_low: float = 2.0, desc: HexaDescription | Non
     plate_exceed, observer_delay_ms, load_peak = float("nan"), float("nan"), float("nan")
     if d.truth_pose is not None:
         W = plate_equivalent_truth(d, desc) if plate_equivalent is None else plate_equivalent
-        load = np.nan_to_num(np.nanmax(np.abs(W) / np.asarray(d.threshold, dtype=float), axis=1))
+        # fmax skips NaN axes (a pose without a solution) and, unlike nanmax, says nothing of an all-NaN row
+        load = np.nan_to_num(np.fmax.reduce(np.abs(W) / np.asarray(d.threshold, dtype=float), axis=1))
         tau_w = servo_equivalent_truth(d, W, desc)
         th_s = np.asarray(d.servo_threshold, dtype=float)
         if tau_w is not None and np.any(th_s > 0):
