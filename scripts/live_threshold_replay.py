@@ -8,9 +8,10 @@ scaled thresholds: the false STARTs the observer node would raise with lower thr
 One graph (`hexa_bringup.demo_run.run_case`, no collision scenario) runs the paper's three trajectories in turn, as
 the CI free-motion test does, at the demo's real-time factor; on the realistic robot the nodes run its calibration
 overlay (`demo_run.nodes_description`). The recorded `residual` (plate-axis wrench and servo torques, each sample's
-stamp) is fed to `hexa.dynamics.observer.CollisionDetector` with the node's thresholds × each scale and its
-min_duration. Until a first START the graph does not depend on the thresholds, so a replay without START is what the
-node would have done live at that scale. Prints one JSON line: samples, the live collision events, STARTs per scale.
+stamp; read by `demo_run.case_data_from_bag`) is fed to `hexa.dynamics.observer.CollisionDetector` with the node's
+thresholds × each scale (`hexa.eval.campaign.DetectorSpec.config`, as the campaign's DET) and its min_duration.
+Until a first START the graph does not depend on the thresholds, so a replay without START is what the node would
+have done live at that scale. Prints one JSON line: samples, the live collision events, STARTs per scale.
 """
 from __future__ import annotations
 
@@ -22,14 +23,27 @@ from pathlib import Path
 import numpy as np
 
 from hexa.dynamics.observer import CollisionDetector, ObserverConfig
+from hexa.eval.campaign import detectors
 
 
-def starts_at(rows: np.ndarray, scale: float) -> int:
-    """STARTs of the threshold detector at `scale` × the node's default thresholds on (t, wrench 6, servo 6) rows."""
+def starts_at(t: np.ndarray, wrench: np.ndarray, servo: np.ndarray, scale: float) -> int:
+    """STARTs of the node's threshold detector at `scale` × its default thresholds on the residual samples (stamps
+    t, plate-axis wrench and servo torques; NaN servo torques are not checked, as in the node)."""
     base = ObserverConfig()
-    det = CollisionDetector(ObserverConfig(thresholds=tuple(scale * v for v in base.thresholds),
-                                           servo_thresholds=tuple(scale * v for v in base.servo_thresholds)))
-    return sum(e.kind == "START" for row in rows for e in det.update(row[0], row[1:7], np.nan_to_num(row[7:13]))[1])
+    spec = next(d for d in detectors(base) if d.name == "threshold")
+    det = CollisionDetector(spec.config(base, scale))
+    return sum(e.kind == "START" for k in range(len(t)) for e in det.update(float(t[k]), wrench[k], servo[k])[1])
+
+
+def scales_of(text: str) -> list[float]:
+    """Comma-separated positive threshold scales."""
+    try:
+        values = [float(v) for v in text.split(",")]
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"scales must be numbers separated by commas, got {text!r}") from None
+    if not values or not all(v > 0 for v in values):
+        raise argparse.ArgumentTypeError(f"scales must be positive, got {text!r}")
+    return values
 
 
 def main() -> int:
@@ -37,10 +51,9 @@ def main() -> int:
     ap.add_argument("--realism", default="realistic", choices=("realistic", "ideal"))
     ap.add_argument("--seconds", type=float, default=60.0, help="sim seconds of free motion")
     ap.add_argument("--domain", type=int, default=71, help="ROS_DOMAIN_ID of the graph")
-    ap.add_argument("--scales", default="0.6,0.7,0.8,0.9,1", help="threshold scales, comma-separated")
+    ap.add_argument("--scales", type=scales_of, default="0.6,0.7,0.8,0.9,1", help="threshold scales, comma-separated")
     a = ap.parse_args()
     from hexa_bringup import demo_run
-    from hexa_bringup.bag import read_bag, typestore
     from hexa_bringup.rosenv import ros_env
 
     case = "free_sequence"
@@ -48,18 +61,10 @@ def main() -> int:
     run = demo_run.run_case(case, Path(tempfile.mkdtemp()), ros_env(a.domain), duration=a.seconds,
                             status_every=1e9, real_time_factor=demo_run.REAL_TIME_FACTOR, loop=True,
                             realism=a.realism, description=demo_run.nodes_description(a.realism, 0))
-    store, rows, events = typestore(), [], 0
-    for topic, msgtype, _t, data in read_bag(run.bag):
-        if topic == "/hexa/residual":
-            m = store.deserialize_cdr(data, msgtype)
-            f, q = m.wrench.force, m.wrench.torque
-            rows.append((m.header.stamp.sec + m.header.stamp.nanosec * 1e-9, f.x, f.y, f.z, q.x, q.y, q.z,
-                         *[float(v) for v in m.servo_torque]))
-        elif topic == "/hexa/collision":
-            events += 1
-    r = np.array(sorted(rows)).reshape(-1, 13)
-    out = {"realism": a.realism, "seconds": a.seconds, "samples": len(r), "live_events": events,
-           "rc": run.returncode, "starts": {s: starts_at(r, float(s)) for s in a.scales.split(",")}}
+    d = demo_run.case_data_from_bag(case, run.bag)
+    out = {"realism": a.realism, "seconds": a.seconds, "samples": len(d.residual_t), "live_events": len(d.events),
+           "rc": run.returncode,
+           "starts": {f"{s:g}": starts_at(d.residual_t, d.residual, d.residual_servo, s) for s in a.scales}}
     print(json.dumps(out), flush=True)
     return 0
 

@@ -102,9 +102,10 @@ def detectors(observer_config: ObserverConfig, cusum: CusumConfig | None = None)
 
 
 def grid_specs(observer_config: ObserverConfig) -> dict[str, DetectorSpec]:
-    """The threshold detector at each of GRID_MIN_DURATIONS, keyed by that minimum duration ("0.01")."""
-    th, servo = tuple(observer_config.thresholds), tuple(observer_config.servo_thresholds)
-    return {f"{md:g}": DetectorSpec("threshold", th, servo, min_duration=md) for md in GRID_MIN_DURATIONS}
+    """The threshold detector of `detectors` at each of GRID_MIN_DURATIONS, keyed by that minimum duration
+    ("0.01")."""
+    spec = next(d for d in detectors(observer_config) if d.name == "threshold")
+    return {f"{md:g}": dataclasses.replace(spec, min_duration=md) for md in GRID_MIN_DURATIONS}
 
 
 def kinds_of(trajectories: str) -> tuple[str, ...]:
@@ -591,25 +592,19 @@ def run_contact_job(job: dict[str, Any]) -> dict[str, Any]:
     m = compute_metrics(d, r_low=R_LOW, plate_equivalent=plate_equivalent_every(d, PLATE_EQUIVALENT_STRIDE))
     out["servo_saturated_s"] = m.stall_s
     out["metrics"] = m.as_dict()
-    out["detect"] = {}
-    for spec in detectors(ocfg, ccfg):
+
+    def detection(spec: DetectorSpec, scales: tuple[float, ...]) -> list[dict[str, float]]:
+        """Per scale: the START time, delay and false STARTs of `spec` replayed on this run."""
         rows = []
-        for scale in THRESHOLD_SCALES:
-            ev = replay(rec, spec, ocfg, scale)
-            mm = compute_metrics(case_data(c.name, rec, ev, ocfg.thresholds, ocfg.servo_thresholds, False),
-                                 r_low=R_LOW)
-            rows.append({"scale": scale, "detect_time": mm.detect_time, "delay_ms": mm.delay_ms,
-                         "false_starts": mm.false_starts})
-        out["detect"][spec.name] = rows
-    out["detect_grid"] = {}
-    for key, spec in grid_specs(ocfg).items():
-        rows = []
-        for scale in GRID_SCALES:
+        for scale in scales:
             mm = compute_metrics(case_data(c.name, rec, replay(rec, spec, ocfg, scale), ocfg.thresholds,
                                            ocfg.servo_thresholds, False), r_low=R_LOW)
             rows.append({"scale": scale, "detect_time": mm.detect_time, "delay_ms": mm.delay_ms,
                          "false_starts": mm.false_starts})
-        out["detect_grid"][key] = rows
+        return rows
+
+    out["detect"] = {spec.name: detection(spec, THRESHOLD_SCALES) for spec in detectors(ocfg, ccfg)}
+    out["detect_grid"] = {key: detection(spec, GRID_SCALES) for key, spec in grid_specs(ocfg).items()}
     out["wall_s"] = time.perf_counter() - t0
     return out
 
@@ -629,12 +624,13 @@ def run_free_job(job: dict[str, Any]) -> dict[str, Any]:
                            "robot_seed": job.get("robot_seed", job["sim_seed"]),
                            "realism": job["realism"], "seconds": job["seconds"],
                            "sim_seconds": rec.sim_seconds, "live_starts": sum(1 for e in rec.events if e[1] == "START"),
-                           "starts": {}, "detector": kind}
+                           "detector": kind}
     rec_moving = dataclasses.replace(rec, t=rec.t[moving], residual=rec.residual[moving], servo=rec.servo[moving],
                                      zeta_dot=rec.zeta_dot[moving])
-    for spec in detectors(ocfg, ccfg):
-        out["starts"][spec.name] = [sum(1 for e in replay(rec_moving, spec, ocfg, s) if e[1] == "START")
-                                    for s in THRESHOLD_SCALES]
-    out["starts_grid"] = {key: [sum(1 for e in replay(rec_moving, spec, ocfg, s) if e[1] == "START")
-                                for s in GRID_SCALES] for key, spec in grid_specs(ocfg).items()}
+
+    def starts(spec: DetectorSpec, scales: tuple[float, ...]) -> list[int]:
+        return [sum(1 for e in replay(rec_moving, spec, ocfg, s) if e[1] == "START") for s in scales]
+
+    out["starts"] = {spec.name: starts(spec, THRESHOLD_SCALES) for spec in detectors(ocfg, ccfg)}
+    out["starts_grid"] = {key: starts(spec, GRID_SCALES) for key, spec in grid_specs(ocfg).items()}
     return out

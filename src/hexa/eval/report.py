@@ -9,9 +9,9 @@ from typing import Any
 
 import numpy as np
 
+from hexa.dynamics.observer import ObserverConfig
 from hexa.eval.campaign import (DETECTOR_NAMES, GRID_SCALES, LINKS, THRESHOLD_SCALES, TRAJECTORY_KINDS,
                                 trajectory_kind)
-from hexa.dynamics.observer import ObserverConfig
 from hexa.report.collision_demo import PAPER_RMSE
 
 #: a START counts as the contact's detection if it comes no later than this after the contact's end (s)
