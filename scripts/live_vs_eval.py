@@ -25,7 +25,9 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--cases", default="plate,arm,rod")
     p.add_argument("--runs", type=int, default=1, help="live runs per case")
     p.add_argument("--seed", type=int, default=0)
-    p.add_argument("--realism", choices=["ideal", "realistic"], default="ideal")
+    p.add_argument("--realism", choices=["ideal", "realistic"], default=None,
+                   help="the simulated robot (default: hexa demo's); the live nodes run the description that goes with "
+                        "it, as in hexa demo")
     p.add_argument("--rtf", type=float, default=0.5)
     p.add_argument("--out", default=None, help="where the live runs' bags go (default: a temporary folder)")
     p.add_argument("--campaign", type=int, default=None, metavar="N",
@@ -33,10 +35,13 @@ def main(argv: list[str] | None = None) -> int:
                         "trajectories (draw_contact(seed, i, 'paper'), simulator seed seed*100003 + i), each written "
                         "as a scenario YAML for the live simulator")
     a = p.parse_args(argv)
+    from hexa_bringup.graphs import DEFAULT_REALISM
+
+    a.realism = a.realism or DEFAULT_REALISM
 
     from hexa.eval.consistency import TABLE_HEADER, agreement, detection_span, offline_case
     from hexa.report.collision_demo import compute_metrics, plate_equivalent_truth
-    from hexa_bringup.demo_run import case_data_from_bag, run_case
+    from hexa_bringup.demo_run import case_data_from_bag, nodes_description, run_case
     from hexa_bringup.rosenv import ros_env
 
     out = Path(a.out or tempfile.mkdtemp(prefix="live_vs_eval_"))
@@ -50,7 +55,7 @@ def main(argv: list[str] | None = None) -> int:
         lo, hi = detection_span(case, a.seed, a.realism)
         for k in range(a.runs):
             run = run_case(case, out / f"run{k}", env, seed=a.seed, real_time_factor=a.rtf, status_every=1e9,
-                           realism=a.realism)
+                           realism=a.realism, description=nodes_description(a.realism, a.seed))
             data = case_data_from_bag(case, run.bag)
             live = compute_metrics(data, plate_equivalent=plate_equivalent_truth(data)).as_dict()
             rows.append(agreement(case, live, offline).row() + f" {lo:.3f}-{hi:.3f} |")
@@ -69,7 +74,7 @@ def campaign_rows(a: argparse.Namespace, out: Path, env: dict[str, str]) -> list
     from hexa.eval.consistency import agreement, offline_contact
     from hexa.report.collision_demo import compute_metrics, plate_equivalent_truth
     from hexa.sim.scenarios import scenario_data
-    from hexa_bringup.demo_run import case_data_from_bag, run_case
+    from hexa_bringup.demo_run import case_data_from_bag, nodes_description, run_case
 
     rows = []
     for i in range(a.campaign):
@@ -79,7 +84,8 @@ def campaign_rows(a: argparse.Namespace, out: Path, env: dict[str, str]) -> list
         path.write_text(yaml.safe_dump(scenario_data(c)), encoding="utf-8")
         offline = offline_contact(c, duration, sim_seed, a.realism)
         run = run_case(f"contact{i}", out, env, seed=sim_seed, real_time_factor=a.rtf, status_every=1e9,
-                       realism=a.realism, duration=duration, scenario=(str(path), c.trajectory))
+                       realism=a.realism, duration=duration, scenario=(str(path), c.trajectory),
+                       description=nodes_description(a.realism, sim_seed))
         data = case_data_from_bag(c.name, run.bag)
         live = compute_metrics(data, plate_equivalent=plate_equivalent_truth(data)).as_dict()
         rows.append(agreement(f"{i} {c.link} {c.chain} {c.trajectory} {c.peak_force:.1f} N", live, offline).row()

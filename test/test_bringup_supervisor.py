@@ -119,7 +119,7 @@ def test_realism_reaches_the_simulator_in_sim_mode_and_is_refused_elsewhere():
                                   approach_speed=None, realism=realism)
 
     assert mode_node_args(args("sim", "realistic"))["sim"] == ["-p", "realism:=realistic"]
-    assert "sim" not in mode_node_args(args("sim", None))        # the sim node's own default (ideal)
+    assert "sim" not in mode_node_args(args("sim", None))        # the sim node's own default (realistic)
     with pytest.raises(SupervisorError, match="realism"):
         mode_node_args(args("robot", "realistic"))
 

@@ -25,9 +25,9 @@ def demo_run(tmp_path_factory, module_ros_domain_id):
     group = ProcessGroup()
     try:
         listener = group.start([PY, "test/graph_listener.py"], env)
-        # robot and seed stated: test_the_live_cases_agree_with_hexa_eval_on_the_same_seed runs hexa eval on them
-        demo = group.start([PY, "-m", "hexa_bringup.cli", "demo", "--out", str(out), "--json", "--realism", "ideal",
-                            "--seed", "0"], env)
+        # the default robot (realistic) and seed 0: test_the_live_cases_agree_with_hexa_eval_on_the_same_seed runs
+        # hexa eval on the same robot, its nodes on the same calibration overlay
+        demo = group.start([PY, "-m", "hexa_bringup.cli", "demo", "--out", str(out), "--json", "--seed", "0"], env)
         demo_out, demo_err = demo.communicate(timeout=900)
         listener.send_signal(signal.SIGINT)
         heard, _ = listener.communicate(timeout=30)
@@ -101,21 +101,21 @@ def test_another_ros_process_receives_collision_events_and_contact_wrenches_with
 
 
 def test_the_live_cases_agree_with_hexa_eval_on_the_same_seed(demo_run):
-    """The demo's plate and arm cases through `hexa eval`'s simulate on the same seed and robot (ideal, nominal
-    scenario) agree with the live graph: same link and chain, force RMSE per axis within 2 × the offline run's + 0.05 N
-    when the force passed r_low at the same time and no servo stalled 0.1 s longer on one side (the same contact;
-    live plate runs gave 0.92–1.77 × the offline x, docs/eval_live.md), and the live detection time within 20 ms
-    (arm: 40 ms) of the offline ones over the command phase — when in each 5 ms current-sample period the 100 Hz
-    commands reach the servos: 0 offline by default, wherever the host's scheduling puts each command live. The
-    arm's offline detection moves 80 ms with the phase (6.484-6.564 s), the plate's not at all (4.604 s); live, 5 arm
-    runs gave 6.492-6.577 s, 4 plate runs 4.594-4.604 s, and with the safety path at SCHED_FIFO one arm run 6.590 s:
-    the arm's START also depends on how the graph is scheduled, which the offline run does not model
-    (docs/eval_live.md)."""
+    """The demo's plate and arm cases through `hexa eval`'s simulate on the same seed and robot (the default realistic
+    one, its observer and force tracker on the calibration overlay the live nodes run; nominal scenario) agree with
+    the live graph: same link and chain, force RMSE per axis within 2 × the offline run's + 0.05 N when the force
+    passed r_low at the same time and no servo stalled 0.1 s longer on one side (the same contact), and the live
+    detection time within 20 ms (arm: 40 ms) of the offline ones over the command phase — when in each 5 ms
+    current-sample period the 100 Hz commands reach the servos: 0 offline by default, wherever the host's scheduling
+    puts each command live. The arm's offline detection moves with the phase (6.540-6.600 s on the realistic robot,
+    6.484-6.564 s on the ideal one), the plate's not (4.630 s; ideal 4.604 s); the arm's START also depends on how
+    the graph is scheduled, which the offline run does not model (docs/eval_live.md)."""
+    from hexa_bringup.graphs import DEFAULT_REALISM
     from hexa.eval.consistency import agreement, offline_case
 
     live = {c["case"]: c for c in demo_run["result"]["cases"]}
     for case, phases in (("plate", ()), ("arm", (0.002, 0.004))):
-        offline = offline_case(case, seed=0, realism="ideal")
+        offline = offline_case(case, seed=0, realism=DEFAULT_REALISM)
         a = agreement(case, live[case], offline)
         assert a.same_link, (live[case], offline)
         # the force RMSE compares the same contact: where the commands' timing moved the arm's contact itself (the
@@ -134,7 +134,7 @@ def test_the_live_cases_agree_with_hexa_eval_on_the_same_seed(demo_run):
             print(f"{case}: force past r_low live {live[case]['exceed_time']:.3f} s, offline "
                   f"{offline['exceed_time']:.3f} s; a servo stalled live {live[case]['stall_s']:.2f} s, offline "
                   f"{offline['stall_s']:.2f} s: another contact, RMSE not compared")
-        times = [offline["detect_time"]] + [offline_case(case, 0, "ideal", phase, isolation="oracle",
+        times = [offline["detect_time"]] + [offline_case(case, 0, DEFAULT_REALISM, phase, isolation="oracle",
                                                          identify=False)["detect_time"] for phase in phases]
         slack = 0.020 if case == "plate" else 0.040   # the arm's live START also moves with the graph's scheduling
         assert min(times) - slack <= a.detect_live <= max(times) + slack, (a, times)

@@ -14,9 +14,8 @@ CONFIG_DIR = Path(__file__).resolve().parent / "config"
 DEFAULT_PARAMS = CONFIG_DIR / "hexa_params.yaml"
 #: the simulated robot of `hexa-sim`, `hexa demo` and `hexa bringup sim` unless told otherwise ("ideal" | "realistic",
 #: hexa.sim.realism); on the realistic robot the other nodes run a calibration overlay identified on it
-#: (hexa_bringup.demo_run.nodes_description). Ideal: the live graph's detection on the realistic robot is not clean
-#: yet (docs/realism.md, "The live graph on the realistic robot")
-DEFAULT_REALISM = "ideal"
+#: (hexa_bringup.demo_run.nodes_description; docs/realism.md, "The live graph on the realistic robot")
+DEFAULT_REALISM = "realistic"
 
 # name, module, required, modes
 NODES: list[tuple[str, str, bool, tuple[str, ...]]] = [
