@@ -9,7 +9,7 @@ set -uo pipefail
 cd "$(dirname "$0")/.."
 PY=${PY:-.venv/bin/python}
 common=(-q -p no:cacheprovider "$@")
-# The simulated robot's default is the realistic one, whose nodes run a calibration overlay identified on it (≈ 1.5 min
+# The simulated robot's default is the realistic one, whose nodes run a calibration overlay identified on it (≈ 25 s
 # of CPU the first time, then cached per robot): identify seed 0's once here, so that no test's graph waits for it.
 "$PY" -c 'from hexa_bringup.demo_run import nodes_description as d; from hexa_bringup.graphs import DEFAULT_REALISM as r
 d(r, 0, log=lambda line: print(f"make test: {line}", flush=True))' || { echo "make test: calibrating the simulated robot failed" >&2; exit 1; }

@@ -94,7 +94,7 @@ def nodes_description(realism: str, seed: int, log: Callable[[str], None] | None
     """The description the nodes run on the simulated robot `realism` of `seed`: None (the packaged one) on the ideal
     robot, which is that model; on the realistic robot the calibration overlay identified on it the way an operator
     calibrates a real robot (`hexa calibrate`, hexa.calibration.simulated.simulated_calibration: cached per robot,
-    ≈ 1.5 min of CPU the first time). The nodes never read the simulator's truth.
+    ≈ 25 s on a quiet machine the first time). The nodes never read the simulator's truth.
 
     Raises:
         hexa.calibration.identify.CalibrationError, hexa.calibration.recording.RecordingError: no calibration.

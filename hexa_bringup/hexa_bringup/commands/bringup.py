@@ -29,8 +29,8 @@ def register(sub: argparse._SubParsersAction) -> None:
                         f"Default {ROBOT_APPROACH_SPEED} in robot mode, 0 in sim (the simulator starts there)")
     p.add_argument("--realism", choices=["ideal", "realistic"], default=None,
                    help="sim mode: the simulated robot, ideal or realistic (docs/realism.md); default: the sim "
-                        "node's parameter (ideal). On the realistic robot the other nodes run a calibration "
-                        "overlay identified on it (cached per robot; ≈ 1.5 min of CPU the first time) unless "
+                        "node's parameter (realistic). On the realistic robot the other nodes run a calibration "
+                        "overlay identified on it (cached per robot; ≈ 25 s the first time) unless "
                         "--description says otherwise")
     p.add_argument("--trajectory", default=None, metavar="FILE",
                    help="sim/robot: the trajectory node plays this pose file (CSV t x y z alpha beta gamma, SI; e.g. "
