@@ -345,15 +345,20 @@ def safety_priority(params: Path, ns: str = "/hexa") -> int:
 
 def graph_specs(mode: str, ns: str, params: Path, node_args: dict[str, list[str]] | None = None,
                 compose: bool = False) -> list:
-    """hexa_bringup.graphs.build_graph(...), as `hexa bringup MODE [--compose]` builds it.
+    """hexa_bringup.graphs.build_graph(...), as `hexa bringup MODE [--compose]` builds it (in sim mode with the
+    calibration overlay of the simulated robot for every node but the simulator).
 
     Raises:
-        BenchGraphError: a required node is not installed, or composition is asked of a builder without it.
+        BenchGraphError: a required node is not installed, composition is asked of a builder without it, or the
+        simulated robot cannot be calibrated.
     """
+    from hexa_bringup.commands.bringup import with_nodes_description
     from hexa_bringup.graphs import build_graph
     from hexa_bringup.supervisor import SupervisorError
 
     try:
+        node_args = with_nodes_description(mode, ns, params, dict(node_args or {}),   # stdout: the bench's table
+                                           log=lambda line: print(f"hexa bench graph: {line}", file=sys.stderr))
         if compose:
             return build_graph(mode, ns, params, node_args, compose=True)
         return build_graph(mode, ns, params, node_args)

@@ -3,6 +3,7 @@ from __future__ import annotations
 
 import argparse
 import sys
+from collections.abc import Callable
 from pathlib import Path
 
 
@@ -102,7 +103,12 @@ def mode_node_args(args: argparse.Namespace) -> dict[str, list[str]]:
     return node_args
 
 
-def description_args(description: str, specs: list, node_args: dict[str, list[str]]) -> dict[str, list[str]]:
+def _say(line: str) -> None:
+    print(f"hexa bringup: {line}", flush=True)
+
+
+def description_args(description: str, specs: list, node_args: dict[str, list[str]],
+                     log: Callable[[str], None] = _say) -> dict[str, list[str]]:
     """`node_args` with `description:=PATH` for every node of `specs` but the simulator (the robot itself).
 
     Raises:
@@ -115,7 +121,7 @@ def description_args(description: str, specs: list, node_args: dict[str, list[st
     from hexa_bringup.graphs import with_description
 
     try:
-        print(f"hexa bringup: {calibration_summary(load_hexa(Path(description).resolve()))}", flush=True)
+        log(calibration_summary(load_hexa(Path(description).resolve())))
     except RobotDescriptionError as exc:
         raise SupervisorError(str(exc)) from exc
     return with_description(description, specs, node_args)
@@ -155,7 +161,27 @@ def sim_robot(params: Path, node_args: dict[str, list[str]], namespace: str = "/
         raise SupervisorError(f"the simulator's seed must be an integer, got {values['seed']!r}") from exc
 
 
-def calibrated_description(params: Path, node_args: dict[str, list[str]], namespace: str = "/hexa") -> Path | None:
+def with_nodes_description(mode: str, ns: str, params: Path, node_args: dict[str, list[str]],
+                           description: str | Path | None = None,
+                           log: Callable[[str], None] = _say) -> dict[str, list[str]]:
+    """`node_args` with the description every node but the simulator runs: `description` if given, else in sim mode
+    the calibration overlay of the simulated robot (`calibrated_description`), else unchanged. `log` gets the
+    calibration's progress and the description's summary.
+
+    Raises:
+        hexa_bringup.supervisor.SupervisorError: the robot cannot be calibrated, or the description is invalid.
+    """
+    from hexa_bringup.graphs import build_graph
+
+    if mode == "sim" and not description:
+        description = calibrated_description(params, node_args, ns, log)
+    if not description:
+        return node_args
+    return description_args(str(description), build_graph(mode, ns, params, node_args), node_args, log)
+
+
+def calibrated_description(params: Path, node_args: dict[str, list[str]], namespace: str = "/hexa",
+                           log: Callable[[str], None] = _say) -> Path | None:
     """The calibration overlay the nodes of sim mode run when the simulator is the realistic robot (identified on
     that robot, cached: hexa_bringup.demo_run.nodes_description), None on the ideal robot.
 
@@ -167,7 +193,7 @@ def calibrated_description(params: Path, node_args: dict[str, list[str]], namesp
 
     realism, seed = sim_robot(params, node_args, namespace)
     try:
-        return nodes_description(realism, seed, log=lambda line: print(f"hexa bringup: {line}", flush=True))
+        return nodes_description(realism, seed, log=log)
     except ValueError as exc:   # an unknown realism, CalibrationError, RecordingError
         raise SupervisorError(f"cannot calibrate the simulated {realism} robot of seed {seed}: {exc}") from exc
 
@@ -201,12 +227,7 @@ def run(args: argparse.Namespace) -> int:
             node_args = mode_node_args(args)
             params = Path(args.params) if args.params else DEFAULT_PARAMS
             ns = args.ns or ("/upsrpu" if args.mode == "upsrpu" else "/hexa")
-            description = getattr(args, "description", None)
-            if args.mode == "sim" and not description:
-                description = calibrated_description(params, node_args, ns)
-            if description:
-                node_args = description_args(str(description), build_graph(args.mode, ns, params, node_args),
-                                             node_args)
+            node_args = with_nodes_description(args.mode, ns, params, node_args, getattr(args, "description", None))
             specs = build_graph(args.mode, ns, params, node_args, compose=args.compose)
             if args.mode == "replay":
                 if not args.bag:
