@@ -50,8 +50,9 @@ def test_demo_writes_the_report_with_a_plot_per_case(demo_run):
 
 def test_all_three_cases_are_detected_after_the_true_contact_onset_on_the_right_link(demo_run):
     # The arm push's plate-equivalent wrench J_Dᵀ F stays below the plate thresholds (1.9 N / 0.15 N·m); the servo-
-    # torque criterion finds it (0.45 N·m on servo 4 against 0.35): 6 runs of 6 at 56-121 ms, rod at -19 to -4 ms
-    # (before its force reaches r_low), plate 16-21 ms (docs/detectors.md, "Detection in servo coordinates").
+    # torque criterion finds it (0.45 N·m on servo 4 against 0.35; docs/detectors.md, "Detection in servo
+    # coordinates"). On the realistic robot 6 runs of 6: arm 131-156 ms, rod -49 to -4 ms (before its force
+    # reaches r_low), plate 31-41 ms (docs/realism.md, "The live graph on the realistic robot").
     for c in demo_run["result"]["cases"]:
         assert math.isfinite(c["detect_time"]), f"{c['case']}: no collision detected"
         assert c["detect_time"] > c["onset_true"], f"{c['case']}: detected before the contact began"
@@ -59,13 +60,14 @@ def test_all_three_cases_are_detected_after_the_true_contact_onset_on_the_right_
         assert (c["found_link"], c["found_chain"]) == (c["true_link"], c["true_chain"]), c
         assert c["point_error_median_mm"] < 10.0, c
         # the observer's own lag, after the force's plate-equivalent wrench crossed a threshold (plate axes or servo
-        # torques): plate 16-21 ms, rod 16-26 ms, arm -4 to 61 ms measured
+        # torques): plate 31-41 ms, rod 16-36 ms, arm 61-86 ms measured on the realistic robot
         lag_limit = 120.0 if c["case"] == "arm" else 60.0
         assert c["observer_delay_ms"] < lag_limit, f"{c['case']}: observer lag {c['observer_delay_ms']:.0f} ms"
     plate = [c for c in demo_run["result"]["cases"] if c["case"] == "plate"][0]
-    # target ≤ 20 ms; measured 16-21 ms at K = 100 1/s, min_duration 0.02 s (11-31 ms at 0.015 s; 51-56 ms at the old
-    # K = 25 1/s, 0.03 s)
-    assert plate["delay_ms"] < 50.0, plate
+    # target ≤ 20 ms (not met on the realistic robot); measured 31-41 ms at K = 100 1/s, min_duration 0.02 s, where
+    # one sample of the noisier residual back under the threshold restarts the 5-sample run (docs/demo.md, "Delay");
+    # this bound catches a slower observer or a longer wait
+    assert plate["delay_ms"] < 60.0, plate
 
 
 def test_plate_and_arm_force_rmse_is_below_the_papers_on_every_axis(demo_run):
