@@ -107,7 +107,7 @@ def test_the_live_cases_agree_with_hexa_eval_on_the_same_seed(demo_run):
     one, its observer and force tracker on the calibration overlay the live nodes run; nominal scenario) agree with
     the live graph: same link and chain, force RMSE per axis within 2 × the offline run's + 0.05 N when the force
     passed r_low at the same time and no servo stalled 0.1 s longer on one side (the same contact), and the live
-    detection time within 20 ms (arm: 40 ms) of the offline ones over the command phase — when in each 5 ms
+    detection time within 30 ms (arm: 40 ms) of the offline ones over the command phase — when in each 5 ms
     current-sample period the 100 Hz commands reach the servos: 0 offline by default, wherever the host's scheduling
     puts each command live. The arm's offline detection moves with the phase (6.540-6.600 s on the realistic robot,
     6.484-6.564 s on the ideal one), the plate's not (4.630 s; ideal 4.604 s); the arm's START also depends on how
@@ -138,5 +138,7 @@ def test_the_live_cases_agree_with_hexa_eval_on_the_same_seed(demo_run):
                   f"{offline['stall_s']:.2f} s: another contact, RMSE not compared")
         times = [offline["detect_time"]] + [offline_case(case, 0, DEFAULT_REALISM, phase, isolation="oracle",
                                                          identify=False)["detect_time"] for phase in phases]
-        slack = 0.020 if case == "plate" else 0.040   # the arm's live START also moves with the graph's scheduling
+        # the arm's live START also moves with the graph's scheduling; the plate's with the residual's noise: one
+        # sample back under the threshold restarts the 5-sample run (live 4.605-4.630 s against 4.630 s offline)
+        slack = 0.030 if case == "plate" else 0.040
         assert min(times) - slack <= a.detect_live <= max(times) + slack, (a, times)
