@@ -99,14 +99,10 @@ def nodes_description(realism: str, seed: int, log: Callable[[str], None] | None
     Raises:
         hexa.calibration.identify.CalibrationError, hexa.calibration.recording.RecordingError: no calibration.
     """
+    from hexa.calibration.simulated import nodes_description_of
     from hexa.sim.realism import RealismConfig
 
-    cfg = RealismConfig.named(realism)
-    if not cfg.truth and not cfg.servo_mechanics:
-        return None
-    from hexa.calibration.simulated import simulated_calibration
-
-    return simulated_calibration(seed, cfg, log=log)
+    return nodes_description_of(seed, RealismConfig.named(realism), log=log)
 
 
 def run_case(case: str, out_dir: Path, env: dict[str, str], ns: str = "/hexa", seed: int = 0,

@@ -158,3 +158,17 @@ def simulated_calibration(seed: int, realism: RealismConfig, description: str | 
             return overlay
         finally:
             fcntl.flock(lock, fcntl.LOCK_UN)
+
+
+def nodes_description_of(seed: int, realism: RealismConfig,
+                         log: Callable[[str], None] | None = None) -> Path | None:
+    """The description the nodes run on the simulated robot of `seed` and `realism`: None (the packaged one) on a
+    robot that is its model (no drawn truth, no servo mechanics), else its calibration overlay
+    (`simulated_calibration`, cached). The live graph and the offline runs compared with it take it from here.
+
+    Raises:
+        hexa.calibration.identify.CalibrationError, RecordingError: the robot cannot be identified.
+    """
+    if not realism.truth and not realism.servo_mechanics:
+        return None
+    return simulated_calibration(seed, realism, log=log)

@@ -66,25 +66,22 @@ def offline_contact(collision: ScriptedCollision, duration: float, seed: int = 0
     simulator seed `seed` on the robot `realism` ("ideal" | "realistic"), the commands going out `command_phase` s
     after a current sample, with `isolation` ("rendered" | "oracle") and the force identified (`identify`); its
     `CaseMetrics.as_dict()`. On a robot that is not its model the observer and the force tracker run the calibration
-    overlay `hexa demo` gives the live nodes (`hexa.calibration.simulated.simulated_calibration`, the same cache).
+    overlay `hexa demo` gives the live nodes (`hexa.calibration.simulated.nodes_description_of`, the same cache).
 
     Raises:
         hexa.sim.camera.RenderError: no GL context for the rendered isolation;
         hexa.calibration.identify.CalibrationError, hexa.calibration.recording.RecordingError: no calibration.
     """
+    from hexa.calibration.simulated import nodes_description_of
     from hexa.eval.campaign import R_LOW, case_data, simulate
     from hexa.report.collision_demo import compute_metrics
+    from hexa.robots.hexa_description import load_hexa
     from hexa.sim.realism import RealismConfig
 
     cfg = RealismConfig.named(realism)
-    nodes_desc = None
-    if cfg.truth or cfg.servo_mechanics:
-        from hexa.calibration.simulated import simulated_calibration
-        from hexa.robots.hexa_description import load_hexa
-
-        nodes_desc = load_hexa(simulated_calibration(seed, cfg))
+    overlay = nodes_description_of(seed, cfg)
     rec = simulate(collision, collision.trajectory, duration, cfg, seed, identify=identify, isolation=isolation,
-                   command_phase=command_phase, nodes_desc=nodes_desc)
+                   command_phase=command_phase, nodes_desc=load_hexa(overlay) if overlay else None)
     d = case_data(collision.name, rec, rec.events, (2.0,) * 3 + (0.2,) * 3, (0.35,) * 6)
     return compute_metrics(d, r_low=R_LOW).as_dict()
 
