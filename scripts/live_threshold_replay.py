@@ -23,15 +23,14 @@ from pathlib import Path
 import numpy as np
 
 from hexa.dynamics.observer import CollisionDetector, ObserverConfig
-from hexa.eval.campaign import detectors
+from hexa.eval.campaign import threshold_spec
 
 
 def starts_at(t: np.ndarray, wrench: np.ndarray, servo: np.ndarray, scale: float) -> int:
     """STARTs of the node's threshold detector at `scale` × its default thresholds on the residual samples (stamps
     t, plate-axis wrench and servo torques; NaN servo torques are not checked, as in the node)."""
     base = ObserverConfig()
-    spec = next(d for d in detectors(base) if d.name == "threshold")
-    det = CollisionDetector(spec.config(base, scale))
+    det = CollisionDetector(threshold_spec(base).config(base, scale))
     return sum(e.kind == "START" for k in range(len(t)) for e in det.update(float(t[k]), wrench[k], servo[k])[1])
 
 

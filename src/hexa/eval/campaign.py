@@ -101,10 +101,15 @@ def detectors(observer_config: ObserverConfig, cusum: CusumConfig | None = None)
             DetectorSpec("paper", PAPER_THRESHOLDS, (0.0,) * 6))
 
 
+def threshold_spec(observer_config: ObserverConfig) -> DetectorSpec:
+    """The node's threshold detector of `detectors`."""
+    return next(d for d in detectors(observer_config) if d.name == "threshold")
+
+
 def grid_specs(observer_config: ObserverConfig) -> dict[str, DetectorSpec]:
     """The threshold detector of `detectors` at each of GRID_MIN_DURATIONS, keyed by that minimum duration
     ("0.01")."""
-    spec = next(d for d in detectors(observer_config) if d.name == "threshold")
+    spec = threshold_spec(observer_config)
     return {f"{md:g}": dataclasses.replace(spec, min_duration=md) for md in GRID_MIN_DURATIONS}
 
 
