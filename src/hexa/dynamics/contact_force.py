@@ -8,12 +8,15 @@ last camera pose; a camera pose that disagrees with FK of ζ at its image time b
 restarts the tracking from the camera (the tracking left the camera's assembly branch).
 
 Contacts and collision events arrive on their own (isolation takes two camera frames and the detector, up to ~1 s on
-a loaded host), so:
-- a contact of the collision in progress is identified at once, then every 1/`rate_hz` of sample time with the
-  latest contact of that collision until its END;
-- the first contact of a recent collision is also identified retroactively on the kept states, from its image time
-  (not before the START) to the END or the present, every min(1/`rate_hz`, 0.05 s) (`backfilled` results): a contact
-  that arrives late, even after the END, still gives the force over the whole contact;
+a loaded host), so the forces of a collision are identified on a grid of sample times anchored at its START, and the
+same states give the same forces however late the messages arrive (a replay at 1× and one at 0.3× agree):
+- the first contact of a recent collision is identified retroactively on the kept states, from its image time (not
+  before the START) to the END or the newest state, at the grid's slots every 1/`rate_hz` (spacing at most 0.05 s)
+  (`backfilled` results): a contact that arrives late, even after the END, still gives the force over the whole
+  contact;
+- then, while the states run up to the END (also after the END message, which can overtake the last states), each
+  slot START + k/`rate_hz` is identified on the first state at or after it, with the latest contact of the collision;
+  with `rate_hz` 0 a contact is identified once, on the newest state, when it arrives;
 - a contact whose collision has not STARTed yet (a newer id) is kept until its START;
 - with `require_collision`, any other contact is rejected (`not_in_collision`).
 An arm contact without a measured push direction takes the collision's last measured one. Rejected inputs are counted
@@ -168,7 +171,8 @@ class ContactForceTracker:
         self._pending: list[tuple[float, NDArray]] = []  # camera poses newer than the newest state
         self._active: int | None = None
         self._started = 0                            # newest collision id STARTed
-        self._last_t = -math.inf                     # sample time of the last identification in progress
+        self._live: int | None = None                # collision whose slots the states still reach (to its END)
+        self._due = math.inf                         # its next slot (s of sample time)
         self._contacts: dict[int, LocatedContact] = {}   # latest contact per collision id (the active one's is used)
         self._early: dict[int, LocatedContact] = {}
         self._spans: dict[int, list[float]] = {}     # recent collision id -> [START t, END t or inf]
@@ -230,9 +234,17 @@ class ContactForceTracker:
             self._pending = [p for p in self._pending if p[0] > t]
             for tp, pose in due:
                 self._check_branch(tp, pose)
-        if self._active is None or t - self._last_t < self.period - TIME_EPS or self._active not in self._contacts:
+        cid = self._live
+        if cid is None or t < self._due - TIME_EPS:
             return []
-        out = self._identify_now(self._contacts[self._active])
+        start, end = self._spans.get(cid, (math.inf, -math.inf))
+        if t > end + TIME_EPS:
+            self._live = None          # the states passed its END: the collision's forces are complete
+            return []
+        self._due = _slot(start, self.period, t + 2.0 * TIME_EPS)
+        if cid not in self._contacts:
+            return []
+        out = self._identify_now(self._contacts[cid])
         return [out] if out is not None else []
 
     def on_pose(self, t: float, pose: NDArray) -> None:
@@ -261,7 +273,8 @@ class ContactForceTracker:
                 self._spans.pop(old)
                 self._identified.discard(old)
                 self._push.pop(old, None)
-            self._active = cid
+            self._active = self._live = cid
+            self._due = t
             self._started = max(self._started, cid)
             early = self._early.pop(cid, None)
             self._early = {k: c for k, c in self._early.items() if k > cid}
@@ -271,8 +284,7 @@ class ContactForceTracker:
         if cid in self._spans:
             self._spans[cid][1] = t
         if self._active == cid:
-            self._active = None
-            self._contacts.pop(cid, None)
+            self._active = None        # its contacts stay until the states reach its END (step_state)
         return []
 
     def on_contact(self, contact: LocatedContact, emit: Callable[[ContactForce], Any] | None = None
@@ -291,7 +303,7 @@ class ContactForceTracker:
             self.rejects["bad_chain"] += 1
             return []
         cid = int(contact.collision_id)
-        if self.config.require_collision and cid != self._active:
+        if self.config.require_collision and cid not in (self._active, self._live):
             if cid in self._spans and cid not in self._identified:
                 self._remember_push(cid, contact.push_direction)
                 out = self._backfill(contact, emit)
@@ -312,7 +324,7 @@ class ContactForceTracker:
         self._tau.clear()
         self._tau_sum = np.zeros(6)
         self._pending.clear()
-        self._zd_prev, self._pose, self._last_t = None, None, -math.inf
+        self._zd_prev, self._pose = None, None
         self._zdd = np.zeros(6)
 
     def _remember_push(self, cid: int, push: NDArray | None) -> None:
@@ -358,12 +370,13 @@ class ContactForceTracker:
             self._contacts.pop(old)
         out: list[ContactForce] = []
         if cid in self._spans and cid not in self._identified:
-            out.extend(self._backfill(contact, emit) or [])   # the states between its image time and now
-        now = self._identify_now(contact)
-        if now is not None:
-            out.append(now)
-            if emit is not None:
-                emit(now)
+            out.extend(self._backfill(contact, emit) or [])   # the slots between its image time and now
+        if math.isinf(self.period) or cid != self._live:   # no grid: identified once, on the newest state
+            now = self._identify_now(contact)
+            if now is not None:
+                out.append(now)
+                if emit is not None:
+                    emit(now)
         return out
 
     def _identify_now(self, contact: LocatedContact) -> ContactForce | None:
@@ -371,7 +384,6 @@ class ContactForceTracker:
         if state is None:
             self.rejects["no_state"] += 1
             return None
-        self._last_t = state.time
         pose = self._forward_kinematics(state.zeta, self._camera if self._pose is None else self._pose)
         if pose is None:
             self.rejects["pose_tracking"] += 1
@@ -382,23 +394,26 @@ class ContactForceTracker:
     def _backfill(self, contact: LocatedContact, emit: Callable[[ContactForce], Any] | None = None
                   ) -> list[ContactForce] | None:
         """`contact` identified on the kept states from its image time (not before its collision's START, not older
-        than `history`) to the END or the newest state (excluded), every min(1/rate_hz, 0.05 s); None when no
-        state lies in that span."""
+        than `history`) to the END or the newest state (included), at the collision's grid slots (the first state at
+        or after each); the live slots then go on after the newest state. None when no state lies in that span."""
+        cid = int(contact.collision_id)
         if self.config.history <= 0 or not self._states:
             return None
-        start, end = self._spans[int(contact.collision_id)]
+        start, end = self._spans[cid]
         newest = self._states[-1].time
         t0 = max(start, contact.time, newest - self.config.history)
-        span = [s for s in self._states if t0 <= s.time <= end and s.time < newest]
+        span = [s for s in self._states if t0 - TIME_EPS <= s.time <= end + TIME_EPS]
         if not span:
             return None
+        spacing = self.period / math.ceil(self.period / BACKFILL_SPACING) if math.isfinite(self.period) \
+            else BACKFILL_SPACING          # divides the live grid's period, so both grids share their slots
         out: list[ContactForce] = []
         guess = self._camera if self._pose is None else self._pose
-        last = -math.inf
+        due = _slot(start, spacing, t0)
         for s in span:
-            if s.time - last < min(self.period, BACKFILL_SPACING) - TIME_EPS:
+            if s.time < due - TIME_EPS:
                 continue
-            last = s.time
+            due = _slot(start, spacing, s.time + 2.0 * TIME_EPS)
             pose = self._forward_kinematics(s.zeta, guess)
             if pose is None:
                 self.rejects["pose_tracking"] += 1
@@ -409,6 +424,10 @@ class ContactForceTracker:
                 out.append(f)
                 if emit is not None:
                     emit(f)
+        if cid == self._live and math.isfinite(self.period):
+            self._due = max(self._due, _slot(start, self.period, newest + 2.0 * TIME_EPS))
+            if span[-1].time == newest:
+                self._pose = guess         # the live identifications go on from the newest state's pose
         return out
 
     def _identify(self, contact: LocatedContact, s: ArmState, pose: NDArray, backfilled: bool
@@ -435,3 +454,8 @@ class ContactForceTracker:
                             condition=float(est.condition), observable=bool(est.observable),
                             residual_norm=float(est.residual_norm), force_model=est.force_model,
                             backfilled=backfilled)
+
+
+def _slot(start: float, spacing: float, t: float) -> float:
+    """The first slot start + k·spacing (k ≥ 0) at or after t (within TIME_EPS)."""
+    return start + max(0, math.ceil((t - TIME_EPS - start) / spacing)) * spacing
