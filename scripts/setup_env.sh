@@ -41,7 +41,8 @@ if [ ! -x "$VENV/bin/python" ]; then
 fi
 "$VENV/bin/python" -c 'import sys; assert sys.version_info[:2] == (3, 11), sys.version' \
   || { echo "setup: .venv must be CPython 3.11; remove .venv and install python3.11" >&2; exit 1; }
-PIP=("$VENV/bin/python" -m pip install --disable-pip-version-check -q)
+# --no-compile: Python compiles a module on its first import (pip would byte-compile every file of every wheel, ≈ 25 s)
+PIP=("$VENV/bin/python" -m pip install --disable-pip-version-check -q --no-compile)
 
 # 3. Pinned wheels: core, ROS 2 Jazzy runtime, build-only ROS packages. torch is the local CPU build (never unpinned).
 h=$(hash_of requirements/*.txt)
