@@ -108,7 +108,8 @@ def main() -> int:
     node.create_subscription(ContactWrench, "contact_wrench",
                              lambda m: wrenches.append({"t": stamp_seconds(m.header.stamp), "id": int(m.collision_id),
                                                         "force": [m.force.x, m.force.y, m.force.z], "rank": int(m.rank),
-                                                        "observable": bool(m.observable), "link": int(m.link)}), 100)
+                                                        "observable": bool(m.observable), "link": int(m.link),
+                                                        "stalled": bool(m.servo_stalled)}), 100)
     node.create_subscription(DiagnosticArray, "/diagnostics", on_diag, 10)
 
     def spin(sec: float) -> None:
@@ -186,6 +187,7 @@ def main() -> int:
         out["wrench_rms_err"] = (np.sqrt(np.mean((np.array([x["force"] for x in w]) - FORCE) ** 2, axis=0)).tolist()
                                  if w else None)
         out["wrench_rank"] = sorted({x["rank"] for x in wrenches})
+        out["wrench_stalled"] = sum(x["stalled"] for x in wrenches)
         out["wrench_ids"] = sorted({x["id"] for x in wrenches})
         out["wrench_t"] = [min(x["t"] for x in wrenches) - T0, max(x["t"] for x in wrenches) - T0] if wrenches else None
         # a bad contact: NaN point, unknown link, chain out of range

@@ -268,3 +268,20 @@ def test_a_bad_setting_is_refused_naming_it(field, value):
     with pytest.raises(ContactForceError, match=field) as exc:
         ContactForceConfig(**{field: value})
     assert repr(value) in str(exc.value)
+
+
+def test_a_force_identified_while_a_servo_is_at_its_stall_torque_is_flagged_for_the_torque_window():
+    tr = _tracker(rate_hz=100.0, torque_window=0.02)
+    assert tr.stall_torque == pytest.approx(0.97 * DESC.torque_max)
+    tau = TAU.copy()
+    tau[_k(0.6):_k(0.65), 2] = DESC.torque_max        # servo 3 stalls from 0.600 to 0.649 s
+    forces = []
+    for k in range(_k(0.8)):
+        if k == _k(0.5):
+            tr.on_collision("START", 1, 0.5)
+            tr.on_contact(_plate_contact(1, 0.5))
+        forces += tr.step_state(T[k], ZETA[k], ZETA_DOT[k], tau[k])
+    flagged = [round(f.time, 3) for f in forces if f.servo_stalled]
+    # a force is flagged while a stalled sample lies in its 20 ms torque window: 0.60 ... 0.66 s (0.649 + 0.02)
+    assert flagged == pytest.approx([0.6, 0.61, 0.62, 0.63, 0.64, 0.65, 0.66])
+    assert len(forces) == 30 and not any(f.servo_stalled for f in forces if f.time < 0.6 or f.time > 0.67)

@@ -29,6 +29,7 @@ def test_rnea_node_identifies_the_plate_force_at_the_contact(procs, ros_env):
     assert r["wrenches"] > 30                          # ~100 Hz while in collision
     assert r["wrench_ids"] == [r["events"][0]["id"]]
     assert r["wrench_rank"] == [3]
+    assert r["wrench_stalled"] == 0                    # the push leaves every servo below its stall torque
     # the paper's plate RMSE is (0.819, 0.476, 1.282) N; measured here ≈ (0.19, 0.35, 0.19) N
     assert all(e < 0.8 for e in r["wrench_rms_err"]), r["wrench_rms_err"]
     assert r["wrench_mean"] == pytest.approx(r["force"], abs=0.4)

@@ -118,7 +118,7 @@ class RneaNode(Node):
     def _publish_one(self, f: ContactForce) -> None:
         w = ContactWrench(collision_id=f.collision_id, link=LINK_CODES[f.link], chain=f.chain, rank=f.rank,
                           condition=f.condition, observable=f.observable, residual_norm=f.residual_norm,
-                          force_model=f.force_model)
+                          force_model=f.force_model, servo_stalled=f.servo_stalled)
         w.header.stamp, w.header.frame_id = to_stamp(f.time), self.frame_id
         w.point = markers.point(f.point)
         w.force.x, w.force.y, w.force.z = (float(v) for v in f.force)

@@ -19,8 +19,10 @@ same states give the same forces however late the messages arrive (a replay at 1
   with `rate_hz` 0 a contact is identified once, on the newest state, when it arrives;
 - a contact whose collision has not STARTed yet (a newer id) is kept until its START;
 - with `require_collision`, any other contact is rejected (`not_in_collision`).
-An arm contact without a measured push direction takes the collision's last measured one. Rejected inputs are counted
-by reason in `ContactForceTracker.rejects`.
+An arm contact without a measured push direction takes the collision's last measured one. A force identified while
+some servo's torque was at its stall torque within `torque_window` is flagged `servo_stalled`: a stalled servo is
+back-driven and reports no angle, so ζ and its rates are estimates from the cameras and the force is unreliable.
+Rejected inputs are counted by reason in `ContactForceTracker.rejects`.
 """
 from __future__ import annotations
 
@@ -34,6 +36,7 @@ import numpy as np
 
 from hexa.dynamics.identification import ARM_FORCE_MODELS, LINKS, identify_contact_force
 from hexa.dynamics.lagrange import DynamicsError, HexaDynamicParameters, motion_from_joint_rates
+from hexa.estimation import EstimatorConfig
 from hexa.kinematics.hexa6rus import forward_kinematics
 from hexa.stream_gate import TimeGate
 
@@ -110,19 +113,22 @@ class LocatedContact:
 
 @dataclass(frozen=True)
 class ArmState:
-    """One sample as identified: ζ (rad), ζ̇ (rad/s), ζ̈ (rad/s², filtered), τ (N·m, averaged) at `time` (s)."""
+    """One sample as identified: ζ (rad), ζ̇ (rad/s), ζ̈ (rad/s², filtered), τ (N·m, averaged) at `time` (s);
+    `stalled`: some servo's torque reached its stall torque in the averaging window."""
 
     time: float
     zeta: NDArray
     zeta_dot: NDArray
     zeta_ddot: NDArray
     tau: NDArray
+    stalled: bool = False
 
 
 @dataclass(frozen=True)
 class ContactForce:
     """The identified force (N, `base`) of a contact at sample `time` (s): the fields of
-    `ContactForceEstimate` (chain 0 for the plate) and whether it was identified retroactively (`backfilled`)."""
+    `ContactForceEstimate` (chain 0 for the plate), whether it was identified retroactively (`backfilled`) and whether
+    a servo was at its stall torque then (`servo_stalled`: the force is unreliable)."""
 
     time: float
     collision_id: int
@@ -136,6 +142,7 @@ class ContactForce:
     residual_norm: float
     force_model: str
     backfilled: bool
+    servo_stalled: bool = False
 
 
 class ContactForceTracker:
@@ -152,6 +159,8 @@ class ContactForceTracker:
         self.desc = desc
         self.config = config or ContactForceConfig()
         self.params = params or HexaDynamicParameters.from_description(desc)
+        #: N·m: a servo torque this large is a stalled servo (the ζ estimator's criterion: its angle is not measured)
+        self.stall_torque = EstimatorConfig().saturation * float(desc.torque_max)
         self.period = 1.0 / self.config.rate_hz if self.config.rate_hz > 0 else math.inf
         self.rejects = {k: 0 for k in REJECT_REASONS}
         self.forces = 0          # ContactForce results returned
@@ -162,8 +171,9 @@ class ContactForceTracker:
         self._time_gate = TimeGate(1.0, adopt_after=5)
         self.last_error = ""     # message of the last failed identification
         self._states: deque[ArmState] = deque()      # the last max(history, POSE_LOOKBACK) s
-        self._tau: deque[tuple[float, NDArray]] = deque()   # the samples of the last torque_window s
+        self._tau: deque[tuple[float, NDArray, bool]] = deque()   # the samples of the last torque_window s
         self._tau_sum = np.zeros(6)
+        self._stalled = 0                            # of which with a servo at its stall torque
         self._zd_prev: tuple[float, NDArray] | None = None
         self._zdd = np.zeros(6)
         self._pose: NDArray | None = None            # plate pose tracked from ζ
@@ -220,11 +230,15 @@ class ContactForceTracker:
             a = math.exp(-h / self.config.accel_tau)
             self._zdd = a * self._zdd + (1.0 - a) * (zeta_dot - self._zd_prev[1]) / h
         self._zd_prev = (t, zeta_dot)
-        self._tau.append((t, tau))
+        stalled = bool(np.max(np.abs(tau)) >= self.stall_torque)
+        self._tau.append((t, tau, stalled))
         self._tau_sum += tau
+        self._stalled += stalled
         while self._tau[0][0] < t - self.config.torque_window:
-            self._tau_sum -= self._tau.popleft()[1]
-        state = ArmState(t, zeta, zeta_dot, self._zdd.copy(), self._tau_sum / len(self._tau))
+            _, old, was = self._tau.popleft()
+            self._tau_sum -= old
+            self._stalled -= was
+        state = ArmState(t, zeta, zeta_dot, self._zdd.copy(), self._tau_sum / len(self._tau), self._stalled > 0)
         self._states.append(state)
         keep = max(self.config.history, POSE_LOOKBACK)
         while self._states[0].time < t - keep:
@@ -323,6 +337,7 @@ class ContactForceTracker:
         self._states.clear()
         self._tau.clear()
         self._tau_sum = np.zeros(6)
+        self._stalled = 0
         self._pending.clear()
         self._zd_prev, self._pose = None, None
         self._zdd = np.zeros(6)
@@ -453,7 +468,7 @@ class ContactForceTracker:
                             force=np.asarray(est.force, dtype=float), rank=int(est.rank),
                             condition=float(est.condition), observable=bool(est.observable),
                             residual_norm=float(est.residual_norm), force_model=est.force_model,
-                            backfilled=backfilled)
+                            backfilled=backfilled, servo_stalled=s.stalled)
 
 
 def _slot(start: float, spacing: float, t: float) -> float:
