@@ -285,3 +285,14 @@ def test_a_force_identified_while_a_servo_is_at_its_stall_torque_is_flagged_for_
     # a force is flagged while a stalled sample lies in its 20 ms torque window: 0.60 ... 0.66 s (0.649 + 0.02)
     assert flagged == pytest.approx([0.6, 0.61, 0.62, 0.63, 0.64, 0.65, 0.66])
     assert len(forces) == 30 and not any(f.servo_stalled for f in forces if f.time < 0.6 or f.time > 0.67)
+
+
+def test_without_a_grid_a_contact_is_identified_once_on_arrival():
+    tr = _tracker(rate_hz=0.0)
+    _run(tr, 0.0, 0.7, {_k(0.5): lambda: tr.on_collision("START", 1, 0.5)})
+    forces = tr.on_contact(_plate_contact(1, 0.6))       # backfilled at 0.60, 0.65 (50 ms slots), then the newest
+    assert [round(f.time, 3) for f in forces] == [0.6, 0.65, 0.699]
+    assert [f.backfilled for f in forces] == [True, True, False]
+    assert _run(tr, 0.7, 0.8) == []                        # no slots without a rate
+    (f,) = tr.on_contact(_plate_contact(1, 0.7))           # a later contact: once, on the newest state
+    assert f.time == pytest.approx(0.799) and not f.backfilled

@@ -288,7 +288,7 @@ class ContactForceTracker:
                 self._identified.discard(old)
                 self._push.pop(old, None)
             self._active = self._live = cid
-            self._due = t
+            self._due = t if math.isfinite(self.period) else math.inf      # rate_hz 0: no live slots
             self._started = max(self._started, cid)
             early = self._early.pop(cid, None)
             self._early = {k: c for k, c in self._early.items() if k > cid}
@@ -386,7 +386,9 @@ class ContactForceTracker:
         out: list[ContactForce] = []
         if cid in self._spans and cid not in self._identified:
             out.extend(self._backfill(contact, emit) or [])   # the slots between its image time and now
-        if math.isinf(self.period) or cid != self._live:   # no grid: identified once, on the newest state
+        newest = self.state
+        done = bool(out) and newest is not None and out[-1].time == newest.time    # the backfill reached it
+        if (math.isinf(self.period) or cid != self._live) and not done:   # no grid: once, on the newest state
             now = self._identify_now(contact)
             if now is not None:
                 out.append(now)
