@@ -43,6 +43,7 @@ import numpy as np
 
 from hexa.benchmarks import BenchRow
 from hexa_bringup.bench_graph_analysis import (cdr_stamp_ns, compare_contacts, compare_events, fifo_pairs,
+                                               matched_stamps,
                                                latency_stats, match_nearest, unwrap_board_us, within_percent)
 # the inputs played from a bag, relative to the graph's namespace: the replay graph's sensor inputs (one definition)
 from hexa_bringup.graphs import CAMERA_TOPICS, CAMERAS  # noqa: F401 - bench_graph_robot takes them from here
@@ -632,6 +633,7 @@ def summary_for_reference(r: ReplayResult) -> dict:
     return {"rate": r.rate, "events": strip,
             "contacts": [{k: v for k, v in c.items() if k != "recv"} for c in r.outputs["contact"]],
             "wrenches": len(r.outputs["contact_wrench"]), "poses": int(r.outputs["plate_pose"][0].size),
+            "wrench_stamps": sorted(w["stamp"] for w in r.outputs["contact_wrench"]),
             "residuals": int(r.outputs["residual"][0].size), "frames": r.frames, "currents": r.currents,
             "singularity": int(r.outputs["singularity"][0].size), "poses_matched": r.poses_matched,
             "residuals_missing": r.currents_after_first - r.residual_matched}
@@ -848,6 +850,12 @@ def replay_rows(r: ReplayResult, info: BagInputs, ref: dict | None, ref_note: st
         rows.append(BenchRow("vs slow replay: contacts", float(ok_c), "same", "count, link, chain", ok_c, note_c))
         rows.append(BenchRow("vs slow replay: contact_wrench count", diff, "%", "<= 5 %", diff <= 5.0,
                              f"{n_w} vs {ref['wrenches']}; {ref_note}"))
+        if "wrench_stamps" in ref:     # identified on the same sample times (within one sample of each other)
+            same = matched_stamps([w["stamp"] for w in out["contact_wrench"]], ref["wrench_stamps"],
+                                  info.stream_period + 1e-6)
+            rows.append(BenchRow("vs slow replay: contact_wrench at the same sample times", same, "msgs", "", None,
+                                 f"of {n_w} (reference {ref['wrenches']}), each within one sample of a reference "
+                                 f"wrench's"))
     else:
         rows.append(BenchRow("vs slow replay", float("nan"), "", "", None, ref_note))
     return rows
