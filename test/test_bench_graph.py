@@ -130,16 +130,6 @@ def test_contacts_compare_by_count_link_and_chain():
     assert within_percent(31, 32, 5.0) and not within_percent(30, 32, 5.0) and within_percent(0, 0, 5.0)
 
 
-def test_wrench_stamps_pair_one_to_one_within_the_tolerance():
-    from hexa_bringup.bench_graph_analysis import matched_stamps
-
-    ref = [4.604, 4.614, 4.624, 4.634]
-    assert matched_stamps(ref, ref, 0.001) == 4
-    assert matched_stamps([4.605, 4.615, 4.625, 4.635, 4.645], ref, 0.0011) == 4      # one sample later, one more
-    assert matched_stamps([4.607, 4.614], ref, 0.001) == 1                            # 3 ms off does not pair
-    assert matched_stamps([4.614, 4.614], ref, 0.001) == 1                            # one to one
-    assert matched_stamps([], ref, 0.001) == 0
-
 
 def test_cpu_sampler_reads_this_process():
     from hexa_bringup.bench_graph import CpuSampler

@@ -167,21 +167,6 @@ def compare_contacts(run: list[dict], ref: list[dict]) -> tuple[bool, str]:
     return ok, f"{len(a)} contacts ({text(a)}) vs reference {len(b)} ({text(b)})"
 
 
-def matched_stamps(run: list[float], ref: list[float], tolerance: float) -> int:
-    """How many of `run`'s stamps pair one to one, in order, with a stamp of `ref` within `tolerance` (s): both
-    sorted, each step pairs the two heads when they are close enough, else drops the earlier one."""
-    a, b = sorted(run), sorted(ref)
-    i = j = n = 0
-    while i < len(a) and j < len(b):
-        if abs(a[i] - b[j]) <= tolerance:
-            n, i, j = n + 1, i + 1, j + 1
-        elif a[i] < b[j]:
-            i += 1
-        else:
-            j += 1
-    return n
-
-
 def within_percent(value: int, ref: int, percent: float) -> bool:
     """|value - ref| <= percent % of ref (equal counts when ref is 0)."""
     return abs(value - ref) <= percent / 100.0 * ref if ref else value == 0

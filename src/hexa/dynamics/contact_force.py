@@ -179,7 +179,6 @@ class ContactForceTracker:
         self._pose: NDArray | None = None            # plate pose tracked from ζ
         self._camera: NDArray | None = None          # last camera pose, the FK seed when tracking is lost
         self._pending: list[tuple[float, NDArray]] = []  # camera poses newer than the newest state
-        self._active: int | None = None
         self._started = 0                            # newest collision id STARTed
         self._live: int | None = None                # collision whose slots the states still reach (to its END)
         self._due = math.inf                         # its next slot (s of sample time)
@@ -204,8 +203,9 @@ class ContactForceTracker:
 
     @property
     def active(self) -> int | None:
-        """Id of the collision in progress (None between collisions)."""
-        return self._active
+        """Id of the collision in progress: STARTed, its END not received (None between collisions)."""
+        cid = self._live
+        return cid if cid is not None and math.isinf(self._spans[cid][1]) else None
 
     # ------------------------------------------------------------------ inputs
     def step_state(self, t: float, zeta: NDArray, zeta_dot: NDArray, tau: NDArray) -> list[ContactForce]:
@@ -287,7 +287,7 @@ class ContactForceTracker:
                 self._spans.pop(old)
                 self._identified.discard(old)
                 self._push.pop(old, None)
-            self._active = self._live = cid
+            self._live = cid
             self._due = t if math.isfinite(self.period) else math.inf      # rate_hz 0: no live slots
             self._started = max(self._started, cid)
             early = self._early.pop(cid, None)
@@ -296,9 +296,7 @@ class ContactForceTracker:
         if kind != "END":
             raise ContactForceError(f"collision event must be 'START' or 'END', got {kind!r}")
         if cid in self._spans:
-            self._spans[cid][1] = t
-        if self._active == cid:
-            self._active = None        # its contacts stay until the states reach its END (step_state)
+            self._spans[cid][1] = t    # its contacts stay until the states reach its END (step_state)
         return []
 
     def on_contact(self, contact: LocatedContact, emit: Callable[[ContactForce], Any] | None = None
@@ -317,7 +315,7 @@ class ContactForceTracker:
             self.rejects["bad_chain"] += 1
             return []
         cid = int(contact.collision_id)
-        if self.config.require_collision and cid not in (self._active, self._live):
+        if self.config.require_collision and cid != self._live:
             if cid in self._spans and cid not in self._identified:
                 self._remember_push(cid, contact.push_direction)
                 out = self._backfill(contact, emit)
