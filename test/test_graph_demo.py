@@ -139,7 +139,8 @@ def test_the_live_cases_agree_with_hexa_eval_on_the_same_seed(demo_run):
         times = [offline["detect_time"]] + [offline_case(case, 0, DEFAULT_REALISM, phase, isolation="oracle",
                                                          identify=False)["detect_time"] for phase in phases]
         # the arm's live START also moves with the graph's scheduling; the plate's with the residual's noise: one
-        # sample back under the threshold restarts the 5-sample run (live 4.605-4.630 s against 4.630 s offline)
+        # sample back under the threshold restarts the 5-sample run, one noise sample over it starts it sooner
+        # (live 4.590-4.630 s in ten fresh-clone and working-copy runs against 4.630 s offline)
         # (live 6.496-6.575 s against 6.540-6.600 s over the phases on the realistic robot)
-        slack = 0.030 if case == "plate" else 0.080
+        slack = 0.045 if case == "plate" else 0.080
         assert min(times) - slack <= a.detect_live <= max(times) + slack, (a, times)
