@@ -148,6 +148,22 @@ def test_a_servo_board_reset_with_the_port_open_is_configured_again(tmp_path):
         assert link.stats.connects == 1
 
 
+def test_a_servo_board_without_targets_is_not_taken_for_a_quiet_one(tmp_path):
+    # the board reports a pulse frame only while some output is on: before the first targets no LATCH is due
+    latches = []
+    with UnoEmulator(link=tmp_path / "uno") as uno, \
+            ServoLink(uno.port, on_latch=lambda x, t: latches.append(t), stale_timeout=0.2,
+                      stream_reconnect_after=0.5) as link:
+        assert link.wait_connected(3.0) and link.latch_supported
+        time.sleep(1.5)                     # three times the stream's reconnect time, without targets
+        assert (link.stats.connects, link.stats.disconnects, link.watch.reconnects) == (1, 0, 0)
+        assert latches == [] and link.reconfigures["latch_quiet"] == 0
+        link.set_targets([1500] * 6)
+        assert _wait(lambda: len(latches) > 5, 2.0) and link.watch.active
+        uno.reset()                         # outputs off, no latch report: now the quiet stream is recovered
+        assert _wait(lambda: link.reconfigures["latch_quiet"] + link.reconfigures["outputs_off"] >= 1, 2.0)
+
+
 def test_servo_link_restores_last_targets_after_the_board_comes_back(tmp_path):
     got = []
     with UnoEmulator(on_targets=got.append, link=tmp_path / "uno") as uno, ServoLink(uno.port) as link:

@@ -461,11 +461,10 @@ class ServoLink(BoardLink):
     without the report answers UNKNOWN_TYPE: the link connects anyway, with `latch_supported` False.
 
     A board that reset with its port open (its hardware watchdog, a brown-out) forgets its configuration: the link
-    configures it again, counted by reason in `reconfigures`, when its LATCH reports go quiet (`watch`: then, still
-    quiet, it reconnects), when its STATUS shows the outputs off although targets were sent ("outputs_off"), and when
-    its STATUS shows the command watchdog holding although a command went out well within `watchdog_ms`
-    ("watchdog_hold").
-    """
+    configures it again, counted by reason in `reconfigures`, when its LATCH reports go quiet after targets were sent
+    (`watch`: then, still quiet, it reconnects), when its STATUS shows the outputs off although targets were sent
+    ("outputs_off"), and when its STATUS shows the command watchdog holding although a command went out well within
+    `watchdog_ms` ("watchdog_hold"). A board without targets sends no LATCH, and none is expected of it."""
 
     kind = fr.BOARD_SERVO
 
@@ -496,7 +495,6 @@ class ServoLink(BoardLink):
             try:
                 self.request(fr.SET_LATCH_REPORT, fr.pack_latch_report(True))
                 self.latch_supported = True
-                self.watch.start(time.monotonic())
             except LinkError as exc:   # firmware before the latch report: the link works without it
                 if "UNKNOWN_TYPE" not in str(exc):
                     raise
@@ -504,6 +502,13 @@ class ServoLink(BoardLink):
                 self.stats.last_error = str(exc)
         if self.last_targets is not None:  # after a board reset: restore what the host believes is commanded
             self._restore_targets()
+            self._watch_latches()
+
+    def _watch_latches(self) -> None:
+        """Expect LATCH reports from now on: the board reports a pulse frame only when some output is on, that is
+        once it has targets, so a board that has none is not taken for a quiet one."""
+        if self.latch_supported and not self.watch.active:
+            self.watch.start(time.monotonic())
 
     def _restore_targets(self) -> None:
         if self.last_targets is not None and self.send(fr.SET_TARGETS, fr.pack_targets(self.last_targets)) is not None:
@@ -537,6 +542,7 @@ class ServoLink(BoardLink):
             self._targets_tx = time.monotonic()
             if self._targets_since is None:
                 self._targets_since = self._targets_tx
+            self._watch_latches()
         self.targets_sent += ok
         return ok
 
