@@ -76,6 +76,33 @@ def test_sigint_is_forwarded_to_every_node_which_stops_cleanly(procs, tmp_path):
     assert "stopping 3 nodes (signal SIGINT)" in out
 
 
+def test_a_node_that_does_not_stop_writes_where_it_hangs_to_its_log_before_it_is_killed(tmp_path):
+    import io
+
+    from hexa_bringup.supervisor import NodeSpec, Supervisor
+
+    # a hexa node's signal handling (hexa_ros.node), then a stop request that never ends the main thread's wait in C
+    code = ("import threading, sys\n"
+            "from hexa_ros import node\n"
+            "node.install_signal_handlers(); node.stop_on_signal()\n"
+            "def wait_for_a_lock_nobody_releases():\n"
+            "    print('waiting', flush=True); threading.Event().wait()\n"
+            "wait_for_a_lock_nobody_releases()\n")
+    out = io.StringIO()
+    sup = Supervisor([NodeSpec("stuck", [PY, "-c", code])], dict(__import__("os").environ),
+                     log_dir=str(tmp_path / "logs"), out=out)
+    sup._start(sup.nodes[0])
+    log = tmp_path / "logs" / "stuck.log"
+    t_end = time.monotonic() + 30
+    while "waiting" not in (log.read_text() if log.exists() else "") and time.monotonic() < t_end:
+        time.sleep(0.05)
+    sup.stop_all(timeout=1.0)
+    assert sup.nodes[0].last_rc == -signal.SIGKILL
+    assert "stuck: did not stop within 1 s" in out.getvalue()
+    text = log.read_text()
+    assert "most recent call first" in text and "wait_for_a_lock_nobody_releases" in text, text
+
+
 def test_bringup_without_installed_nodes_or_with_a_bad_graph_file_says_why(tmp_path):
     bad = tmp_path / "g.yaml"
     bad.write_text("- {name: x}\n")

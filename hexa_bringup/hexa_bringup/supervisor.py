@@ -10,6 +10,8 @@ import time
 from dataclasses import dataclass, field
 from typing import Callable, TextIO
 
+from hexa_ros.node import DUMP_STACKS_SIGNAL
+
 
 class SupervisorError(RuntimeError):
     """A required node could not be started (missing module, or it keeps dying at start-up)."""
@@ -161,7 +163,8 @@ class Supervisor:
         self._stop_signal = signum
 
     def stop_all(self, signum: int = signal.SIGINT, timeout: float = 10.0) -> None:
-        """Forward `signum` to every node's process group, wait up to `timeout`, then SIGKILL what is left."""
+        """Forward `signum` to every node's process group, wait up to `timeout`, then SIGKILL what is left (after
+        asking it to write its threads' stacks to its log: hexa_ros.node.install_signal_handlers)."""
         live = [n for n in self.nodes if n.proc is not None and n.proc.poll() is None]
         for n in live:
             try:
@@ -173,7 +176,13 @@ class Supervisor:
             try:
                 n.proc.wait(timeout=max(0.1, deadline - time.monotonic()))
             except subprocess.TimeoutExpired:
-                self._say(f"{n.spec.name}: did not stop within {timeout:g} s; killing")
+                self._say(f"{n.spec.name}: did not stop within {timeout:g} s; killing (its threads' stacks are at "
+                          "the end of its log)")
+                try:
+                    os.killpg(n.proc.pid, DUMP_STACKS_SIGNAL)   # hexa_ros.node: each thread's stack to its log
+                    n.proc.wait(timeout=0.5)
+                except (ProcessLookupError, subprocess.TimeoutExpired):
+                    pass
                 try:
                     os.killpg(n.proc.pid, signal.SIGKILL)
                 except ProcessLookupError:

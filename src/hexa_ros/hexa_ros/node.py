@@ -32,6 +32,8 @@ SPIN_STEP = 0.2
 #: the process only when one is set (hexa_ros.realtime stays unimported otherwise)
 REQUESTED_PRIORITY = "_hexa_realtime_priority"
 EXECUTORS = ("events", "single")
+#: the signal that makes a hexa node write its threads' stacks to stderr (`install_signal_handlers`)
+DUMP_STACKS_SIGNAL = signal.SIGUSR1
 
 
 def _raise_keyboard_interrupt(_signum: int, _frame: Any) -> None:
@@ -41,9 +43,16 @@ def _raise_keyboard_interrupt(_signum: int, _frame: Any) -> None:
 
 def install_signal_handlers() -> None:
     """SIGINT and SIGTERM raise KeyboardInterrupt in the main thread (rclpy's own handler stays off) and record the
-    stop request (`stop_requested`): an import interrupted by it raises ImportError, not KeyboardInterrupt."""
+    stop request (`stop_requested`): an import interrupted by it raises ImportError, not KeyboardInterrupt.
+
+    SIGUSR1 writes every thread's Python stack to stderr (the node's log under `hexa bringup`), also while the main
+    thread is blocked in C: the supervisor sends it to a node that does not stop before it kills the node, so the log
+    says where it hung."""
+    import faulthandler
+
     signal.signal(signal.SIGINT, _raise_keyboard_interrupt)
     signal.signal(signal.SIGTERM, _raise_keyboard_interrupt)
+    faulthandler.register(DUMP_STACKS_SIGNAL, all_threads=True)
 
 
 def make_executor(kind: str, context: Any = None) -> Any:
