@@ -139,7 +139,8 @@ def test_driver_recovers_from_unplug_within_two_seconds_and_diagnostics_show_it(
         assert float(d["last_reconnect_s"]) < 2.5
         uno_d = wait_for(lambda: (s := probe.diag_status("servo board")) is not None and
                          kv(s)["state"] == "CONNECTED" and kv(s), 3.0)
-        assert uno_d and int(uno_d["disconnects"]) == 2 and int(uno_d["targets_restored_after_reconnect"]) == 2, repr(uno_d)
+        assert uno_d, "the servo board's diagnostics did not return to CONNECTED"
+        assert int(uno_d["disconnects"]) == 2 and int(uno_d["targets_restored_after_reconnect"]) == 2, uno_d
 
 
 def _level(status) -> int:
