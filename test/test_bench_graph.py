@@ -80,6 +80,26 @@ def test_the_bench_helpers_run_at_the_observers_configured_priority(tmp_path):
     assert safety_priority(tmp_path / "none.yaml") == 0
 
 
+def test_the_realtime_priority_option_raises_the_safety_path_as_bringup_does(tmp_path):
+    from hexa_bringup.bench_graph import graph_specs, safety_priority
+    from hexa_bringup.graphs import DEFAULT_PARAMS
+
+    assert safety_priority(DEFAULT_PARAMS, priority=50) == 50 and safety_priority(DEFAULT_PARAMS) == 0
+    replay = {s.name: s.cmd for s in graph_specs("replay", "/hexa", DEFAULT_PARAMS, priority=50)}
+    assert {n for n, cmd in replay.items() if "realtime_priority:=50" in cmd} == {"observer"}
+    robot = {s.name: s.cmd for s in graph_specs("robot", "/hexa", DEFAULT_PARAMS, {"driver": ["-p", "x:=1"]},
+                                                priority=50)}
+    assert {n for n, cmd in robot.items() if "realtime_priority:=50" in cmd} == {"driver", "observer"}
+    assert "x:=1" in robot["driver"]
+    # composed, the observer keeps a process of its own at that priority (a node with arguments is not composed)
+    composed = graph_specs("replay", "/hexa", DEFAULT_PARAMS, compose=True, priority=50)
+    [observer] = [s for s in composed if "realtime_priority:=50" in s.cmd]
+    assert observer.name == "observer"
+    r = subprocess.run([PY, "-m", "hexa_bringup.cli", "bench", "graph", "--realtime-priority", "120", "--no-robot",
+                        "--no-sim", "--cache", str(tmp_path)], capture_output=True, text=True, timeout=120)
+    assert r.returncode != 0 and "--realtime-priority must be 0" in r.stderr and "Traceback" not in r.stderr
+
+
 def test_frames_sharing_a_stamp_pair_in_order():
     from hexa_bringup.bench_graph_analysis import fifo_pairs
 

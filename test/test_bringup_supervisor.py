@@ -135,6 +135,31 @@ def test_robot_mode_approaches_the_start_slowly_by_default_and_sim_only_when_ask
         mode_node_args(args("robot", float("nan")))
 
 
+def test_realtime_priority_raises_the_safety_path_in_the_graph_bringup_builds(tmp_path):
+    import argparse
+
+    from hexa_bringup.commands.bringup import mode_node_args
+    from hexa_bringup.graphs import DEFAULT_PARAMS, build_graph
+    from hexa_bringup.supervisor import SupervisorError
+
+    def args(priority):
+        return argparse.Namespace(mode="robot", uno="/dev/ttyACM0", mega="/dev/ttyACM1", cameras=[],
+                                  approach_speed=None, realtime_priority=priority)
+
+    node_args = mode_node_args(args(50))
+    specs = {s.name: s.cmd for s in build_graph("robot", "/hexa", DEFAULT_PARAMS, node_args)}
+    raised = {name for name, cmd in specs.items() if "realtime_priority:=50" in cmd}
+    assert raised == {"driver", "observer"}, specs
+    assert "uno_port:=/dev/ttyACM0" in specs["driver"]           # beside the mode's own arguments
+    assert not any("realtime_priority" in a for a in mode_node_args(args(None)).get("observer", []))
+    for bad in (-1, 100):
+        with pytest.raises(SupervisorError, match="--realtime-priority must be 0"):
+            mode_node_args(args(bad))
+    r = subprocess.run([PY, "-m", "hexa_bringup.cli", "bringup", "robot", "--uno", "u", "--mega", "m",
+                        "--realtime-priority", "120"], capture_output=True, text=True, timeout=60)
+    assert r.returncode == 2 and "--realtime-priority must be 0" in r.stderr and "Traceback" not in r.stderr
+
+
 def test_realism_reaches_the_simulator_in_sim_mode_and_is_refused_elsewhere():
     import argparse
 

@@ -8,7 +8,8 @@ each input. The report: CPU per node process from /proc over the playing window,
 current sample → residual, collision START → first contact and first contact_wrench), inputs against outputs per
 node, and the outputs against a slow replay (rate 0.3) of the same bag. The player stands in for the driver and
 the measuring subscriber must not add its own wait to what it measures: both run at the observer's
-`realtime_priority` of the parameters file (`safety_priority`; hexa_ros.realtime), as the driver does.
+`realtime_priority` (`safety_priority`: `--realtime-priority`, else the parameters file's; hexa_ros.realtime), as
+the driver does.
 
 Robot: the graph `hexa bringup robot` starts, without the simulator and the trajectory node, at 1× wall time: both
 camera nodes in `folder` source on frames of the bag taken while the robot was at rest, the driver against the
@@ -85,6 +86,7 @@ class Options:
     ready_timeout: float = 120.0
     compose: bool = False
     stream_rate: int = RECORD_STREAM_HZ
+    realtime_priority: int | None = None
 
 
 def say(text: str) -> None:
@@ -328,10 +330,14 @@ def node_names(cmd: list[str], default: str) -> list[str]:
     return names or [default]
 
 
-def safety_priority(params: Path, ns: str = "/hexa") -> int:
-    """The SCHED_FIFO priority `params` gives the observer (`realtime_priority`; the node's default without one):
-    the bench's stand-ins for the driver and the boards, and its measuring subscriber, run at it too."""
+def safety_priority(params: Path, ns: str = "/hexa", priority: int | None = None) -> int:
+    """The SCHED_FIFO priority of the observer: `priority` (`--realtime-priority`) when given, else what `params`
+    gives it (`realtime_priority`; the node's default without one). The bench's stand-ins for the driver and the
+    boards, and its measuring subscriber, run at it too."""
     import yaml
+
+    if priority is not None:
+        return int(priority)
 
     from hexa_bringup.commands.service import node_parameters
 
@@ -344,19 +350,21 @@ def safety_priority(params: Path, ns: str = "/hexa") -> int:
 
 
 def graph_specs(mode: str, ns: str, params: Path, node_args: dict[str, list[str]] | None = None,
-                compose: bool = False) -> list:
-    """hexa_bringup.graphs.build_graph(...), as `hexa bringup MODE [--compose]` builds it (in sim mode with the
-    calibration overlay of the simulated robot for every node but the simulator).
+                compose: bool = False, priority: int | None = None) -> list:
+    """hexa_bringup.graphs.build_graph(...), as `hexa bringup MODE [--compose] [--realtime-priority priority]` builds
+    it (in sim mode with the calibration overlay of the simulated robot for every node but the simulator).
 
     Raises:
         BenchGraphError: a required node is not installed, composition is asked of a builder without it, or the
         simulated robot cannot be calibrated.
     """
-    from hexa_bringup.commands.bringup import with_nodes_description
+    from hexa_bringup.commands.bringup import with_nodes_description, with_realtime_priority
     from hexa_bringup.graphs import build_graph
     from hexa_bringup.supervisor import SupervisorError
 
     try:
+        if priority is not None:
+            node_args = with_realtime_priority(dict(node_args or {}), priority)
         node_args = with_nodes_description(mode, ns, params, dict(node_args or {}),   # stdout: the bench's table
                                            log=lambda line: print(f"hexa bench graph: {line}", file=sys.stderr))
         if compose:
@@ -639,9 +647,10 @@ def summary_for_reference(r: ReplayResult) -> dict:
 
 
 def replay_once(info: BagInputs, index: dict, rate: float, env: dict[str, str], params: Path, work: Path,
-                ready_timeout: float, compose: bool = False) -> ReplayResult:
-    """Bring up the replay graph, wait for it, play the bag's inputs at `rate`, collect the outputs."""
-    specs = graph_specs("replay", info.ns, params, compose=compose)
+                ready_timeout: float, compose: bool = False, priority: int | None = None) -> ReplayResult:
+    """Bring up the replay graph, wait for it, play the bag's inputs at `rate`, collect the outputs (`priority`:
+    `--realtime-priority`)."""
+    specs = graph_specs("replay", info.ns, params, compose=compose, priority=priority)
     if work.exists():
         shutil.rmtree(work)
     work.mkdir(parents=True)
@@ -657,7 +666,7 @@ def replay_once(info: BagInputs, index: dict, rate: float, env: dict[str, str], 
     what = f"replay at {rate:g}x"
     t_start = time.monotonic()
     with Children(env) as ch:
-        priority = safety_priority(params, ns)
+        priority = safety_priority(params, ns, priority)
         probe = Probe(ch, work, probe_spec, priority=priority)
         for s in specs:
             ch.start(s.name, s.cmd, log=work / f"{s.name}.log")
@@ -730,9 +739,9 @@ def replay_once(info: BagInputs, index: dict, rate: float, env: dict[str, str], 
         settling=first, wall=time.monotonic() - t_start)
 
 
-def reference_key(info: BagInputs, params: Path, compose: bool = False) -> str:
+def reference_key(info: BagInputs, params: Path, compose: bool = False, priority: int | None = None) -> str:
     """Cache key of a reference replay: the bag's files, the replay graph's command lines, the parameters."""
-    specs = graph_specs("replay", info.ns, params, compose=compose)
+    specs = graph_specs("replay", info.ns, params, compose=compose, priority=priority)
     h = hashlib.sha256()
     h.update(json.dumps({"v": 1, "rate": REFERENCE_RATE, "bag": str(info.path.resolve()),
                          "files": bag_identity(info.path), "graph": [[s.name, s.cmd] for s in specs],
@@ -873,6 +882,9 @@ def run(opts: Options) -> dict[str, Any]:
     params = opts.params if opts.params is not None else DEFAULT_PARAMS
     if not params.is_file():
         raise BenchGraphError(f"parameter file {params} not found")
+    if opts.realtime_priority is not None and not 0 <= opts.realtime_priority <= 99:
+        raise BenchGraphError(f"--realtime-priority must be 0 (normal scheduling) or a SCHED_FIFO priority 1-99, "
+                              f"got {opts.realtime_priority}")
     if not opts.rate > 0:
         raise BenchGraphError(f"--rate must be > 0, got {opts.rate}")
     cache = opts.cache
@@ -916,7 +928,7 @@ def run(opts: Options) -> dict[str, Any]:
                                                "rest_currents_a": scene.amps, "rest_zeta_rad": scene.zeta}
                     for hz in ROBOT_RATES:
                         r = robot_once(info, scene, hz, env, params, cache / "graph_logs" / f"robot_{hz}hz",
-                                       opts.robot_duration, opts.ready_timeout, opts.compose)
+                                       opts.robot_duration, opts.ready_timeout, opts.compose, opts.realtime_priority)
                         results[f"graph robot {hz} Hz"] = [row.as_dict() for row in robot_rows(r)]
                         info_out[f"robot_{hz}hz"] = {
                             "boards": r.boards, "nodes": r.nodes, "pids": r.pids, "rates_hz": r.rates,
@@ -929,7 +941,7 @@ def run(opts: Options) -> dict[str, Any]:
                 from hexa_bringup.bench_graph_sim import sim_once, sim_rows
 
                 r = sim_once(env, params, cache / "graph_logs" / "sim", opts.robot_duration, opts.ready_timeout,
-                             opts.compose)
+                             opts.compose, opts.realtime_priority)
                 results["graph sim 1x"] = [row.as_dict() for row in sim_rows(r)]
                 info_out["sim"] = {"rtf": r.rtf, "window_s": r.window, "nodes": r.nodes, "pids": r.pids,
                                    "counts": r.counts}
@@ -945,11 +957,11 @@ def _replay_section(opts: Options, info: BagInputs, env: dict[str, str], params:
     say("indexing the bag's inputs")
     index = input_index(info)
     r = replay_once(info, index, opts.rate, env, params, cache / "graph_logs" / "replay", opts.ready_timeout,
-                    opts.compose)
+                    opts.compose, opts.realtime_priority)
     say(f"replay at {opts.rate:g}x done in {r.wall:.0f} s")
     ref, ref_note = None, "no slow replay (--no-reference)"
     if opts.reference:
-        key = reference_key(info, params, opts.compose)
+        key = reference_key(info, params, opts.compose, opts.realtime_priority)
         path = cache / "graph_reference" / f"{key}.json"
         if path.exists():
             ref = json.loads(path.read_text())
@@ -959,7 +971,7 @@ def _replay_section(opts: Options, info: BagInputs, env: dict[str, str], params:
             say(f"slow replay at {REFERENCE_RATE:g}x for the comparison (about {info.duration / REFERENCE_RATE:.0f} "
                 f"s of playing; cached for the next runs)")
             rr = replay_once(info, index, REFERENCE_RATE, env, params, cache / "graph_logs" / "reference",
-                             opts.ready_timeout, opts.compose)
+                             opts.ready_timeout, opts.compose, opts.realtime_priority)
             ref = summary_for_reference(rr)
             if ref["residuals_missing"] == 0:
                 path.parent.mkdir(parents=True, exist_ok=True)

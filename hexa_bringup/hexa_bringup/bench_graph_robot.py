@@ -157,8 +157,10 @@ class RobotResult:
 
 
 def robot_once(info: BagInputs, scene: RestScene, stream_hz: int, env: dict[str, str], params: Path, work: Path,
-               duration: float, ready_timeout: float, compose: bool = False) -> RobotResult:
-    """The robot graph on emulated boards and folder cameras, measured for `duration` s after a warm-up."""
+               duration: float, ready_timeout: float, compose: bool = False, priority: int | None = None
+               ) -> RobotResult:
+    """The robot graph on emulated boards and folder cameras, measured for `duration` s after a warm-up (`priority`:
+    `--realtime-priority`)."""
     if work.exists():
         shutil.rmtree(work)
     work.mkdir(parents=True)
@@ -171,7 +173,7 @@ def robot_once(info: BagInputs, scene: RestScene, stream_hz: int, env: dict[str,
     for name, cam in (("camera_top", "cam_top"), ("camera_side", "cam_side")):
         node_args[name] = ["-p", "source:=folder", "-p", f"camera:={cam}", "-p", f"path:={scene.frames / cam}",
                            "-p", f"rate:={scene.fps:g}", "-p", "loop:=true"]
-    specs = [s for s in graph_specs("robot", ns, params, node_args, compose) if s.name != "trajectory"]
+    specs = [s for s in graph_specs("robot", ns, params, node_args, compose, priority) if s.name != "trajectory"]
     replay_nodes = {n for s in graph_specs("replay", ns, params) for n in node_names(s.cmd, s.name)}
     nodes = {s.name: node_names(s.cmd, s.name) for s in specs}
     specs = [s for s in specs if "trajectory" not in nodes[s.name]]
@@ -191,7 +193,7 @@ def robot_once(info: BagInputs, scene: RestScene, stream_hz: int, env: dict[str,
                   "ready_publishers": [f"{ns}/{t}" for t in OUTPUTS],
                   "ready_messages": [f"{ns}/residual", f"{ns}/plate_pose"], "hold_command": scene.zeta}
     what = f"robot mode, currents at {stream_hz} Hz"
-    priority = safety_priority(params, ns)     # the boards and the subscriber at the safety path's priority
+    priority = safety_priority(params, ns, priority)   # the boards and the subscriber at the safety path's
     try:
         with Children(env) as ch:
             boards = ch.start("boards", [sys.executable, "-m", "hexa_bringup.bench_graph_probe", "boards", str(uno),

@@ -40,12 +40,13 @@ class SimResult:
 
 
 def sim_once(env: dict[str, str], params: Path, work: Path, duration: float, ready_timeout: float,
-             compose: bool = False) -> SimResult:
-    """Bring up the sim graph, wait for /clock, measure `duration` wall seconds after WARM_UP, stop it."""
+             compose: bool = False, priority: int | None = None) -> SimResult:
+    """Bring up the sim graph, wait for /clock, measure `duration` wall seconds after WARM_UP, stop it (`priority`:
+    `--realtime-priority`)."""
     link_dir = f"/tmp/hexa_bench_sim_{os.getpid()}"
     node_args = {"sim": ["-p", "real_time_factor:=1.0", "-p", f"link_dir:={link_dir}"],
                  "driver": ["-p", f"uno_port:={link_dir}/uno", "-p", f"mega_port:={link_dir}/mega"]}
-    specs = graph_specs("sim", "/hexa", params, node_args, compose=compose)
+    specs = graph_specs("sim", "/hexa", params, node_args, compose=compose, priority=priority)
     nodes = {s.name: node_names(s.cmd, s.name) for s in specs}
     ns = "/hexa"
     spec = {"ns": ns, "topics": [{"topic": "/clock", "type": "rosgraph_msgs/msg/Clock", "qos": "reliable",
@@ -58,7 +59,8 @@ def sim_once(env: dict[str, str], params: Path, work: Path, duration: float, rea
             "ready_messages": ["/clock"]}
     work.mkdir(parents=True, exist_ok=True)
     try:
-        received, pids, cpu_pct, t0, t1 = _measure(env, specs, nodes, spec, work, duration, ready_timeout, params)
+        received, pids, cpu_pct, t0, t1 = _measure(env, specs, nodes, spec, work, duration, ready_timeout,
+                                                   safety_priority(params, priority=priority))
     finally:
         shutil.rmtree(link_dir, ignore_errors=True)     # the virtual boards' serial links
     clocks = [(t_ns * 1e-9, cdr_stamp_ns(data) * 1e-9) for t_ns, data in received.get("/clock", [])]
@@ -76,11 +78,12 @@ def sim_once(env: dict[str, str], params: Path, work: Path, duration: float, rea
 
 
 def _measure(env: dict[str, str], specs: list, nodes: dict, spec: dict, work: Path, duration: float,
-             ready_timeout: float, params: Path) -> tuple[dict, dict, dict, float, float]:
-    """Start the graph and the probe, measure `duration` wall s after WARM_UP, stop them: what the probe received,
-    the pids, CPU % per process over the window, and the window's ends."""
+             ready_timeout: float, priority: int) -> tuple[dict, dict, dict, float, float]:
+    """Start the graph and the probe (at SCHED_FIFO `priority`, the safety path's), measure `duration` wall s after
+    WARM_UP, stop them: what the probe received, the pids, CPU % per process over the window, and the window's
+    ends."""
     with Children(env) as ch:
-        probe = Probe(ch, work, spec, priority=safety_priority(params))
+        probe = Probe(ch, work, spec, priority=priority)
         for s in specs:
             ch.start(s.name, s.cmd, log=work / f"{s.name}.log")
         say(f"sim mode: starting {len(specs)} node processes ({', '.join(nodes)}) and waiting for /clock")

@@ -8,7 +8,7 @@ import argparse
 import json
 
 GRAPH_OPTIONS = ("rate", "no_reference", "robot", "no_robot", "sim", "no_sim", "robot_duration", "cache", "params",
-                 "domain_id", "compose", "stream_rate")
+                 "domain_id", "compose", "stream_rate", "realtime_priority")
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -41,6 +41,9 @@ def register(sub: argparse._SubParsersAction) -> None:
     g.add_argument("--stream-rate", type=int, default=None, metavar="HZ",
                    help="without BAG: the current-sample rate of the simulated bag (default 1000; the driver's "
                         "default is 200)")
+    g.add_argument("--realtime-priority", type=int, default=None, metavar="N",
+                   help="the safety path (driver, observer) at SCHED_FIFO N, as `hexa bringup --realtime-priority`: "
+                        "its stand-ins and the measuring subscriber too (default: the parameters file's, 0)")
     g.add_argument("--compose", action="store_true",
                    help="the graph as `hexa bringup --compose` starts it (several nodes per process; CPU per process)")
     g.add_argument("--domain-id", type=int, default=None,
@@ -114,5 +117,6 @@ def run_graph(args: argparse.Namespace) -> int:
                    robot=not (args.no_robot or args.sim), sim=not (args.no_sim or args.robot),
                    robot_duration=duration, cache=Path(args.cache) if args.cache else Path("out/bench"),
                    params=Path(args.params) if args.params else None, domain_id=args.domain_id,
-                   compose=args.compose, stream_rate=1000 if args.stream_rate is None else args.stream_rate)
+                   compose=args.compose, stream_rate=1000 if args.stream_rate is None else args.stream_rate,
+                   realtime_priority=args.realtime_priority)
     return main(opts, args.json, args.out, print_rows)

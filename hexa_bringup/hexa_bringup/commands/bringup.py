@@ -9,6 +9,8 @@ from pathlib import Path
 
 #: rad/s: the robot mode's approach from the measured pose to the trajectory's start (hobby servos: ≈ 6 rad/s)
 ROBOT_APPROACH_SPEED = 0.3
+#: the nodes of the 1 kHz safety path, which `--realtime-priority` raises (hexa_ros.realtime)
+SAFETY_PATH = ("driver", "observer")
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -43,6 +45,11 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--description", default=None, metavar="YAML",
                    help="robot description or calibration overlay (`hexa calibrate identify`) for every node but "
                         "the simulator (which stays the robot); default: the packaged description")
+    p.add_argument("--realtime-priority", type=int, default=None, metavar="N",
+                   help="run the safety path (driver, observer) at SCHED_FIFO N (1-99; 50 on the robot PC, as "
+                        "ros2_control) or 0 for normal scheduling; default: the parameters file's "
+                        "`realtime_priority` (0). Needs root or an rtprio limit; without, the nodes run at normal "
+                        "priority and say so (docs/running.md)")
     p.add_argument("--compose", action="store_true",
                    help="run pose + isolation in one process and observer + rnea + singularity in another "
                         "(hexa_ros.compose; fewer processes, one interpreter per group)")
@@ -100,7 +107,27 @@ def mode_node_args(args: argparse.Namespace) -> dict[str, list[str]]:
     if args.mode == "upsrpu":
         node_args["singularity"] = ["-p", "robot:=upsrpu", "-p", "input:=markers"]
         node_args["srm"] = ["-p", "input:=markers"]
+    priority = getattr(args, "realtime_priority", None)
+    if priority is not None:
+        node_args = with_realtime_priority(node_args, priority)
     return node_args
+
+
+def with_realtime_priority(node_args: dict[str, list[str]], priority: int) -> dict[str, list[str]]:
+    """`node_args` with `realtime_priority:=priority` for the safety path's nodes (`SAFETY_PATH`).
+
+    Raises:
+        hexa_bringup.supervisor.SupervisorError: `priority` outside 0..99.
+    """
+    from hexa_bringup.supervisor import SupervisorError
+
+    if not 0 <= int(priority) <= 99:
+        raise SupervisorError(f"--realtime-priority must be 0 (normal scheduling) or a SCHED_FIFO priority 1-99, "
+                              f"got {priority}")
+    out = dict(node_args)
+    for name in SAFETY_PATH:
+        out[name] = out.get(name, []) + ["-p", f"realtime_priority:={int(priority)}"]
+    return out
 
 
 def _say(line: str) -> None:
