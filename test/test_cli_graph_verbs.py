@@ -171,7 +171,7 @@ def test_param_describe_dump_and_load(graph, tmp_path):
 
 
 def test_doctor_reports_the_middleware_the_graph_and_the_firmware(graph):
-    r = hexa(graph, "doctor", "--json", "--wait", "3")
+    r = hexa(graph, "doctor", "--json", "--wait", "8")    # discovery of the node: seconds on a loaded machine
     assert r.stdout, r.stderr
     report = json.loads(r.stdout)
     checks = {c["name"]: c for c in report["checks"]}
