@@ -375,12 +375,14 @@ def test_a_stopped_driver_dates_its_next_command_after_the_samples_that_waited_i
         assert steps.max() <= 10.0, steps.max()
 
 
+@pytest.mark.ros_parallel   # starts a node that refuses its parameters: no live timing
 def test_driver_refuses_a_negative_board_clock_extrapolation(procs, ros_env):
     p = procs.start([DRIVER, "--ros-args", "-p", "board_clock_max_extrapolation:=-1.0"], ros_env)
     _out, err = p.communicate(timeout=60)
     assert p.returncode == 2 and "board_clock_max_extrapolation" in err, err
 
 
+@pytest.mark.ros_parallel   # starts a node that refuses its parameters: no live timing
 def test_driver_refuses_a_bad_command_sync_guard(procs, ros_env):
     p = procs.start([DRIVER, "--ros-args", "-p", "command_sync_guard:=0.01"], ros_env)
     _out, err = p.communicate(timeout=60)

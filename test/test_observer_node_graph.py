@@ -44,6 +44,7 @@ def test_observer_node_detects_the_push_and_takes_runtime_thresholds(procs, ros_
     assert node.returncode == 0 and "Traceback" not in err, err
 
 
+@pytest.mark.ros_parallel   # starts a node that refuses its parameters: no live timing
 @pytest.mark.parametrize("module, param", [("hexa_dynamics.observer_node", "zeta_source"),
                                            ("hexa_dynamics.observer_node", "servo_thresholds"),
                                            ("hexa_dynamics.rnea_node", "arm_force_model"),

@@ -26,6 +26,7 @@ def test_trajectory_node_holds_on_collision_and_resumes_on_service_call(procs, r
     assert r["after_resume_moves"] > 1e-3
 
 
+@pytest.mark.ros_parallel   # starts a node that refuses its parameters: no live timing
 def test_trajectory_node_rejects_an_unknown_trajectory_with_a_clear_error(procs, ros_env):
     p = procs.start([PY, "-m", "hexa_dynamics.trajectory_node", "--ros-args", "-p", "trajectory:=square"], ros_env)
     _out, err = p.communicate(timeout=60)
@@ -52,6 +53,7 @@ def test_trajectory_node_approaches_the_start_slowly_from_the_measured_pose(proc
     assert r["approach_peak_rate"] < 0.3 * 1.3                        # stamps jitter: 30 % margin
 
 
+@pytest.mark.ros_parallel   # starts a node that refuses its parameters: no live timing
 def test_trajectory_node_refuses_a_negative_approach_speed(procs, ros_env):
     p = procs.start([PY, "-m", "hexa_dynamics.trajectory_node", "--ros-args", "-p", "approach_speed:=-1.0"],
                     ros_env)

@@ -44,6 +44,7 @@ def rclpy_node(ros_env):
         os.environ.update(old)
 
 
+@pytest.mark.ros_parallel   # starts a node that refuses its parameters: no live timing
 def test_camera_node_reports_missing_sources_clearly(ros_env, procs) -> None:
     p = procs.start([PY, "-m", "hexa_vision.camera_node", "--ros-args", "-p", "source:=folder", "-p",
                      "path:=/nonexistent/frames"], ros_env)
