@@ -882,9 +882,14 @@ def run(opts: Options) -> dict[str, Any]:
     params = opts.params if opts.params is not None else DEFAULT_PARAMS
     if not params.is_file():
         raise BenchGraphError(f"parameter file {params} not found")
-    if opts.realtime_priority is not None and not 0 <= opts.realtime_priority <= 99:
-        raise BenchGraphError(f"--realtime-priority must be 0 (normal scheduling) or a SCHED_FIFO priority 1-99, "
-                              f"got {opts.realtime_priority}")
+    if opts.realtime_priority is not None:
+        from hexa_bringup.commands.bringup import check_realtime_priority
+        from hexa_bringup.supervisor import SupervisorError
+
+        try:
+            check_realtime_priority(opts.realtime_priority)
+        except SupervisorError as exc:
+            raise BenchGraphError(str(exc)) from exc
     if not opts.rate > 0:
         raise BenchGraphError(f"--rate must be > 0, got {opts.rate}")
     cache = opts.cache

@@ -113,20 +113,34 @@ def mode_node_args(args: argparse.Namespace) -> dict[str, list[str]]:
     return node_args
 
 
+def check_realtime_priority(priority: int) -> int:
+    """`priority` as `--realtime-priority` takes it.
+
+    Raises:
+        hexa_bringup.supervisor.SupervisorError: `priority` outside 0..99 (hexa_ros.realtime.in_range).
+    """
+    from hexa_ros.realtime import in_range
+
+    from hexa_bringup.supervisor import SupervisorError
+
+    if not in_range(priority):
+        raise SupervisorError(f"--realtime-priority must be 0 (normal scheduling) or a SCHED_FIFO priority 1-99, "
+                              f"got {priority}")
+    return int(priority)
+
+
 def with_realtime_priority(node_args: dict[str, list[str]], priority: int) -> dict[str, list[str]]:
     """`node_args` with `realtime_priority:=priority` for the safety path's nodes (`SAFETY_PATH`).
 
     Raises:
         hexa_bringup.supervisor.SupervisorError: `priority` outside 0..99.
     """
-    from hexa_bringup.supervisor import SupervisorError
+    from hexa_ros.realtime import REALTIME_PRIORITY
 
-    if not 0 <= int(priority) <= 99:
-        raise SupervisorError(f"--realtime-priority must be 0 (normal scheduling) or a SCHED_FIFO priority 1-99, "
-                              f"got {priority}")
+    priority = check_realtime_priority(priority)
     out = dict(node_args)
     for name in SAFETY_PATH:
-        out[name] = out.get(name, []) + ["-p", f"realtime_priority:={int(priority)}"]
+        out[name] = out.get(name, []) + ["-p", f"{REALTIME_PRIORITY}:={priority}"]
     return out
 
 

@@ -29,6 +29,12 @@ REALTIME_PRIORITY_PARAM = Param(
        "(docs/running.md); without, the node runs at normal priority and warns", range=(0, 99))
 
 
+def in_range(priority: int) -> bool:
+    """`priority` is 0 (normal scheduling) or a SCHED_FIFO priority (`REALTIME_PRIORITY_PARAM.range`)."""
+    low, high = REALTIME_PRIORITY_PARAM.range or (0, 99)
+    return low <= int(priority) <= high
+
+
 def set_realtime_priority(priority: int, pid: int | None = None) -> str:
     """Put every thread of process `pid` (default: this one) under SCHED_FIFO at `priority` (1-99); threads started
     later inherit it from the thread that starts them. `priority` 0 leaves the scheduling as it is.
@@ -39,7 +45,7 @@ def set_realtime_priority(priority: int, pid: int | None = None) -> str:
     Raises:
         ValueError: `priority` outside 0..99.
     """
-    if not 0 <= int(priority) <= 99:
+    if not in_range(priority):
         raise ValueError(f"realtime priority must be 0..99, got {priority!r}")
     if priority == 0:
         return ""
