@@ -33,14 +33,16 @@ from __future__ import annotations
 import math
 from collections import Counter, deque
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from hexa.stream_gate import ACCEPTED, TimeGate
 
 if TYPE_CHECKING:
-    from numpy.typing import NDArray
+    from collections.abc import Sequence
+
+    from numpy.typing import ArrayLike, NDArray
 
     from hexa.robots.hexa_description import HexaDescription
 
@@ -155,7 +157,7 @@ class ArmEstimate:
     settled: bool = True
 
 
-def _six(x: Any) -> NDArray | None:
+def _six(x: ArrayLike | None) -> NDArray | None:
     try:
         a = np.asarray(x, dtype=float).reshape(-1)
     except (TypeError, ValueError):
@@ -163,7 +165,7 @@ def _six(x: Any) -> NDArray | None:
     return a if a.shape == (6,) else None
 
 
-def six_floats(x: Any) -> list[float] | None:
+def six_floats(x: ArrayLike) -> list[float] | None:
     """Six values as a new list of plain floats, or None when `x` is not six numbers (the per-sample paths compute
     on floats: numpy's per-call overhead dominates on six values)."""
     if type(x) is np.ndarray and x.shape == (6,) and x.dtype == np.float64:
@@ -212,7 +214,7 @@ class ZetaEstimator:
         self._corr = [0.0] * 6             # the camera corrections of ζ̂ so far
         self._commands.clear()
         self._hist.clear()
-        self._pending_cam: deque[tuple[float, Any]] = deque(maxlen=64)
+        self._pending_cam: deque[tuple[float, NDArray]] = deque(maxlen=64)
         self._last: ArmEstimate | None = None   # built when asked for (`last`)
 
     @property
@@ -261,11 +263,12 @@ class ZetaEstimator:
             self._commands.popleft()
         return self._commands[0][1]
 
-    def update(self, t: float, zeta_commanded: Any, tau: Any) -> ArmEstimate | None:
+    def update(self, t: float, zeta_commanded: ArrayLike, tau: ArrayLike) -> ArmEstimate | None:
         """One current sample: commanded angles u (rad) and horn torques τ (N·m) at time t (s)."""
         return None if self.step(t, zeta_commanded, tau) is None else self.last
 
-    def step(self, t: float, zeta_commanded: Any, tau: Any) -> tuple[list[float], list[float], bool] | None:
+    def step(self, t: float, zeta_commanded: ArrayLike, tau: ArrayLike
+             ) -> tuple[list[float], list[float], bool] | None:
         """`update` without building the ArmEstimate (the per-sample path): (ζ̂, ζ̂̇ as lists of floats, settled), or
         None when the sample is rejected."""
         u = six_floats(zeta_commanded)
@@ -332,7 +335,8 @@ class ZetaEstimator:
         xs = self._xs
         return xs[0::3], xs[1::3], t - self._t_start >= cfg.settle_time
 
-    def _predict_update(self, h: float, c: Any, tq: Any, free: Any, r_s: float) -> None:
+    def _predict_update(self, h: float, c: Sequence[float] | NDArray, tq: Sequence[float] | NDArray,
+                        free: Sequence[bool] | NDArray, r_s: float) -> None:
         """Kalman predict over h seconds and the servo-model update, for the six arms at once, in closed form.
 
         State [ζ, ζ̇, b] per arm. Predict: constant velocity (white acceleration √q_a, stall_accel_sigma for a
@@ -408,7 +412,7 @@ class ZetaEstimator:
         z = self._filter_at(float(t))
         return None if z is None else z.copy()
 
-    def update_camera(self, t: float, pose: Any) -> bool:
+    def update_camera(self, t: float, pose: ArrayLike) -> bool:
         """A plate pose [x y z α β γ] (m, rad) stamped t (the image time): ζ_IK = IK(pose) (eq 18) is a measurement
         of ζ at t, applied now as ζ_IK + (ζ̂(now) − ζ̂(t)). Returns False when rejected."""
         from hexa.kinematics.hexa6rus import UnreachablePoseError, inverse_kinematics
@@ -491,7 +495,7 @@ class InputCheck:
         self.zeta_range = (float(desc.zeta_min) - angle_margin, float(desc.zeta_max) + angle_margin)
         self.rejected: Counter[str] = Counter()
 
-    def currents(self, currents: Any) -> NDArray | None:
+    def currents(self, currents: ArrayLike) -> NDArray | None:
         """The six currents as an array, or None (counted: currents_bad_shape, currents_non_finite, currents_range)."""
         cur = _six(currents)
         if cur is None:
@@ -506,7 +510,8 @@ class InputCheck:
             return cur
         return None
 
-    def states(self, position: Any, velocity: Any, effort: Any, kind: str = "states") -> bool:
+    def states(self, position: ArrayLike | None, velocity: ArrayLike | None, effort: ArrayLike | None,
+               kind: str = "states") -> bool:
         """Whether a joint_states sample is usable (counted when not: states_bad_shape, states_non_finite,
         states_range; with kind "setpoint" the set-points a motor_currents carries: setpoint_bad_shape, ...)."""
         arrays = [_six(position)] + [_six(v) for v in (velocity, effort) if v is not None]
@@ -573,8 +578,9 @@ class SampleSequencer:
         self.board = mode == "board"
         self._stamp_mode = mode == "stamp"
         self._cur: deque[tuple[float, float, NDArray]] = deque()  # (stamp, board t, τ)
-        self._js: deque[tuple[float, NDArray, Any, Any]] = deque()  # (stamp, commanded, velocity, effort)
-        self._poses: list[tuple[float, int, Any]] = []
+        # (stamp, commanded, velocity, effort)
+        self._js: deque[tuple[float, NDArray, NDArray | None, NDArray | None]] = deque()
+        self._poses: list[tuple[float, int, NDArray]] = []
         self._seq = 0
         self.last_t = -math.inf
         self.late_poses = 0
@@ -654,7 +660,8 @@ class SampleSequencer:
         self._sample(t, commanded, tau, None, out)
         return out
 
-    def push_states(self, stamp: float, commanded: NDArray, velocity: Any, effort: Any) -> list[tuple]:
+    def push_states(self, stamp: float, commanded: NDArray, velocity: NDArray | None, effort: NDArray | None
+                    ) -> list[tuple]:
         if not self.admit("states", stamp):
             return []
         self._js.append((float(stamp), commanded, velocity, effort))
@@ -663,7 +670,7 @@ class SampleSequencer:
             self.unpaired += 1
         return self._drain()
 
-    def push_pose(self, stamp: float, pose: Any) -> list[tuple]:
+    def push_pose(self, stamp: float, pose: NDArray) -> list[tuple]:
         import heapq
 
         stamp = float(stamp)
@@ -688,7 +695,7 @@ class SampleSequencer:
             tp, _, pose = heapq.heappop(self._poses)
             out.append(("pose", tp, pose))
 
-    def _sample(self, t: float, cmd: NDArray, tau: NDArray, vel: Any, out: list) -> None:
+    def _sample(self, t: float, cmd: NDArray, tau: NDArray, vel: NDArray | None, out: list) -> None:
         self._release_poses(t, out)
         out.append(("sample", t, cmd, tau, vel))
         self.last_t = t   # sample times only go back when a clock jump was adopted upstream: follow it

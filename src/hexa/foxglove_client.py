@@ -9,8 +9,12 @@ import base64
 import json
 import struct
 import time
+from collections.abc import Callable
 from dataclasses import dataclass
-from typing import Any
+from typing import TYPE_CHECKING, Any
+
+if TYPE_CHECKING:
+    from google.protobuf.message import Message as ProtobufMessage
 
 SUBPROTOCOLS = ("foxglove.sdk.v1", "foxglove.websocket.v1")
 #: binary opcode of a message on a subscription (server → client)
@@ -48,7 +52,7 @@ class FoxgloveClient:
             raise FoxgloveClientError(f"no Foxglove server at {url}: {exc}") from exc
         self.channels: dict[int, dict[str, Any]] = {}
         self._subs: dict[int, int] = {}
-        self._classes: dict[int, Any] = {}
+        self._classes: dict[int, type[ProtobufMessage]] = {}
         self._next = 1
 
     def __enter__(self) -> FoxgloveClient:
@@ -124,7 +128,7 @@ class FoxgloveClient:
                 pool.FindMessageTypeByName(ch["schemaName"]))
         return cls.FromString(payload)
 
-    def messages(self, duration: float, until: Any = None) -> list[Message]:
+    def messages(self, duration: float, until: Callable[[list[Message]], bool] | None = None) -> list[Message]:
         """Messages received on the subscriptions for `duration` seconds, or until `until(messages)` is true."""
         out: list[Message] = []
         deadline = time.monotonic() + duration

@@ -19,7 +19,7 @@ from __future__ import annotations
 import math
 from collections import Counter
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, Any, Callable
+from typing import TYPE_CHECKING, Callable
 
 import numpy as np
 
@@ -27,6 +27,8 @@ from hexa.rotations import matrix_from_quaternion, transform_from_pose6
 from hexa.stream_gate import ACCEPTED, StreamGate, time_step_rule
 
 if TYPE_CHECKING:
+    from numpy.typing import ArrayLike
+
     from hexa.robots.hexa_description import HexaDescription
 
 
@@ -118,7 +120,7 @@ class PoseCheck:
     def _reject(self, reason: str) -> None:
         self.rejected[reason] += 1
 
-    def check(self, stamp: float, position: Any, quaternion: Any) -> np.ndarray | None:
+    def check(self, stamp: float, position: ArrayLike, quaternion: ArrayLike) -> np.ndarray | None:
         """A pose from a message: position (3,) and quaternion (x, y, z, w); its transform, or None when rejected."""
         try:
             p = np.asarray(position, dtype=float).reshape(-1)
@@ -141,7 +143,7 @@ class PoseCheck:
         T[:3, 3] = p
         return self._check_transform(t, T)
 
-    def check_pose6(self, stamp: float, pose: Any) -> np.ndarray | None:
+    def check_pose6(self, stamp: float, pose: ArrayLike) -> np.ndarray | None:
         """A pose as [x y z α β γ] (m, rad; Z-Y-X, seed 000 eq 38); its transform, or None when rejected."""
         try:
             x = np.asarray(pose, dtype=float).reshape(-1)

@@ -12,7 +12,7 @@ from __future__ import annotations
 
 import math
 from collections import Counter
-from typing import Any, Callable, Generic, TypeVar
+from typing import Callable, Generic, SupportsFloat, TypeVar
 
 T = TypeVar("T")
 
@@ -101,7 +101,7 @@ class TimeGate(StreamGate[float]):
         self.max_step = float(max_step)
         super().__init__(time_step_rule(self.max_step, repeats), adopt_after)
 
-    def check(self, value: Any) -> str:
+    def check(self, value: SupportsFloat | str) -> str:
         try:
             t = float(value)
         except (TypeError, ValueError):

@@ -15,7 +15,7 @@ import math
 from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Callable
+from typing import Callable
 
 import numpy as np
 
@@ -201,7 +201,7 @@ SEQUENCE_BLEND = 2.0
 SEQUENCE_SEPARATOR = "+"
 
 
-def smoothstep(u: float | np.ndarray) -> Any:
+def smoothstep(u: float | np.ndarray) -> float | np.ndarray:
     """s = 3u² − 2u³ of u clipped to 0..1 (a float for a scalar u): a blend from 0 to 1 that starts and ends at
     rest, the trajectory player's and a sequence's cross-fade."""
     v = np.clip(u, 0.0, 1.0)
@@ -209,14 +209,14 @@ def smoothstep(u: float | np.ndarray) -> Any:
     return float(s) if np.ndim(u) == 0 else s
 
 
-def smoothstep_rate(u: float | np.ndarray, duration: float) -> Any:
+def smoothstep_rate(u: float | np.ndarray, duration: float) -> float | np.ndarray:
     """d/dt of smoothstep(t / duration) at u = t / duration (0 outside 0..1)."""
     v = np.clip(u, 0.0, 1.0)
     d = np.where((v > 0.0) & (v < 1.0), 6.0 * v * (1.0 - v) / duration, 0.0)
     return float(d) if np.ndim(u) == 0 else d
 
 
-def smoothstep_accel(u: float | np.ndarray, duration: float) -> Any:
+def smoothstep_accel(u: float | np.ndarray, duration: float) -> float | np.ndarray:
     """d²/dt² of smoothstep(t / duration) at u = t / duration (0 outside 0..1, where it steps)."""
     v = np.clip(u, 0.0, 1.0)
     d = np.where((v > 0.0) & (v < 1.0), (6.0 - 12.0 * v) / (duration * duration), 0.0)

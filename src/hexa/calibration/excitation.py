@@ -20,7 +20,7 @@ import math
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import TYPE_CHECKING, Any, Callable
+from typing import TYPE_CHECKING, Callable
 
 import numpy as np
 
@@ -29,6 +29,7 @@ from hexa.trajectories import FourierTrajectory
 if TYPE_CHECKING:
     from numpy.typing import NDArray
 
+    from hexa.calibration.regressor import Regressor
     from hexa.dynamics.lagrange import HexaDynamicParameters
     from hexa.robots.hexa_description import HexaDescription
 
@@ -160,7 +161,7 @@ def _sym(prm: HexaDynamicParameters) -> NDArray:
     return sym_from_params(prm)
 
 
-def identification_matrix(reg: Any) -> NDArray:
+def identification_matrix(reg: Regressor) -> NDArray:
     """The stacked (6N × P) regressor of the parameters the design must excite: the identifiable plate and rod
     columns, the per-servo J, (ms), friction columns and a constant per servo (the current sensor's zero offset,
     which an arm's slowly varying gravity torque resembles)."""

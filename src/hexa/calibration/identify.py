@@ -39,7 +39,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING, Any, Sequence
+from typing import TYPE_CHECKING, Any, Iterable, Sequence
 
 import numpy as np
 
@@ -49,7 +49,8 @@ from hexa.calibration.regressor import BASE_SYM, SYM_NAMES, params_with_sym, reg
 if TYPE_CHECKING:
     from numpy.typing import NDArray
 
-    from hexa.dynamics.lagrange import HexaDynamicParameters
+    from hexa.calibration.regressor import Regressor
+    from hexa.dynamics.lagrange import HexaDynamicParameters, MotionState
     from hexa.robots.hexa_description import HexaDescription
 
 ANALYSIS_RATE_HZ = 100.0    # currents resampled at this rate and filtered …
@@ -81,7 +82,7 @@ class Motion:
 
     t: NDArray
     currents: NDArray
-    reg: Any
+    reg: Regressor
     zeta: NDArray
     zeta_dot: NDArray
     zeta_ddot: NDArray
@@ -242,7 +243,7 @@ def prepare(rec: Recording, desc: HexaDescription, prm: HexaDynamicParameters | 
                   horn=(_wrap(zc - sp), ic, zd, sp), notes=notes)
 
 
-def _filtered_regressor(prm: HexaDynamicParameters, full: Any) -> Any:
+def _filtered_regressor(prm: HexaDynamicParameters, full: MotionState) -> Regressor:
     """The regressor on the whole analysis grid, every column through the currents' low-pass, at the analysis
     instants (Gautier's parallel filtering: the same filter on both sides of the linear model). The low-pass passes
     a periodic excitation's upper harmonics only in part (4th order at 4 Hz, zero-phase: 63 % at 3.75 Hz); with the
@@ -375,7 +376,7 @@ def pseudo_inertia(theta_plate: NDArray) -> NDArray:
     return J
 
 
-def _inertia_matrix(i6: Any) -> NDArray:
+def _inertia_matrix(i6: Iterable[float]) -> NDArray:
     xx, yy, zz, xy, xz, yz = (float(v) for v in i6)
     return np.array([[xx, xy, xz], [xy, yy, yz], [xz, yz, zz]])
 
@@ -444,7 +445,7 @@ class _OutputError:
         g, b, x = u[:6], u[6:12], u[12:]
         tau = self.M @ x + self.tau0
         r = self.w * (self.I - g[self.servo] * tau - b[self.servo])
-        extra: list[Any] = [b / OFFSET_PRIOR]
+        extra: list[NDArray | list[float]] = [b / OFFSET_PRIOR]
         if self.scale_row:
             extra.append([self.big * (float(np.mean(1.0 / g)) / self.K_t - 1.0)])
         return np.concatenate([r, *map(np.atleast_1d, extra)])

@@ -20,7 +20,7 @@ import numpy as np
 import yaml
 
 if TYPE_CHECKING:
-    from numpy.typing import NDArray
+    from numpy.typing import ArrayLike, NDArray
 
     from hexa.calibration.identify import Calibration
     from hexa.robots.hexa_description import HexaDescription
@@ -29,7 +29,7 @@ PER_SERVO = ("k_t", "current_offset", "coulomb", "viscous", "inertia", "first_mo
              "horn_offset")
 
 
-def _floats(a: Any) -> Any:
+def _floats(a: ArrayLike) -> float | list[Any]:
     """Plain floats / nested lists of floats (what yaml.safe_dump writes) of a number or array."""
     return np.asarray(a, dtype=float).tolist()
 

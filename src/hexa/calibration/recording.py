@@ -9,11 +9,13 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING, Any, Callable
+from typing import TYPE_CHECKING, Callable
 
 import numpy as np
 
 if TYPE_CHECKING:
+    from pathlib import Path
+
     from numpy.typing import NDArray
 
     from hexa.robots.hexa_description import HexaDescription
@@ -67,14 +69,14 @@ class Recording:
         if not (self.payload >= 0 and math.isfinite(self.payload)):
             raise RecordingError(f"payload must be a mass >= 0 kg, got {self.payload!r}")
 
-    def save(self, path: Any) -> None:
+    def save(self, path: str | Path) -> None:
         """As .npz (the recording of an in-process run, `hexa calibrate … --save`)."""
         np.savez_compressed(path, t_current=self.t_current, currents=self.currents, t_state=self.t_state,
                             setpoints=self.setpoints, t_pose=self.t_pose, poses=self.poses,
                             payload=self.payload, payload_point=self.payload_point, source=self.source)
 
     @staticmethod
-    def load(path: Any) -> "Recording":
+    def load(path: str | Path) -> "Recording":
         with np.load(path) as z:
             return Recording(**{k: z[k] for k in ("t_current", "currents", "t_state", "setpoints", "t_pose",
                                                    "poses", "payload_point")},

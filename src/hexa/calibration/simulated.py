@@ -4,13 +4,15 @@ one carrying a known mass), identified into an overlay — what `hexa calibrate 
 from __future__ import annotations
 
 from pathlib import Path
-from typing import TYPE_CHECKING, Any, Callable
+from typing import TYPE_CHECKING, Callable
 
 import numpy as np
 
 from hexa.calibration.recording import CALIBRATION_RATE_HZ
 
 if TYPE_CHECKING:
+    from numpy.typing import ArrayLike
+
     from hexa.calibration.identify import Calibration
     from hexa.calibration.recording import Recording
     from hexa.robots.hexa_description import HexaDescription
@@ -21,7 +23,7 @@ SIM_PAYLOAD = 0.5
 
 
 def simulate_excitation_runs(excitation: str | Path, seed: int, realism: RealismConfig, desc: HexaDescription,
-                             payload: float = SIM_PAYLOAD, payload_point: Any = (0.0, 0.0, 0.0),
+                             payload: float = SIM_PAYLOAD, payload_point: ArrayLike = (0.0, 0.0, 0.0),
                              current_rate_hz: float = CALIBRATION_RATE_HZ,
                              progress: Callable[[str], Callable[[float], None] | None] | None = None
                              ) -> tuple[list[Recording], RobotTruth | None]:

@@ -14,6 +14,8 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 if TYPE_CHECKING:
+    from pathlib import Path
+
     from numpy.typing import NDArray
 
     from hexa.calibration.identify import Motion
@@ -81,7 +83,7 @@ def compare(rec: Recording, desc_before: HexaDescription, desc_after: HexaDescri
                               servo_after=out[1][1])
 
 
-def plot(cmp: ResidualComparison, path: Any, title: str = "") -> Any:
+def plot(cmp: ResidualComparison, path: str | Path, title: str = "") -> str | Path:
     """PNG of the six plate-axis residuals before and after (matplotlib, Agg)."""
     import matplotlib
 

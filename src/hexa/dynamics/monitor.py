@@ -14,7 +14,7 @@ from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
-from numpy.typing import NDArray
+from numpy.typing import ArrayLike, NDArray
 
 from hexa.dynamics.cusum import CusumConfig, make_detector
 from hexa.dynamics.observer import ObserverConfig, ObserverError, ResidualObserver, ResidualSample
@@ -24,6 +24,8 @@ from hexa.rotations import pose6_from_transform
 from hexa.stream_gate import ACCEPTED, StreamGate
 
 if TYPE_CHECKING:
+    from collections.abc import Sequence
+
     from hexa.robots.hexa_description import HexaDescription
 
 ZETA_SOURCES = ("estimator", "measured")
@@ -239,7 +241,8 @@ class CollisionMonitor:
         return self.sequencer.board
 
     # ------------------------------------------------------------------ inputs
-    def push_currents(self, stamp: float, board_us: int, currents: Any, setpoint: Any = None) -> list[MonitorSample]:
+    def push_currents(self, stamp: float, board_us: int, currents: ArrayLike,
+                      setpoint: Sequence[float] | NDArray | None = None) -> list[MonitorSample]:
         """A current sample (A) received at host time `stamp` with board time `board_us` (µs); `setpoint`: the servo
         set-points in effect when it was measured (rad), when the message carries them (None or empty: they come
         on joint_states, paired by stamp). A stream that carries them makes joint_states unneeded

@@ -25,6 +25,10 @@ from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
 
 if TYPE_CHECKING:
+    from collections.abc import Sequence
+
+    from numpy.typing import ArrayLike, NDArray
+
     from hexa.dynamics.monitor import CollisionMonitor, MonitorSample
 
 OK, DEGRADED, LOST = "OK", "DEGRADED", "LOST"
@@ -125,15 +129,17 @@ class MonitoringWatch:
         return ("joint_states", "motor_currents") if board else ("joint_states",)
 
     # ------------------------------------------------------------------ inputs (counted, then to the monitor)
-    def push_currents(self, stamp: float, board_us: int, currents: Any, setpoint: Any = None) -> list[MonitorSample]:
+    def push_currents(self, stamp: float, board_us: int, currents: ArrayLike,
+                      setpoint: Sequence[float] | NDArray | None = None) -> list[MonitorSample]:
         self.received["motor_currents"] += 1
         return self.monitor.push_currents(stamp, board_us, currents, setpoint)
 
-    def push_states(self, stamp: float, position: Any, velocity: Any, effort: Any) -> list[MonitorSample]:
+    def push_states(self, stamp: float, position: NDArray | None, velocity: NDArray | None,
+                    effort: NDArray | None) -> list[MonitorSample]:
         self.received["joint_states"] += 1
         return self.monitor.push_states(stamp, position, velocity, effort)
 
-    def push_pose(self, stamp: float, pose: Any) -> list[MonitorSample]:
+    def push_pose(self, stamp: float, pose: NDArray) -> list[MonitorSample]:
         self.received["plate_pose"] += 1
         return self.monitor.push_pose(stamp, pose)
 

@@ -22,6 +22,9 @@ from hexa.dynamics.lagrange import HexaDynamicParameters, motion_from_joint_rate
 from hexa.dynamics.observer import direct_residual_batch, momentum_residual_batch
 
 if TYPE_CHECKING:
+    from numpy.typing import ArrayLike
+
+    from hexa.dynamics.observer import CollisionEvent
     from hexa.robots.hexa_description import HexaDescription
 
 R_LOW = 2.0
@@ -86,7 +89,7 @@ def simulate(path: Callable[[np.ndarray], np.ndarray], duration: float, contact:
 
 
 def contact_point(desc: HexaDescription, zeta: np.ndarray, pose: np.ndarray, link: str, chain: int,
-                  fraction: Any) -> np.ndarray:
+                  fraction: ArrayLike) -> np.ndarray:
     """A point on the link: the plate at offset `fraction` (3,) in {P}; an arm/rod at `fraction` of its length."""
     from hexa.kinematics import hexa6rus as kin
 
@@ -139,7 +142,7 @@ def pose_driven_residual(run: SimRun, params: HexaDynamicParameters, pose_noise:
     obs = ResidualObserver(params, ObserverConfig(kinematics="pose", gains=(25.0,) * 6, min_duration=0.01))
     rng = np.random.default_rng(seed)
     out = np.full((run.t.size, 6), np.nan)
-    events: list[Any] = []
+    events: list[CollisionEvent] = []
     for k, t in enumerate(run.t):
         if k % camera_every == 0:
             noise = np.concatenate([rng.normal(scale=pose_noise[0], size=3), rng.normal(scale=pose_noise[1], size=3)])

@@ -16,10 +16,13 @@ import sys
 import time
 from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
 from dataclasses import asdict, dataclass, field, replace
-from typing import Any, Callable
+from typing import TYPE_CHECKING, Any, Callable, TextIO
 
 from hexa.eval.campaign import (ISOLATION_MODES, TRAJECTORIES, kinds_of, run_calibration_job, run_contact_job,
                                 run_free_job)
+
+if TYPE_CHECKING:
+    from distributed import Client, LocalCluster
 
 #: free motion is cut into jobs of at most this many seconds (one trajectory each, looped), for the parallel pool
 FREE_CHUNK_S = 60.0
@@ -210,7 +213,7 @@ class ProgressBar:
     bar and the ETA follow the simulated seconds (`total_sim_s` expected), not the job count: a campaign's jobs run
     from a few seconds (a contact) to a minute (a free-motion chunk, a robot's calibration)."""
 
-    def __init__(self, total_jobs: int, total_sim_s: float, stream: Any = None, width: int = 30) -> None:
+    def __init__(self, total_jobs: int, total_sim_s: float, stream: TextIO | None = None, width: int = 30) -> None:
         self.total, self.total_sim, self.width = total_jobs, total_sim_s, width
         self.stream = stream if stream is not None else sys.stderr
         self.done, self.sim_s, self.t0 = 0, 0.0, time.monotonic()
@@ -241,8 +244,8 @@ class _Engine:
         self.cfg, self.workers = cfg, cfg.workers or os.cpu_count() or 1
         self.name = "process pool" if self.workers > 1 else "in process"
         self._pool: ProcessPoolExecutor | None = None
-        self._client: Any = None
-        self._cluster: Any = None
+        self._client: Client | None = None
+        self._cluster: LocalCluster | None = None
 
     def __enter__(self) -> "_Engine":
         cfg = self.cfg
@@ -286,7 +289,7 @@ class _Engine:
             for kind, job in jobs:
                 done(kind, _run_job(kind, job))
 
-    def __exit__(self, exc_type: Any, *_: Any) -> None:
+    def __exit__(self, exc_type: type[BaseException] | None, *_: object) -> None:
         if self._pool is not None:
             if exc_type is None:
                 self._pool.shutdown()

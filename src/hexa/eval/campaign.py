@@ -39,8 +39,13 @@ import numpy as np
 from hexa.sim.scenarios import ScriptedCollision
 
 if TYPE_CHECKING:
+    from numpy.typing import ArrayLike, DTypeLike, NDArray
+
+    from hexa.dynamics.contact_force import ContactForce
     from hexa.dynamics.cusum import CusumConfig
     from hexa.dynamics.observer import ObserverConfig
+    from hexa.eval.rendered_isolation import Evaluation
+    from hexa.report.collision_demo import CaseData
     from hexa.robots.hexa_description import HexaDescription
     from hexa.sim.realism import RealismConfig
 
@@ -212,7 +217,7 @@ class RunRecord:
     wrench_point: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)))   # where each force was identified
     counters: dict[str, Any] = field(default_factory=dict)
     isolation: str = "oracle"
-    evaluations: list[Any] = field(default_factory=list)     # rendered isolation: every isolated pair (Evaluation)
+    evaluations: list[Evaluation] = field(default_factory=list)     # rendered isolation: every isolated pair
     isolation_cost: dict[str, float] = field(default_factory=dict)
     truth_tau: np.ndarray = field(default_factory=lambda: np.zeros((0, 6)))   # servo torques (N·m), at truth_t
 
@@ -222,15 +227,15 @@ class CommandLink:
     were sent (one byte stream: a late command holds back the ones behind it)."""
 
     def __init__(self) -> None:
-        self._queue: list[tuple[float, Any, int]] = []
+        self._queue: list[tuple[float, NDArray, int]] = []
 
-    def send(self, arrival: float, zeta: Any, tag: int) -> None:
+    def send(self, arrival: float, zeta: NDArray, tag: int) -> None:
         """Queue a command that the host's delay would deliver at `arrival` (s)."""
         if self._queue:
             arrival = max(arrival, self._queue[-1][0])
         self._queue.append((arrival, zeta, tag))
 
-    def arrived(self, now: float) -> tuple[Any, int] | None:
+    def arrived(self, now: float) -> tuple[NDArray, int] | None:
         """(set-points, tag) of the last command arrived by `now` since the previous call, None if none has."""
         n = 0
         while n < len(self._queue) and self._queue[n][0] <= now + 1e-12:
@@ -310,7 +315,7 @@ def simulate(collision: ScriptedCollision | None, trajectory: str, duration: flo
         raise ValueError(f"command_phase must be in [0, {1.0 / rate:g}) s, got {command_phase!r}")
     k, lost_until = 0, -math.inf
 
-    def keep(forces: list[Any]) -> None:
+    def keep(forces: list[ContactForce]) -> None:
         for f in forces:
             rec["wt"].append(f.time)
             rec["wf"].append(f.force)
@@ -388,7 +393,7 @@ def simulate(collision: ScriptedCollision | None, trajectory: str, duration: flo
     finally:
         sim.close()
 
-    def arr(key: str, width: int | None = None, dtype: Any = float) -> np.ndarray:
+    def arr(key: str, width: int | None = None, dtype: DTypeLike = float) -> np.ndarray:
         a = np.asarray(rec[key], dtype=dtype)
         return a.reshape(len(rec[key]), width) if width else a
 
@@ -423,8 +428,8 @@ def replay(rec: RunRecord, spec: DetectorSpec, base_config: ObserverConfig, scal
     return out
 
 
-def case_data(name: str, rec: RunRecord, events: list, thresholds: Any, servo_thresholds: Any,
-              with_outputs: bool = True) -> Any:
+def case_data(name: str, rec: RunRecord, events: list, thresholds: ArrayLike, servo_thresholds: ArrayLike,
+              with_outputs: bool = True) -> CaseData:
     """The demo's CaseData of a run (`with_outputs` False: truth and events only, for the replays)."""
     from hexa.report.collision_demo import CaseData
     from hexa.vision.isolation import LINK_UNKNOWN
@@ -462,6 +467,7 @@ def isolation_evaluations(rec: RunRecord) -> list[dict[str, Any]]:
     return out
 
 
+# d: a CaseData with its truth_pose (Any, as CaseData.truth_pose is Optional)
 def plate_equivalent_every(d: Any, stride: int) -> np.ndarray:
     """The true force's plate-equivalent wrench (hexa.report.collision_demo.plate_equivalent_truth) computed on every
     `stride`-th truth sample and interpolated between them (it costs ~5 ms a sample)."""
@@ -517,7 +523,7 @@ def run_calibration_job(job: dict[str, Any]) -> dict[str, Any]:
             "sim_seconds": float(job.get("seconds", 0.0)), "wall_s": time.perf_counter() - t0}
 
 
-def _detector_settings(job: dict[str, Any]) -> tuple[Any, str, Any]:
+def _detector_settings(job: dict[str, Any]) -> tuple[ObserverConfig, str, CusumConfig]:
     """(ObserverConfig, detector kind, CusumConfig) of a job's optional observer, detector and cusum fields."""
     from hexa.dynamics.cusum import CusumConfig
     from hexa.dynamics.observer import ObserverConfig

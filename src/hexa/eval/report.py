@@ -5,7 +5,7 @@ from __future__ import annotations
 import json
 import math
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -14,13 +14,18 @@ from hexa.eval.campaign import (DETECTOR_NAMES, GRID_SCALES, LINKS, THRESHOLD_SC
                                 trajectory_kind)
 from hexa.report.collision_demo import PAPER_RMSE
 
+if TYPE_CHECKING:
+    from types import ModuleType
+
+    from matplotlib.figure import Figure
+
 #: a START counts as the contact's detection if it comes no later than this after the contact's end (s)
 DETECT_GRACE = 0.1
 #: contacts at or above this peak force enter the detection-rate targets (N)
 STRONG_N = 3.0
 #: threshold scales at which the report counts the strong contacts whose true load reaches them (`within_reach`)
 REACH_SCALES = (0.5, 0.75, 1.0)
-#: the targets (issue "Evidence at scale"), as (key, text, comparison, value)
+#: the campaign's targets (docs/eval_results.md), as (key, text, comparison, value)
 TARGETS = (
     ("fa_per_10h", "false alarms per 10 h of free motion", "<=", 1.0),
     ("det_plate_3n", "detection, plate, peak >= 3 N", ">=", 0.99),
@@ -334,7 +339,7 @@ def summarize(result: dict[str, Any]) -> dict[str, Any]:
     return out
 
 
-def _fmt(v: Any, fmt: str = ".3g") -> str:
+def _fmt(v: object, fmt: str = ".3g") -> str:
     if v is None or (isinstance(v, float) and not math.isfinite(v)):
         return "—"
     return format(v, fmt) if isinstance(v, (int, float)) else str(v)
@@ -377,11 +382,11 @@ def _isolation_lines(iso: dict[str, Any]) -> list[str]:
     return lines + [""]
 
 
-def _panels(plt: Any, n: int) -> tuple[Any, Any]:
+def _panels(plt: ModuleType, n: int) -> tuple[Figure, np.ndarray]:
     return plt.subplots(1, n, figsize=(5.5 * n, 3.8), squeeze=False)
 
 
-def _save(plt: Any, fig: Any, path: Path) -> Path:
+def _save(plt: ModuleType, fig: Figure, path: Path) -> Path:
     fig.tight_layout()
     fig.savefig(path, dpi=90)
     plt.close(fig)

@@ -185,8 +185,8 @@ class CommandTimeline:
     *provisional* until a read of the board's port that started after the send (`confirm`): samples that were
     already waiting in the port when the command went out — a driver that was stopped or starved while the board
     went on measuring — are not in the map yet, so the estimate can be early by the whole wait, and every sample of
-    that wait would carry a command the servos did not have yet (seen as a false collision START after a 45 ms driver
-    stall, docs/driver_timing.md). Each such read raises the estimate to what its samples prove: they had all been
+    that wait would carry a command the servos did not have yet (after a 45 ms driver stall this makes a false collision
+    START, docs/driver_timing.md). Each such read raises the estimate to what its samples prove: they had all been
     measured when the read started.
 
     Args:

@@ -23,13 +23,17 @@ import threading
 import time
 from collections import deque
 from collections.abc import Callable, Mapping, Sequence
-from typing import Any, NamedTuple
+from typing import TYPE_CHECKING, Any, NamedTuple
 
 import numpy as np
 
 from hexa.protocol import frames as fr
 from hexa.protocol.board_clock import BoardClockMap, CommandTimeline, ServoFrameTimeline
 from hexa.protocol.driver_core import N_JOINTS, DriverConfigError, DriverCore
+
+if TYPE_CHECKING:
+    from hexa.protocol.link import BoardLink, CurrentLink, ServoLink
+    from hexa.protocol.stream_watch import StreamWatch
 
 #: LATCH reports whose clock offsets (Uno board time − Mega board time) the median runs over: 1 s of 20 ms frames
 OFFSET_WINDOW = 50
@@ -349,7 +353,7 @@ class LinkReport(NamedTuple):
     values: dict[str, Any]
 
 
-def link_report(name: str, link: Any, now: float, extra: Mapping[str, Any]) -> LinkReport:
+def link_report(name: str, link: BoardLink, now: float, extra: Mapping[str, Any]) -> LinkReport:
     """The status of a `hexa.protocol.link.BoardLink` at host time `now`: OK when connected, ERROR when stale,
     connecting or disconnected (the last error), with its stats and `extra` as values."""
     from hexa.protocol.link import CONNECTED, STALE
@@ -372,7 +376,7 @@ def link_report(name: str, link: Any, now: float, extra: Mapping[str, Any]) -> L
     return LinkReport(name, level, message, str(link.port), {**values, **extra})
 
 
-def driver_reports(sched: DriverScheduler, uno: Any, mega: Any, now: float, stale_timeout: float
+def driver_reports(sched: DriverScheduler, uno: ServoLink, mega: CurrentLink, now: float, stale_timeout: float
                    ) -> tuple[LinkReport, LinkReport]:
     """The diagnostics of the servo board (a ServoLink) and the current board (a CurrentLink) at host time `now`:
     each link's status and counters, the Mega's ERROR when no sample came for `stale_timeout` s, the Uno's ERROR
@@ -413,7 +417,7 @@ def driver_reports(sched: DriverScheduler, uno: Any, mega: Any, now: float, stal
     return uno_r, mega_r
 
 
-def _recovery_values(stream: str, watch: Any) -> dict[str, Any]:
+def _recovery_values(stream: str, watch: StreamWatch) -> dict[str, Any]:
     """Diagnostic values of a link's StreamWatch, keys prefixed with the stream's name."""
     return {f"{stream}_rerequests": watch.rerequests, f"{stream}_reconnects": watch.reconnects,
             f"{stream}_recoveries": watch.recoveries, f"{stream}_last_recovery_s": f"{watch.last_recovery_s:.3f}"}

@@ -19,6 +19,8 @@ from hexa.sim.camera import mjcf_camera
 from hexa.sim.config import SimConfig, sim_config_of
 
 if TYPE_CHECKING:
+    from numpy.typing import ArrayLike
+
     from hexa.robots.hexa_description import HexaDescription
     from hexa.sim.realism import RobotTruth
 
@@ -32,7 +34,7 @@ class MJCFError(ValueError):
     """The description cannot be turned into a model (the message names the value)."""
 
 
-def _f(v: Any) -> str:
+def _f(v: ArrayLike) -> str:
     return " ".join(f"{float(x):.9g}" for x in np.atleast_1d(v))
 
 

@@ -5,7 +5,7 @@ sensor's noise and host timing jitter. See docs/realism.md.
     truth = draw_truth(load_hexa(), seed=3)             # masses, COMs, inertias, K_t, friction, offsets... per seed
     sim = Simulator(scenario="plate", seed=3, realism=RealismConfig.realistic())   # draws the same truth itself
 
-`RealismConfig.ideal()` is the simulator as it was before this module: the robot *is* the model, servos are MuJoCo
+`RealismConfig.ideal()` is the simulator without realism: the robot *is* the model, servos are MuJoCo
 position actuators that take set-points at once, the sensor noise is the ADC's only, the host is punctual.
 The truth (`RobotTruth`) only builds the simulated world and the virtual Mega's currents; no node reads it.
 """

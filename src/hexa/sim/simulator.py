@@ -34,6 +34,8 @@ from hexa.sim.scenarios import ScenarioSpec, ScriptedCollision, draw_collision, 
 import mujoco  # noqa: E402  (after hexa.sim.camera set MUJOCO_GL)
 
 if TYPE_CHECKING:
+    from pathlib import Path
+
     from hexa.robots.hexa_description import HexaDescription
 
 LINK_CODES = {"plate": 0, "arm": 1, "rod": 2, "none": 255}   # as hexa_msgs/Contact (UNKNOWN = 255: no contact)
@@ -187,7 +189,8 @@ class Simulator:
             robot, as a campaign that calibrates a few robots and runs many contacts on each does.
     """
 
-    def __init__(self, desc: HexaDescription | None = None, seed: int = 0, scenario: Any = None, cameras: bool = True,
+    def __init__(self, desc: HexaDescription | None = None, seed: int = 0,
+                 scenario: str | Path | ScenarioSpec | ScriptedCollision | None = None, cameras: bool = True,
                  pose: np.ndarray | None = None, drive: str | None = None, randomize: bool = False,
                  settle: float = 0.5, trajectory: str | None = None, lead_in: float = 0.0,
                  contact_model: str = "scripted", servo_frame_period: float | None = None,
@@ -334,7 +337,7 @@ class Simulator:
         self._step_once(use_schedule=True, advance=False)
 
         self._renderer: RGBDRenderer | None = None
-        self._scratch: Any = None                 # MjData for frame_state / render_frame (made on first use)
+        self._scratch: mujoco.MjData | None = None   # for frame_state / render_frame (made on first use)
         self._noise: dict[str, NoiseBank] = {}
         self.rgb_noise_sigma = self.config.rgb_noise_sigma      # image noise (hexa.sim.randomize changes them)
         self.depth_noise_rel = self.config.depth_noise_rel
@@ -708,7 +711,7 @@ class Simulator:
             raise SimulatorError(f"unknown camera {camera!r}; cameras: {list(self.config.cameras)}")
         return camera_model_of(self.config.cameras[camera])
 
-    def _object_placement(self, d: Any, t: float) -> tuple[np.ndarray, np.ndarray]:
+    def _object_placement(self, d: mujoco.MjData, t: float) -> tuple[np.ndarray, np.ndarray]:
         """Position and quaternion of the scripted contact's object at time `t`, from the link poses in `d` (its
         kinematics current): the capsule's tip `object_distance(t)` from the contact point along the push direction;
         parked out of view when no object is near or the contact model is the physical pusher."""
@@ -737,7 +740,7 @@ class Simulator:
         d.mocap_pos[self._object_mocap], d.mocap_quat[self._object_mocap] = self._object_placement(d, self.time)
         mujoco.mj_kinematics(self.model, d)
 
-    def _scratch_data(self) -> Any:
+    def _scratch_data(self) -> mujoco.MjData:
         """A second MjData of the model for kinematics and rendering off the physics' own (made once)."""
         if self._scratch is None:
             self._scratch = mujoco.MjData(self.model)

@@ -33,7 +33,10 @@ from hexa.vision.isolation import (
 )
 
 if TYPE_CHECKING:
+    from numpy.typing import ArrayLike
+
     from hexa.robots.hexa_description import HexaDescription
+    from hexa.sim.scenarios import ScriptedCollision
     from hexa.sim.simulator import Simulator
 
 LINK_CODE = {"plate": LINK_PLATE, "arm": LINK_ARM, "rod": LINK_ROD, "none": LINK_UNKNOWN}
@@ -64,7 +67,7 @@ def camera_models(sim: Simulator) -> dict[str, CameraModel]:
     return {name: CameraModel.from_any(sim.camera_model(name), name) for name in ("cam_top", "cam_side")}
 
 
-def draw_contacts(n: int, seed: int = 0, links: tuple[str, ...] = ("plate", "arm", "rod")) -> list[Any]:
+def draw_contacts(n: int, seed: int = 0, links: tuple[str, ...] = ("plate", "arm", "rod")) -> list[ScriptedCollision]:
     """n ScriptedCollisions cycling through links (and chains 1..6 for arms and rods), randomised within the
     bundled scenarios' ranges; onsets spread over 0.8..3.5 s so the robot is at varied poses of the trajectories."""
     from hexa.sim.scenarios import ScriptedCollision
@@ -115,7 +118,7 @@ def object_clearance(desc: HexaDescription, pose: np.ndarray, zeta: np.ndarray, 
     return gap
 
 
-def contact_clearance(desc: HexaDescription, collision: Any, step: float = CLEARANCE_STEP) -> float:
+def contact_clearance(desc: HexaDescription, collision: ScriptedCollision, step: float = CLEARANCE_STEP) -> float:
     """Smallest `object_clearance` (m) of a scripted contact over its approach and hold, on the poses of its
     trajectory every `step` s from the approach's start to the release's end (trajectory time, clamped to the
     trajectory; the robot is kinematic here: IK of each pose). The point on the link and the push direction are
@@ -154,7 +157,7 @@ def contact_clearance(desc: HexaDescription, collision: Any, step: float = CLEAR
     return float(gap)
 
 
-def render_contact(collision: Any, seed: int = 0, desc: HexaDescription | None = None,
+def render_contact(collision: ScriptedCollision, seed: int = 0, desc: HexaDescription | None = None,
                    min_clearance: float | None = None) -> ContactSample | None:
     """Simulate one scripted contact; background frames at t = 0 (object parked), contact frames at the peak.
 
@@ -265,7 +268,7 @@ def contact_samples(n: int, seed: int = 0, min_clearance: float = MIN_CLEARANCE,
             stats[f"infeasible {link}"] = stats.get(f"infeasible {link}", 0) + 1
 
 
-def push_direction_error(estimate: np.ndarray, force_truth: Any) -> float:
+def push_direction_error(estimate: np.ndarray, force_truth: ArrayLike | None) -> float:
     """Angle (deg) between the estimated push direction and the true force; NaN when either is missing."""
     if force_truth is None:
         return float("nan")

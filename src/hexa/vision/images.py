@@ -21,6 +21,11 @@ ENCODINGS: dict[str, tuple[str, int]] = {
 }
 
 
+#: a sensor_msgs/Image's `data` as `image_to_numpy` takes it: a buffer, a numpy array (any dtype: its bytes) or a list
+#: of byte values
+ImageData = bytes | bytearray | memoryview | np.ndarray | list
+
+
 class ImageConversionError(ValueError):
     """Image fields are inconsistent (size, step, encoding) or the array does not fit the requested encoding."""
 
@@ -38,7 +43,7 @@ class ImageFields:
 
 
 def image_to_numpy(height: int, width: int, encoding: str, is_bigendian: int | bool, step: int,
-                   data: bytes | bytearray | memoryview | np.ndarray | list) -> np.ndarray:
+                   data: ImageData) -> np.ndarray:
     """Array (H, W) or (H, W, C) in native byte order from sensor_msgs/Image fields.
 
     Rows may be padded (step > width·bytes per pixel); the padding is dropped. Big-endian multi-byte data is

@@ -380,5 +380,5 @@ class ContactLocator:
         res = per.get(located.estimate.camera) or next(iter(per.values()))
         return debug_image(res, self.isolator, located.geometry)
 
-    def _decode(self, cam: str, frame: Any) -> RGBDFrame | None:
+    def _decode(self, cam: str, frame: RawFrame | RGBDFrame) -> RGBDFrame | None:
         return self.assemblers[cam].assemble(frame) if isinstance(frame, RawFrame) else frame

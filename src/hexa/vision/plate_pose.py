@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from collections import Counter
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -12,7 +12,10 @@ from hexa.vision.markers import MarkerDetector, MarkerError, MarkerFit, MarkerLa
 from hexa.vision.sync import FrameAssembler, RGBDFrame
 
 if TYPE_CHECKING:
+    from collections.abc import Sequence
+
     from hexa.vision.detector import Detection, PlateDetector
+    from hexa.vision.images import ImageData
 
 #: counters that count work done, not rejected input
 _WORK_COUNTERS = ("frames", "detections", "poses", "tracked boxes")
@@ -62,7 +65,8 @@ class PlatePoseEstimator:
         self.markers: MarkerDetector | None = None
         self._counters: Counter[str] = Counter()
 
-    def set_camera_info(self, width: int, height: int, k: Any, d: Any = None, detections_wanted: bool = True
+    def set_camera_info(self, width: int, height: int, k: Sequence[float] | np.ndarray,
+                        d: Sequence[float] | np.ndarray | None = None, detections_wanted: bool = True
                         ) -> PlatePose | None:
         """Update the intrinsics from CameraInfo fields (a new marker detector when they change); the pose of the
         frame that was paired before the first camera_info, else None."""
@@ -73,13 +77,13 @@ class PlatePoseEstimator:
         return None if frame is None else self.process(frame, detections_wanted)
 
     def add_color(self, stamp: float, height: int, width: int, encoding: str, is_bigendian: int, step: int,
-                  data: Any, detections_wanted: bool = True) -> PlatePose | None:
+                  data: ImageData, detections_wanted: bool = True) -> PlatePose | None:
         """Add a colour image (sensor_msgs/Image fields); the pose of the frame it completes, or None."""
         frame = self.assembler.add_color(stamp, height, width, encoding, is_bigendian, step, data)
         return None if frame is None else self.process(frame, detections_wanted)
 
     def add_depth(self, stamp: float, height: int, width: int, encoding: str, is_bigendian: int, step: int,
-                  data: Any, detections_wanted: bool = True) -> PlatePose | None:
+                  data: ImageData, detections_wanted: bool = True) -> PlatePose | None:
         """Add a depth image (sensor_msgs/Image fields); the pose of the frame it completes, or None."""
         frame = self.assembler.add_depth(stamp, height, width, encoding, is_bigendian, step, data)
         return None if frame is None else self.process(frame, detections_wanted)

@@ -202,7 +202,8 @@ class RealSenseSource:
         self.name, self.serial, self.playback, self.loop = name, str(serial), str(playback), bool(loop)
         self.size, self.fps, self.retry_period = (int(width), int(height)), int(fps), float(retry_period)
         self._clock = clock or time.monotonic
-        self._pipe: Any = None    # rs.pipeline while streaming
+        # rs.pipeline while streaming; Any, not Optional: `poll` uses it after `_open` set it, which mypy cannot see
+        self._pipe: Any = None
         self._next_try = 0.0
         self.model: CameraModel | None = None
         self.info_fields: dict | None = None

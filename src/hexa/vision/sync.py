@@ -3,14 +3,14 @@ demand (`ImagePairer` pairs undecoded images, `FrameAssembler.assemble` decodes 
 from __future__ import annotations
 
 from collections import Counter, deque
+from collections.abc import Sequence
 from dataclasses import dataclass
-from typing import Any
 
 import numpy as np
 from scipy.spatial.transform import Rotation  # imported with the module, not in the first collision
 
 from hexa.vision.camera import CameraModel, CameraModelError
-from hexa.vision.images import ImageConversionError, depth_to_meters, image_to_numpy, to_rgb
+from hexa.vision.images import ImageConversionError, ImageData, depth_to_meters, image_to_numpy, to_rgb
 
 
 @dataclass
@@ -34,7 +34,7 @@ class RawImage:
     encoding: str
     is_bigendian: int
     step: int
-    data: Any
+    data: ImageData
 
 
 @dataclass(frozen=True)
@@ -98,7 +98,8 @@ class FrameAssembler:
         self.frames = 0
         self._waiting: tuple[float, np.ndarray, np.ndarray] | None = None   # a pair that came before camera_info
 
-    def set_camera_info(self, width: int, height: int, k: Any, d: Any = None) -> RGBDFrame | None:
+    def set_camera_info(self, width: int, height: int, k: Sequence[float] | np.ndarray,
+                        d: Sequence[float] | np.ndarray | None = None) -> RGBDFrame | None:
         """Update the intrinsics from CameraInfo fields (bad ones are counted and ignored; a repeat of the current
         ones costs a comparison). Returns the frame that was paired before the first camera_info arrived (a
         camera publishes a frame's images before its camera_info), now that it can be used, else None."""
@@ -116,7 +117,7 @@ class FrameAssembler:
         return None if waiting is None else self._emit(*waiting)
 
     def add_color(self, stamp: float, height: int, width: int, encoding: str, is_bigendian: int, step: int,
-                  data: Any) -> RGBDFrame | None:
+                  data: ImageData) -> RGBDFrame | None:
         rgb = self._rgb(height, width, encoding, is_bigendian, step, data)
         if rgb is None:
             return None
@@ -124,7 +125,7 @@ class FrameAssembler:
         return self._match()
 
     def add_depth(self, stamp: float, height: int, width: int, encoding: str, is_bigendian: int, step: int,
-                  data: Any) -> RGBDFrame | None:
+                  data: ImageData) -> RGBDFrame | None:
         depth = self._depth_m(height, width, encoding, is_bigendian, step, data)
         if depth is None:
             return None
@@ -150,7 +151,7 @@ class FrameAssembler:
             return None
         return self._emit(raw.stamp, rgb, depth)
 
-    def _rgb(self, height: int, width: int, encoding: str, is_bigendian: int, step: int, data: Any
+    def _rgb(self, height: int, width: int, encoding: str, is_bigendian: int, step: int, data: ImageData
              ) -> np.ndarray | None:
         try:
             return np.ascontiguousarray(to_rgb(image_to_numpy(height, width, encoding, is_bigendian, step, data),
@@ -159,7 +160,7 @@ class FrameAssembler:
             self.rejects["bad colour image"] += 1
             return None
 
-    def _depth_m(self, height: int, width: int, encoding: str, is_bigendian: int, step: int, data: Any
+    def _depth_m(self, height: int, width: int, encoding: str, is_bigendian: int, step: int, data: ImageData
                  ) -> np.ndarray | None:
         try:
             depth = depth_to_meters(image_to_numpy(height, width, encoding, is_bigendian, step, data), encoding)
