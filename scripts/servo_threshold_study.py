@@ -42,7 +42,7 @@ def bag_series(bag: Path, ns: str = "/hexa") -> dict:
     prm = HexaDynamicParameters.from_description(load_hexa())
     res, zeta, pose, force = [], [], [], []
     wanted = ("residual", "sim/joint_states_truth", "sim/plate_pose_truth", "sim/wrench_truth")
-    # the bag's own message definitions: bags recorded before Residual had servo_torque still read
+    # the bag's own message definitions: bags whose Residual has no servo_torque field still read
     with AnyReader([Path(bag)], default_typestore=typestore()) as reader:
         cons = [c for c in reader.connections if c.topic.removeprefix(ns + "/") in wanted]
         messages = [(c.topic.removeprefix(ns + "/"), reader.deserialize(raw, c.msgtype))

@@ -255,9 +255,9 @@ def test_the_replay_reports_every_figure_with_counts(bench_run):
 
 def test_at_a_slow_rate_nearly_every_current_sample_gets_its_residual(bench_run):
     """Counted from the observer's first residual, which waits for the first camera pose. The pose node's
-    best-effort image readers can miss the first frames of a replay (seen: its first top frame came 30 frames
-    after the isolation node's, before the player waited for every reader of a topic; a reader that matches late on
-    its own side is not covered by that wait), and the first residual waits for them; half the samples is the floor
+    best-effort image readers can miss the first frames of a replay (the player waits for every reader of a topic,
+    but a reader that matches late on its own side is not covered by that wait), and the first residual waits for
+    them; half the samples is the floor
     for the whole count."""
     rows = _rows(bench_run["result"], "graph replay")
     info = bench_run["result"]["info"]["replay"]

@@ -224,7 +224,7 @@ def _frame_world(phase: float, t_end: float, send_period: float = 0.01, seed: in
 def test_servo_frames_give_each_servo_the_command_its_last_pulse_carried(delay):
     """Reported frames (each 12 ms after its start, after its last pulse) give the exact set-points; the 20 ms not
     reported yet are predicted from the send times, shifted by the delivery delay the reports reveal. With set-points
-    taken from the commands alone (the old pairing) a servo is off by up to two commands for ≈ half of the time."""
+    taken from the commands alone a servo is off by up to two commands for ≈ half of the time."""
     from hexa.protocol.board_clock import ServoFrameTimeline
 
     sends, angles, frames, truth = _frame_world(phase=0.0073, t_end=1.0, delay=delay)

@@ -216,8 +216,8 @@ def test_pseudo_inertia_maps_are_inverse_and_their_cholesky_jacobian_is_exact():
 def test_identified_flat_plate_is_a_valid_body_with_the_constraint_active_and_no_correction(excitation):
     """A flat plate (the truth's COM inertia on the triangle inequality's edge, as the Hexa's disc) from 12 s of
     noisy excitation: the inertia's errors (tens of %) put the least squares' optimum past the edge — the solution
-    stops on it (J ≻ 0 active: an unconstrained solve ends outside, where the former path projected the inertia
-    afterwards) and is a valid body as it comes out of the pseudo-inertia solve (J = L Lᵀ)."""
+    stops on it (J ≻ 0 active: an unconstrained solve ends outside, and projecting its inertia afterwards would
+    leave the rest of the fit unadjusted) and is a valid body as it comes out of the pseudo-inertia solve (J = L Lᵀ)."""
     from hexa.calibration.identify import pseudo_inertia
 
     rng = np.random.default_rng(6)

@@ -216,8 +216,8 @@ def test_driver_recovers_a_silent_board_and_diagnostics_name_it_while_stale(tmp_
 
 def test_a_command_held_by_the_rate_limit_is_sent_on_wall_time_under_sim_time(tmp_path, procs, ros_env, probe):
     """Two commands closer than 1/command_rate_hz: the second waits for the flush timer, which runs on wall time
-    even under use_sim_time (with a sim-time timer it waited for /clock, and at real-time factor 0.3 the next command
-    replaced it: the servos got double steps). Here no /clock is published at all: sim time stands still."""
+    even under use_sim_time (a sim-time timer would wait for /clock, and at real-time factor 0.3 the next command would
+    replace it: the servos would get double steps). Here no /clock is published at all: sim time stands still."""
     desc = load_hexa()
     servos = servo_calibrations_from_config(None, desc)
     got = []
@@ -240,8 +240,8 @@ def test_a_late_burst_of_samples_carries_the_command_in_effect_when_each_was_mea
                                                                                        probe):
     """The Mega's samples are held back for 30-80 ms (its thread blocked) while a new command goes out, then arrive
     in one burst: the samples measured before the Uno got the command keep the previous command in joint_states, the
-    ones after carry the new one (by the board clock, hexa.protocol.board_clock). Pairing by handling time — what
-    the driver did before — gave the whole burst the new command."""
+    ones after carry the new one (by the board clock, hexa.protocol.board_clock). Pairing by handling time would give
+    the whole burst the new command."""
     desc = load_hexa()
     servos = servo_calibrations_from_config(None, desc)
     zeta0 = np.full(6, desc.zeta_center)
@@ -366,11 +366,11 @@ def test_a_stopped_driver_dates_its_next_command_after_the_samples_that_waited_i
         assert not stale, stale
         moved = {round(float(p[0] - zeta0[0]), 3) for b, p in samples if b > b_resume}
         # the ramp went on after the stop. Not ≥ 10: this test process also runs both emulators and the probe, and
-        # the stop's backlog reaching the probe in one burst can starve the ramp thread for 100 ms (6-9 distinct
-        # commands were seen in 4 of 24 runs)
+        # the stop's backlog reaching the probe in one burst can starve the ramp thread for 100 ms (then 6-9
+        # distinct commands arrive: 4 runs in 24)
         assert len(moved) >= 5, moved
         # 0.15 s of a 0.4 rad/s ramp: 60 mrad to catch up, in steps of at most 1.5 rad/s · 10 ms = 15 mrad (9.5 µs,
-        # 10 with the pulses' rounding); without the bound on the allowance 18-21 µs were seen
+        # 10 with the pulses' rounding); without the bound on the allowance the steps reach 18-21 µs
         steps = np.abs(np.diff(np.array(order[order.index(pulses_at_stop):], dtype=float), axis=0)).max(axis=1)
         assert steps.max() <= 10.0, steps.max()
 

@@ -53,7 +53,7 @@ def _fastest_rate(trace, window: float = 0.005) -> float:
 
 
 def test_after_a_render_the_loop_does_not_catch_up_in_a_burst():
-    burst, _ = _run(max_lag=math.inf)          # the old behaviour: always catch up
+    burst, _ = _run(max_lag=math.inf)          # no pacing: always catch up
     paced, pacer = _run(max_lag=0.005)
     assert _fastest_rate(burst) > 2 * 0.3      # catching up runs sim time at several times the factor
     assert _fastest_rate(paced) < 1.3 * 0.3    # dropped instead: never much faster than requested

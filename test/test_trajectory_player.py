@@ -102,7 +102,7 @@ def test_a_late_caller_pauses_the_trajectory_instead_of_commanding_a_jump(desc):
     assert p.lag_events == 1 and p.lag_time == pytest.approx(0.22)
     assert np.allclose(late.pose, traj(1.03)[0]) and late.trajectory_time == pytest.approx(1.03)
     assert np.max(np.abs(late.zeta - c.zeta)) < 0.03  # rad: a small step, not the 0.25 s jump
-    jump = TrajectoryPlayer(desc, traj, DURATIONS["circle"])  # without max_step the old behaviour: a jump
+    jump = TrajectoryPlayer(desc, traj, DURATIONS["circle"])  # without max_step: a jump
     jump.command(1.0)
     assert np.allclose(jump.command(1.25).pose, traj(1.25)[0])
     with pytest.raises(TrajectoryPlayerError, match="max_step"):
