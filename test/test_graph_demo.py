@@ -46,6 +46,13 @@ def test_demo_writes_the_report_with_a_plot_per_case(demo_run):
     for case in cases:
         assert (out / f"{case}.png").stat().st_size > 10_000
         assert (out / case / "bag" / "metadata.yaml").exists()
+    # the real-time factor each case reached, from /clock against wall time: never above the one asked for (the
+    # pacing does not catch up), and reported in the report too
+    rtf = demo_run["result"]["real_time_factor"]
+    assert set(rtf["reached"]) == cases, rtf
+    for case, reached in rtf["reached"].items():
+        assert reached is not None and 0.05 < reached <= rtf["asked"] * 1.05, (case, rtf)
+    assert "the simulator reached" in (out / "report.md").read_text()
 
 
 def test_all_three_cases_are_detected_after_the_true_contact_onset_on_the_right_link(demo_run):

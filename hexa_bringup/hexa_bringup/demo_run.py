@@ -35,13 +35,17 @@ class CaseRun:
     log_dir: Path
     returncode: int
     wall_s: float
+    #: sim seconds per wall second from the simulator's first /clock after t = 0 to its last (None: no /clock seen)
+    reached_rtf: float | None = None
 
 
 class _ClockWatcher:
-    """Reads /clock in a background thread for the progress display."""
+    """Reads /clock in a background thread for the progress display and the real-time factor the run reached."""
 
     def __init__(self, env: dict[str, str]) -> None:
         self.t = 0.0
+        self._first: tuple[float, float] | None = None     # (wall s, sim s) of the first /clock after t = 0
+        self._last: tuple[float, float] | None = None
         self._stop = threading.Event()
         self._thread = threading.Thread(target=self._run, args=(env,), daemon=True)
 
@@ -58,6 +62,10 @@ class _ClockWatcher:
 
             def on_clock(m: Clock) -> None:
                 self.t = m.clock.sec + m.clock.nanosec * 1e-9
+                if self.t > 0.0:
+                    self._last = (time.monotonic(), self.t)
+                    if self._first is None:
+                        self._first = self._last
 
             node.create_subscription(Clock, "/clock", on_clock, 10)
             ex = SingleThreadedExecutor(context=ctx)
@@ -70,6 +78,15 @@ class _ClockWatcher:
         except Exception as exc:  # noqa: BLE001 - progress is cosmetic; say why it is missing
             print(f"hexa demo: no progress display ({exc})", file=sys.stderr)
 
+    @property
+    def reached_rtf(self) -> float | None:
+        """Sim seconds per wall second between the first and the last /clock after t = 0 (None: under 1 s of wall
+        time seen). The simulator's pacing drops the wall time a camera render or a stall costs (hexa.sim.pacing),
+        so this is below the factor asked for when the renders do not fit in its sleeps."""
+        if self._first is None or self._last is None or self._last[0] - self._first[0] < 1.0:
+            return None
+        return (self._last[1] - self._first[1]) / (self._last[0] - self._first[0])
+
     def __enter__(self) -> "_ClockWatcher":
         self._thread.start()
         return self
@@ -81,9 +98,9 @@ class _ClockWatcher:
 
 #: wall seconds the simulator holds sim time at 0 while the graph starts (DDS discovery, serial handshakes)
 START_DELAY = 3.0
-#: simulator real-time factor the demo asks for; on 2 cores the simulator (rendering both cameras) and the whole
-#: graph reach about 0.55-0.6 when asked for 1 (docs/realtime.md), so 0.5 is mostly kept; the
-#: pacing drops what a stall loses
+#: simulator real-time factor the demo asks for. The pacing drops the wall time each camera render costs
+#: (hexa.sim.pacing), so on 2 cores the demo's graph reaches 0.34-0.37x (`hexa demo` prints it per case); asked
+#: for 1 it reaches 0.50-0.53x, and then free motion raised a false START (docs/demo.md, "Real time")
 REAL_TIME_FACTOR = 0.5
 #: sim seconds at rest before the trajectory and the scenario clock start (the estimator and observer settle, the
 #: driver's commands take over from the simulator's own start pose)
@@ -161,7 +178,7 @@ def run_case(case: str, out_dir: Path, env: dict[str, str], ns: str = "/hexa", s
                          progress=lambda: f"case {case}: sim t = {clock.t:5.2f} / {sim_s:.2f} s "
                                           f"({100 * min(1.0, clock.t / sim_s):3.0f} %)")
         rc = sup.run()
-    return CaseRun(case, bag, case_dir / "logs", rc, time.monotonic() - t0)
+    return CaseRun(case, bag, case_dir / "logs", rc, time.monotonic() - t0, clock.reached_rtf)
 
 
 def _stamp(h) -> float:
