@@ -540,7 +540,7 @@ def parse_outputs(received: dict[str, list[tuple[int, bytes]]], ns: str) -> dict
     t = f"{ns.rstrip('/')}/"
     out: dict[str, Any] = {}
     for name in ("plate_pose", "residual", "singularity", "joint_states", "cam_top/color/image_raw",
-                 "cam_top/aligned_depth_to_color/image_raw"):
+                 "cam_top/aligned_depth_to_color/image_raw", "cam_top/aligned_depth_to_color/camera_info"):
         rows = received.get(t + name, [])
         out[name] = (np.asarray([r * 1e-9 for r, _ in rows]), np.asarray([cdr_stamp_ns(d) for _, d in rows],
                                                                           dtype=np.int64))
