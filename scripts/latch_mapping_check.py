@@ -1,7 +1,7 @@
 """How well the driver's `joint_states.position` matches the set-points the simulated servos really acted on, with the
 servo board's 20 ms pulse frame simulated: with the Uno's latch report (default) and without (commands as sent).
 
-    python scripts/latch_mapping_check.py [--seconds 6] [--rtf 0.3] [--frame 0.02] [--cameras] [--no-sync] [--load N]
+    python scripts/latch_mapping_check.py [--seconds 6] [--rtf 0.3] [--frame 0.02] [--cameras] [--load N]
 
 Runs the MuJoCo Hexa, paced as the sim node paces it (`hexa.sim.pacing.Pacer`: a stall, such as the renders of
 `--cameras`, is dropped instead of caught up), with the virtual boards and the real driver node (its own process, a
@@ -31,8 +31,7 @@ from pathlib import Path
 import numpy as np
 
 
-def run(latch: bool, seconds: float, rtf: float, frame: float, domain: int, cameras: bool = False,
-        sync: bool = True) -> dict:
+def run(latch: bool, seconds: float, rtf: float, frame: float, domain: int, cameras: bool = False) -> dict:
     import rclpy
     from diagnostic_msgs.msg import DiagnosticArray
     from hexa_msgs.msg import MotorCurrents
@@ -59,8 +58,7 @@ def run(latch: bool, seconds: float, rtf: float, frame: float, domain: int, came
     stop = threading.Event()
     driver = subprocess.Popen([str(Path(sys.executable).with_name("hexa-driver")), "--ros-args", "-r", "__ns:=/hexa",
                                "-p", f"uno_port:={link / 'uno'}", "-p", f"mega_port:={link / 'mega'}",
-                               "-p", f"latch_report:={'true' if latch else 'false'}",
-                               "-p", f"command_sync:={'true' if sync else 'false'}"], env=env,
+                               "-p", f"latch_report:={'true' if latch else 'false'}"], env=env,
                               stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
     rclpy.init()
     node = rclpy.create_node("latch_check")
@@ -179,7 +177,7 @@ def run(latch: bool, seconds: float, rtf: float, frame: float, domain: int, came
         n += 1
     if dump is not None:
         Path(os.environ["LATCH_CHECK_DUMP"]).write_text(json.dumps(dump))
-    return {"latch_report": latch, "command_sync": sync and latch, "frame_s": frame, "cameras": cameras, "samples": n,
+    return {"latch_report": latch, "frame_s": frame, "cameras": cameras, "samples": n,
             "samples_with_a_servo_off": round(wrong_samples / max(n, 1), 3),
             "servo_samples_off": round(wrong_servos / max(6 * n, 1), 3),
             # off where the servo's set-point had not changed within 1 ms: a command the servo never had then
@@ -198,7 +196,6 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--mode", choices=["latch", "commands", "both"], default="both")
     ap.add_argument("--cameras", action="store_true", help="render both cameras at 30 Hz (the sim clock stops)")
     ap.add_argument("--load", type=int, default=0, help="busy processes beside the run (a loaded host)")
-    ap.add_argument("--no-sync", action="store_true", help="driver command_sync:=false (commands sent as they come)")
     args = ap.parse_args(argv)
     modes = {"latch": [True], "commands": [False], "both": [True, False]}[args.mode]
     hogs = [subprocess.Popen([sys.executable, "-c", "while True: pass"]) for _ in range(args.load)]
@@ -215,13 +212,11 @@ def _modes(args: argparse.Namespace, modes: list[bool]) -> None:
         if len(modes) > 1:
             out = subprocess.run([sys.executable, __file__, "--mode", "latch" if latch else "commands",
                                   "--seconds", str(args.seconds), "--rtf", str(args.rtf), "--frame", str(args.frame),
-                                  "--domain", str(args.domain)] + (["--cameras"] if args.cameras else [])
-                                 + (["--no-sync"] if args.no_sync else []),
+                                  "--domain", str(args.domain)] + (["--cameras"] if args.cameras else []),
                                  capture_output=True, text=True)
             sys.stdout.write(out.stdout or out.stderr[-3000:])
         else:
-            print(json.dumps(run(latch, args.seconds, args.rtf, args.frame, args.domain, args.cameras,
-                                 sync=not args.no_sync)), flush=True)
+            print(json.dumps(run(latch, args.seconds, args.rtf, args.frame, args.domain, args.cameras)), flush=True)
 
 
 if __name__ == "__main__":

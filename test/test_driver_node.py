@@ -382,13 +382,6 @@ def test_driver_refuses_a_negative_board_clock_extrapolation(procs, ros_env):
     assert p.returncode == 2 and "board_clock_max_extrapolation" in err, err
 
 
-@pytest.mark.ros_parallel   # starts a node that refuses its parameters: no live timing
-def test_driver_refuses_a_bad_command_sync_guard(procs, ros_env):
-    p = procs.start([DRIVER, "--ros-args", "-p", "command_sync_guard:=0.01"], ros_env)
-    _out, err = p.communicate(timeout=60)
-    assert p.returncode == 2 and "command_sync_guard" in err, err
-
-
 def test_each_servo_carries_the_set_point_its_last_pulse_latched(tmp_path, procs, ros_env, probe):
     """With the Uno's latch report (default) a sample carries, per servo, the command that servo's last pulse carried:
     a servo takes a new set-point only from its pulse, once per 20 ms frame, so after a command each servo switches
@@ -476,55 +469,3 @@ def test_each_servo_carries_the_set_point_its_last_pulse_latched(tmp_path, procs
         assert int(diag["latch_unknown_seq"]) <= 6     # at most the first frame's, before any command was recorded
         assert int(diag["latch_predicted_wrong"]) >= min(reverted, 1), (reverted, diag["latch_predicted_wrong"])
 
-
-def test_command_sync_holds_commands_for_the_quiet_gap(tmp_path, procs, ros_env, probe):
-    """command_sync:=true (with the latch report): the driver holds commands for the frame's quiet gap and sends
-    about one per frame, the newest; the servos still follow the commands to the last one.
-
-    Only the plumbing is checked here: where in the frame the commands land is not. This test process runs both
-    emulators and the probe, and starves now and then — the Mega's samples (the driver's board clock) and the Uno's
-    handling then come late by tens of ms, more than the gap's margins. The aim itself is tested in
-    test_board_clock.py; scripts/latch_mapping_check.py measures it against the simulated servos
-    (docs/driver_timing.md)."""
-    desc = load_hexa()
-    servos = servo_calibrations_from_config(None, desc)
-    with MegaEmulator(current_source=lambda t: [0.0] * 6, link=tmp_path / "mega") as mega, \
-            UnoEmulator(link=tmp_path / "uno") as uno:
-        procs.start(driver_args(uno.port, mega.port, "max_speed:=0.0", "diagnostics_period:=0.1",
-                                "command_sync:=true"), ros_env)
-        assert wait_for(lambda: len(probe.currents) >= 20, 30.0), "no motor_currents from the driver"
-        zeta0 = np.full(6, desc.zeta_center)
-        t_start = time.monotonic()
-        k = 0
-        while time.monotonic() < t_start + 3.0:     # a ramp, commands at up to 100 Hz
-            probe.command(zeta0 + 1e-3 * k)
-            k += 1
-            time.sleep(0.01)
-        last = zeta0 + 1e-3 * (k - 1)
-        want = tuple(s.pulse_from_angle(z) for s, z in zip(servos, last))
-        assert wait_for(lambda: uno.pulses_us == want, 2.0), (uno.pulses_us, want)   # the newest got there
-        t_diag = time.monotonic()
-        diag = kv(wait_for(lambda: probe.diag_status("servo board", since=t_diag), 5.0))
-    assert diag["command_sync"] == "True"
-    assert int(diag["latch_frames"]) > 50
-    held, in_gap = int(diag["commands_held_for_gap"]), int(diag["commands_sent_in_gap"])
-    assert held > 0 and in_gap > 0, diag
-    # the first ones (no frame yet), and those given up on after three tries when the clocks disagree
-    assert int(diag["commands_sent_unsynced"]) <= held + in_gap, diag
-    assert int(diag["commands_coalesced"]) > 0, diag
-    # at most one per frame (+ the unsynced ones): 3 s = 150 frames, at ~100 Hz of commands
-    assert int(diag["commands_accepted"]) <= 3.6 * 50 + int(diag["commands_sent_unsynced"]) + 10, diag
-
-
-def test_command_sync_is_off_by_default_and_without_the_latch_report(tmp_path, procs, ros_env, probe):
-    with MegaEmulator(current_source=lambda t: [0.0] * 6, link=tmp_path / "mega") as mega, \
-            UnoEmulator(link=tmp_path / "uno") as uno:
-        procs.start(driver_args(uno.port, mega.port, "diagnostics_period:=0.1"), ros_env)
-        assert wait_for(lambda: len(probe.currents) >= 20, 30.0), "no motor_currents from the driver"
-        for k in range(50):
-            probe.command(np.full(6, load_hexa().zeta_center) + 1e-3 * k)
-            time.sleep(0.01)
-        t_diag = time.monotonic()
-        diag = kv(wait_for(lambda: probe.diag_status("servo board", since=t_diag), 5.0))
-    assert diag["command_sync"] == "False" and int(diag["commands_held_for_gap"]) == 0
-    assert int(diag["latch_frames"]) > 0                      # the report is on: only the timing is not

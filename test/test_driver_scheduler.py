@@ -1,7 +1,6 @@
 """The driver's command scheduling and sample pairing without ROS (hexa.protocol.driver_scheduler): the rate limit and
 coalescing, commands dated after their write and confirmed by the next read, the slew limit on the Mega's clock, the
-Uno's frames moved onto the Mega's clock, commands held for the quiet gap, the calibration's averaging, diagnostics
-and concurrent callers."""
+Uno's frames moved onto the Mega's clock, the calibration's averaging, diagnostics and concurrent callers."""
 from __future__ import annotations
 
 import threading
@@ -58,13 +57,13 @@ class World:
         self.sent.append(list(pulses))
         return len(self.sent) & 0xFF
 
-    def command(self, zeta: np.ndarray) -> float | None:
-        """Submit and flush at the current host time; the hold (s) when the command waits for the gap."""
+    def command(self, zeta: np.ndarray) -> None:
+        """Submit and flush at the current host time."""
         self.sched.submit(zeta, self.t)
-        return self.flush()
+        self.flush()
 
-    def flush(self, from_hold: bool = False) -> float | None:
-        return self.sched.flush(self.t, self.send, clock=lambda: self.t + self.write_time, from_hold=from_hold)
+    def flush(self) -> None:
+        self.sched.flush(self.t, self.send, clock=lambda: self.t + self.write_time)
 
 
 def test_commands_coalesce_and_go_out_at_most_at_command_rate(core, desc):
@@ -72,7 +71,8 @@ def test_commands_coalesce_and_go_out_at_most_at_command_rate(core, desc):
     sent: list[list[int]] = []
     z = np.full(6, desc.zeta_center)
     assert sched.submit(z, 1.0)                          # the first goes at once
-    assert sched.flush(1.0, lambda p: sent.append(p) or 1) is None and len(sent) == 1
+    sched.flush(1.0, lambda p: sent.append(p) or 1)
+    assert len(sent) == 1
     assert not sched.submit(z + 0.01, 1.004)             # 4 ms later: waits for the rate limit
     assert not sched.submit(z + 0.02, 1.006)             # replaces the waiting one
     assert core.counters.coalesced == 1 and np.allclose(sched.pending, z + 0.02)
@@ -189,31 +189,6 @@ def test_the_unos_frames_land_on_the_megas_clock_by_the_median_offset(core, desc
         assert sched.setpoints_at(switch + 2e-4)[i] == pytest.approx(b[i])
 
 
-def test_command_sync_holds_a_command_for_the_quiet_gap_and_gives_up_after_three_tries(core, desc):
-    sched = DriverScheduler(core, command_rate_hz=100.0, command_sync=True)
-    assert core.slew_period == pytest.approx(0.02)         # one command per frame: the allowance over a frame
-    w = World(sched)
-    a = np.full(6, desc.zeta_center)
-    w.run_to(0.3)
-    assert w.command(a) is None and len(w.sent) == 1 and sched.sync_unsynced == 1   # no frame to aim at yet
-    starts = [0.3105 + 0.02 * k for k in range(6)]
-    _report_frames(w, starts, lambda s: 1)
-    w.run_to(starts[-1] + 0.0201)                          # 0.1 ms into the next frame: among the read points
-    hold = w.command(a + 0.01)
-    assert hold is not None and 0.0 < hold < 0.02 and len(w.sent) == 1 and sched.sync_held == 1
-    assert w.flush() is None and len(w.sent) == 1          # the rate timer while the gap timer runs: nothing
-    w.run_to(w.t + hold)
-    assert w.flush(from_hold=True) is None and len(w.sent) == 2 and sched.sync_sent_in_gap == 1
-    lo, hi = sched.frames.quiet_gap(sched.sync_guard)
-    phase = (w.mega_time(w.t) + sched.frames.delivery_delay - w.mega_time(starts[-1])) % 0.02
-    assert lo + (hi - lo) / 4 - 1e-3 <= phase <= hi - (hi - lo) / 4 + 1e-3, (lo, phase, hi)
-    # a gap timer that keeps missing the gap (the clocks disagree): the command goes after three holds
-    w.run_to(starts[-1] + 0.0401)
-    holds = [w.command(a + 0.02)] + [w.flush(from_hold=True) for _ in range(3)]
-    assert [h is not None for h in holds] == [True, True, True, False] and len(w.sent) == 3
-    assert sched.sync_unsynced == 2
-
-
 def test_the_calibration_averages_the_samples_at_rest_and_refuses_otherwise(core, desc):
     sched = DriverScheduler(core, command_rate_hz=100.0, latch_report=False)
     w = World(sched)
@@ -261,7 +236,7 @@ def test_a_new_mega_connection_keeps_only_the_newest_command_whatever_its_clock_
 
 @pytest.mark.parametrize("key, value", [("board_clock_max_extrapolation", -1.0),
                                         ("board_clock_max_extrapolation", float("nan")),
-                                        ("command_sync_guard", 0.01), ("command_rate_hz", 0.0)])
+                                        ("command_rate_hz", 0.0)])
 def test_a_bad_timing_parameter_is_refused_naming_it(core, key, value):
     cfg = dict(load_driver_config(), **{key: value})
     with pytest.raises(DriverConfigError, match=key):

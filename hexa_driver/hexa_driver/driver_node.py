@@ -68,7 +68,7 @@ class DriverNode(Node):
                                             servo_calibrations_from_config(cfg["servos"], desc))
         self.sched = DriverScheduler.from_config(self.core, cfg)
         self._graph_order = [list(self.core.joint_names).index(n) for n in JOINT_NAMES]   # MotorCurrents.setpoint
-        self._gap_timer = self._calib_timer = None
+        self._calib_timer: threading.Timer | None = None
         self._calib: tuple[CalibrateCurrents.Response, float] | None = None   # the request being averaged
         self._closed = False
 
@@ -93,8 +93,8 @@ class DriverNode(Node):
     def close(self) -> None:
         """Stop the timers and the serial links first: the link threads publish."""
         self._closed = True
-        for timer in filter(None, (self._gap_timer, self._calib_timer)):
-            timer.cancel()
+        if self._calib_timer is not None:
+            self._calib_timer.cancel()
         self.uno.stop()
         self.mega.stop()
 
@@ -116,10 +116,9 @@ class DriverNode(Node):
         if self.sched.submit(zeta, time.monotonic()):
             self._flush()
 
-    def _flush(self, from_hold: bool = False) -> None:
-        hold = None if self._closed else self.sched.flush(time.monotonic(), self._send_targets, from_hold=from_hold)
-        if hold is not None:      # held for the pulse frame's quiet gap
-            self._gap_timer = _after(hold, self._flush, from_hold=True)
+    def _flush(self) -> None:
+        if not self._closed:
+            self.sched.flush(time.monotonic(), self._send_targets)
 
     def _send_targets(self, pulses: list[int]) -> int | None:
         return self.uno.last_targets_seq if self.uno.set_targets(pulses) else None

@@ -26,9 +26,7 @@ TEXT = {
     "calibration_duration": "s averaged by calibrate_currents when the request says 0",
     "rest_quiet_time": "s without a new joint command required before a zero-current calibration",
     "frame_id": "frame of joint_states and motor_currents",
-    "latch_report": "the Uno reports each pulse frame; samples carry the set-point each servo acted on",
-    "command_sync": "send each command in the pulse frame's quiet gap (needs latch_report)",
-    "command_sync_guard": "s kept clear of the read points either side of the quiet gap"}
+    "latch_report": "the Uno reports each pulse frame; samples carry the set-point each servo acted on"}
 
 
 def driver_descriptor(name: str, default: object) -> object:

@@ -321,7 +321,6 @@ class ServoFrameTimeline:
         self.delivery_delay = 0.0
         # (start, latch offsets, angles | nan, read points)
         self._frames: deque[tuple[float, np.ndarray, np.ndarray, np.ndarray]] = deque()
-        self._aimed: deque[tuple[float, np.ndarray]] = deque(maxlen=64)   # (frame start aimed at, angles)
         self.frames = 0
         self.unknown_seq = 0
         self.mismatches = 0
@@ -329,19 +328,12 @@ class ServoFrameTimeline:
     def reset(self) -> None:
         """Forget the frames (the servo board or a clock restarted); the commands by SEQ stay valid."""
         self._frames.clear()
-        self._aimed.clear()
 
-    def add_command(self, seq: int, zeta: np.ndarray, sent_at: float | None = None,
-                    aimed_at: float | None = None) -> None:
+    def add_command(self, seq: int, zeta: np.ndarray, sent_at: float | None = None) -> None:
         """A SET_TARGETS frame with header SEQ `seq` (0..255) carried the angles `zeta` (rad), sent at `sent_at` (s,
-        this timeline's clock; None: unknown) — the send times let the reported frames measure the delivery delay.
-        `aimed_at`: the start of the frame it was timed for (`aim`): until that frame is reported, it is predicted to
-        carry this command on all six channels, however far its send time's estimate is off (a board clock
-        extrapolated through a stall, or the simulator's clock stopped while a camera renders)."""
+        this timeline's clock; None: unknown) — the send times let the reported frames measure the delivery delay."""
         seq = int(seq) & 0xFF
         self._by_seq[seq] = np.array(zeta, dtype=float)
-        if aimed_at is not None and math.isfinite(aimed_at):
-            self._aimed.append((float(aimed_at), self._by_seq[seq]))
         if sent_at is not None and math.isfinite(sent_at):
             self._sent_at[seq] = float(sent_at)
             if seq in self._seq_order:
@@ -399,57 +391,6 @@ class ServoFrameTimeline:
                 d = min(d, percentile_linear(self._delay_hi, 10))
             self.delivery_delay = min(max(d, 0.0), self.period)
 
-    def quiet_gap(self, guard: float) -> tuple[float, float] | None:
-        """The frame's quiet gap (s after a frame's start, on the newest reported frame's grid): from `guard` after
-        the last channel's read point to `guard` before the next frame's first. A command the board gets in it is
-        read by all six channels of the next frame, far from any read point: which pulse carries it is then certain.
-        None before any reported frame, or when the read points leave no gap that wide."""
-        if not self._frames:
-            return None
-        reads = self._frames[-1][3]
-        lo = float(np.max(reads)) + guard
-        hi = float(np.min(reads)) + self.period - guard
-        return (lo, hi) if hi > lo else None
-
-    def aim(self, now: float, guard: float) -> tuple[float, float] | None:
-        """`send_wait` and the start (this timeline's clock) of the frame whose pulses will carry the command: the
-        one after the gap it lands in. None when there is no gap to aim at."""
-        wait = self.send_wait(now, guard)
-        if wait is None:
-            return None
-        landing = now + wait + self.delivery_delay
-        start = self._frames[-1][0]
-        k = math.floor((landing - start) / self.period)
-        return wait, start + (k + 1) * self.period
-
-    def send_wait(self, now: float, guard: float) -> float | None:
-        """How long (s, this timeline's clock) to hold a command ready at `now` so that, a `delivery_delay` later,
-        the board gets it in the middle of the frame's quiet gap (`quiet_gap`): 0 when it would land within a
-        quarter of the gap's width of its middle already, else the wait to the middle. None when there is no gap to
-        aim at (no reported frame yet).
-
-        Aiming at the middle, not the edges, leaves ≈ 5 ms either side for what is not known exactly: the delivery
-        delay (learnt from the reports, and learnt slowly once every command lands in the gap — the reports then
-        bound it from one side only), its jitter, the pulse widths changing since the newest report."""
-        gap = self.quiet_gap(guard)
-        if gap is None:
-            return None
-        lo, hi = gap
-        middle = (lo + hi) / 2
-        phase = (now + self.delivery_delay - self._frames[-1][0]) % self.period
-        if abs(phase - middle) <= (hi - lo) / 4:
-            return 0.0
-        return (middle - phase) % self.period
-
-    def _aimed_at(self, frame_start: float) -> np.ndarray | None:
-        """The newest command aimed at the frame starting at `frame_start` (None: none was)."""
-        for start, zeta in reversed(self._aimed):
-            if abs(start - frame_start) < 0.5 * self.period:
-                return zeta
-            if start < frame_start - self.period:
-                break
-        return None
-
     def setpoints_at(self, t: float, commands: CommandTimeline) -> np.ndarray | None:
         """The six set-points the servos act on at time `t` (s); None before any reported frame (the caller falls
         back to `commands.at`). A servo's set-point comes from the latest pulse that ended at or before t: a
@@ -461,12 +402,9 @@ class ServoFrameTimeline:
         for i in range(6):
             # the latest pulse end of servo i at or before t, on the frame grid of the newest report
             k = math.floor((t - last_start - last_off[i]) / self.period + 1e-9)
-            if k > 0:     # a frame after the newest report: its pulse carries the command aimed at it, else the
-                # command the board had at its read point, i.e. sent a delivery delay earlier
-                frame_start = last_start + k * self.period
-                z = self._aimed_at(frame_start)
-                if z is None:
-                    z = commands.at(frame_start + last_pulse[i] - self.delivery_delay)
+            if k > 0:     # a frame after the newest report: its pulse carries the command the board had at its
+                # read point, i.e. sent a delivery delay earlier
+                z = commands.at(last_start + k * self.period + last_pulse[i] - self.delivery_delay)
                 if z is not None:
                     out[i] = z[i]
                     continue

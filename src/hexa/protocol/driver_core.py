@@ -247,7 +247,7 @@ SCALAR_KEYS = ("uno_port", "mega_port", "baud", "stream_rate_hz", "stale_timeout
                "hello_timeout", "boot_delay", "stream_rerequest_period", "stream_reconnect_after", "command_rate_hz",
                "max_speed",
                "board_clock_max_extrapolation", "watchdog_ms", "diagnostics_period", "calibration_duration",
-               "rest_quiet_time", "frame_id", "latch_report", "command_sync", "command_sync_guard")
+               "rest_quiet_time", "frame_id", "latch_report")
 REQUIRED_KEYS = SCALAR_KEYS + ("joint_names", "sensor", "current_offsets", "servos")
 
 

@@ -3,8 +3,7 @@
 `DriverScheduler` is the driver's timing state between the two boards (docs/driver_timing.md):
 
 - commands: the newest command waits while the previous one went out less than 1/`command_rate_hz` ago (faster
-  ones coalesce, the latest wins); with `command_sync` it is held until it would reach the Uno in the middle of the
-  pulse frame's quiet gap (`ServoFrameTimeline.aim`), three tries at most;
+  ones coalesce, the latest wins);
 - samples: the Mega's board clock mapped from the host's (`BoardClockMap`), each command dated on it when sent and
   confirmed by the next read of the port (`CommandTimeline`), each sample paired with the set-points the servos acted
   on when it was measured — from the Uno's reported pulse frames (`ServoFrameTimeline`) when it reports them;
@@ -37,8 +36,6 @@ if TYPE_CHECKING:
 
 #: LATCH reports whose clock offsets (Uno board time − Mega board time) the median runs over: 1 s of 20 ms frames
 OFFSET_WINDOW = 50
-#: a command held for the quiet gap this many times goes anyway (the clocks disagree)
-MAX_GAP_DEFERRALS = 3
 #: fewest samples a zero-current calibration averages
 MIN_CALIBRATION_SAMPLES = 5
 
@@ -65,39 +62,28 @@ class DriverScheduler:
         command_rate_hz: most SET_TARGETS per second.
         max_extrapolation: `BoardClockMap.max_extrapolation` of both board clocks (s, ≥ 0).
         latch_report: the Uno reports its pulse frames (`on_latch` is called).
-        command_sync: time commands into the frame's quiet gap (only with `latch_report`).
-        sync_guard: kept clear of the read points either side of the gap (s, in [0, 0.005)).
 
     Raises:
         DriverConfigError: a value out of range (named by its driver.yaml key).
     """
 
     def __init__(self, core: DriverCore, command_rate_hz: float, max_extrapolation: float = 0.01,
-                 latch_report: bool = True, command_sync: bool = False, sync_guard: float = 0.002) -> None:
-        rate, max_extrapolation, sync_guard = float(command_rate_hz), float(max_extrapolation), float(sync_guard)
+                 latch_report: bool = True) -> None:
+        rate, max_extrapolation = float(command_rate_hz), float(max_extrapolation)
         if not (math.isfinite(rate) and rate > 0):
             raise DriverConfigError(f"parameter command_rate_hz must be > 0, got {command_rate_hz}")
         if not (math.isfinite(max_extrapolation) and max_extrapolation >= 0.0):
             raise DriverConfigError(f"parameter board_clock_max_extrapolation must be >= 0 s, got {max_extrapolation}")
-        if not (math.isfinite(sync_guard) and 0.0 <= sync_guard < 0.005):
-            raise DriverConfigError(f"parameter command_sync_guard must be in [0, 0.005) s, got {sync_guard}")
         self.core = core
         self.min_interval = 1.0 / rate
         self.latch_report = bool(latch_report)
-        self.command_sync = bool(command_sync) and self.latch_report
-        self.sync_guard = sync_guard
         self.board_clock = BoardClockMap(max_extrapolation=max_extrapolation)   # the Mega's
         self.uno_clock = BoardClockMap(max_extrapolation=max_extrapolation)     # stops as the Mega's does
         self.timeline = CommandTimeline()
         self.frames = ServoFrameTimeline()
-        if self.command_sync:   # one command per frame: the slew allowance builds up over a frame
-            core.slew_period = max(core.slew_period, self.frames.period)
         self._lock = threading.Lock()
         self._pending: np.ndarray | None = None
         self._last_sent = -math.inf
-        self._held = False                        # a command waits for the quiet gap (the caller's timer runs)
-        self._aim_frame: float | None = None      # start (Mega clock) of the frame the command being sent is for
-        self._deferrals = 0                       # of the pending command
         self._pulses_by_seq: dict[int, list[int]] = {}
         self._uno_offsets: deque[float] = deque(maxlen=OFFSET_WINDOW)
         self._board_restarts = 0
@@ -108,16 +94,13 @@ class DriverScheduler:
         self.submitted = 0              # commands handed to `submit`
         self.tx_failures = 0            # commands the Uno's port did not take
         self.latches_unmapped = 0       # LATCH reports before the Mega's clock was known
-        self.sync_held = 0              # commands held for the quiet gap
-        self.sync_sent_in_gap = 0       # commands sent when aimed at the gap (held or not)
-        self.sync_unsynced = 0          # commands sent without a gap to aim at, or given up on
         self.last_sample_time = 0.0     # host time of the newest sample (0: none yet)
 
     @classmethod
     def from_config(cls, core: DriverCore, cfg: Mapping[str, Any]) -> DriverScheduler:
         """The scheduler of a driver configuration (driver.yaml keys)."""
         return cls(core, float(cfg["command_rate_hz"]), float(cfg["board_clock_max_extrapolation"]),
-                   bool(cfg["latch_report"]), bool(cfg["command_sync"]), float(cfg["command_sync_guard"]))
+                   bool(cfg["latch_report"]))
 
     # ------------------------------------------------------------------------------------------ links
     def on_connected(self, board: str) -> None:
@@ -148,8 +131,8 @@ class DriverScheduler:
         return self._pending
 
     def flush(self, now: float, send: Callable[[list[int]], int | None],
-              clock: Callable[[], float] = time.monotonic, from_hold: bool = False) -> float | None:
-        """Send the waiting command at host time `now`, unless it is held for the quiet gap.
+              clock: Callable[[], float] = time.monotonic) -> None:
+        """Send the waiting command, if any, at host time `now`.
 
         The command is clamped and slew-limited on the robot's time (the Mega's clock; before any sample the host's),
         recorded in the core, written with `send` and dated on the Mega's clock at `clock()` read after the write
@@ -159,23 +142,10 @@ class DriverScheduler:
             now: host time (s).
             send: writes six pulse widths (µs) to the Uno; the SEQ of the SET_TARGETS frame, None when not written.
             clock: host clock read after the write.
-            from_hold: the caller's gap timer fired: the held command may go.
-
-        Returns:
-            Host seconds to wait before calling again with `from_hold` (the command is held for the gap: arm a
-            timer), else None (sent, nothing waiting, or a gap timer already runs).
         """
         with self._lock:
-            if from_hold:
-                self._held = False
-            if self._pending is None or self._held:
-                return None
-            self._aim_frame = None
-            wait = self._gap_wait(now)
-            if wait is not None:
-                self._held = True
-                return wait
-            self._deferrals = 0
+            if self._pending is None:
+                return
             zeta, self._pending = self._pending, None
             board_now = self.board_clock.board_time_at(now)
             robot_now = now if board_now is None else board_now
@@ -185,36 +155,11 @@ class DriverScheduler:
             t_sent = clock()
             b_sent = self.timeline.add(self.board_clock.board_time_at(t_sent), self.core.commanded, sent_at=t_sent)
             if seq is not None:
-                self.frames.add_command(seq, self.core.commanded, b_sent, aimed_at=self._aim_frame)
+                self.frames.add_command(seq, self.core.commanded, b_sent)
                 self._pulses_by_seq[int(seq) & 0xFF] = list(pulses)
             else:
                 self.tx_failures += 1
             self._last_sent = now
-        return None
-
-    def _gap_wait(self, now: float) -> float | None:
-        """With command_sync: host seconds to hold the waiting command so that it reaches the Uno in the middle of
-        the frame's quiet gap; None to send it now (in the gap already, no frame to aim at, or given up)."""
-        if not self.command_sync:
-            return None
-        board_now = self.board_clock.board_time_at(now)
-        aim = None if board_now is None else self.frames.aim(board_now, self.sync_guard)
-        if aim is None:                           # no frame reported yet: nothing to aim at
-            self.sync_unsynced += 1
-            return None
-        wait, frame_start = aim
-        if wait <= 0:
-            self.sync_sent_in_gap += 1
-            self._aim_frame = frame_start
-            return None
-        if self._deferrals >= MAX_GAP_DEFERRALS:  # the timer keeps missing the gap (the clocks disagree)
-            self.sync_unsynced += 1
-            return None
-        self._deferrals += 1
-        if self._deferrals == 1:
-            self.sync_held += 1
-        # board seconds to host seconds (sim time runs slower than the host's in simulation)
-        return min(wait / max(self.board_clock.rate, 1e-3), 1.0)
 
     # ------------------------------------------------------------------------------------------ telemetry
     def on_samples(self, samples: Sequence[fr.Sample], t_read: float, t_rx: float,
@@ -406,8 +351,6 @@ def driver_reports(sched: DriverScheduler, uno: ServoLink, mega: CurrentLink, no
         "latch_unknown_seq": sched.frames.unknown_seq, "latch_predicted_wrong": sched.frames.mismatches,
         "latch_delivery_delay_ms": f"{1e3 * sched.frames.delivery_delay:.2f}",
         "latch_unmapped": sched.latches_unmapped, "uno_clock_rate": f"{sched.uno_clock.rate:.4f}",
-        "command_sync": sched.command_sync, "commands_held_for_gap": sched.sync_held,
-        "commands_sent_in_gap": sched.sync_sent_in_gap, "commands_sent_unsynced": sched.sync_unsynced,
         "board_watchdog_hold": "?" if hold is None else hold, **_recovery_values("latch", uno.watch),
         **{f"board_reconfigures_{k}": v for k, v in uno.reconfigures.items()}})
     if uno_r.level == "OK" and uno.watch.stale(now):
