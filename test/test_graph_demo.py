@@ -67,8 +67,9 @@ def test_all_three_cases_are_detected_after_the_true_contact_onset_on_the_right_
         assert (c["found_link"], c["found_chain"]) == (c["true_link"], c["true_chain"]), c
         assert c["point_error_median_mm"] < 10.0, c
         # the observer's own lag, after the force's plate-equivalent wrench crossed a threshold (plate axes or servo
-        # torques): plate 16-41 ms, rod 16-66 ms, arm 61-86 ms measured on the realistic robot
-        lag_limit = 60.0 if c["case"] == "plate" else 120.0
+        # torques): plate 16-41 ms, rod 16-66 ms, arm 61-106 ms measured on the realistic robot (8 runs; the arm's
+        # moves with the live command timing, docs/demo.md "Real time")
+        lag_limit = {"plate": 60.0, "rod": 120.0}.get(c["case"], 160.0)
         assert c["observer_delay_ms"] < lag_limit, f"{c['case']}: observer lag {c['observer_delay_ms']:.0f} ms"
     plate = [c for c in demo_run["result"]["cases"] if c["case"] == "plate"][0]
     # target ≤ 20 ms (not met on the realistic robot); measured 31-41 ms at K = 100 1/s, min_duration 0.02 s, where
