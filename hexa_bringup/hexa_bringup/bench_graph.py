@@ -364,7 +364,7 @@ def graph_specs(mode: str, ns: str, params: Path, node_args: dict[str, list[str]
 
     try:
         if priority is not None:
-            node_args = with_realtime_priority(dict(node_args or {}), priority)
+            node_args = with_realtime_priority(node_args or {}, priority)     # a new dict
         node_args = with_nodes_description(mode, ns, params, dict(node_args or {}),   # stdout: the bench's table
                                            log=lambda line: print(f"hexa bench graph: {line}", file=sys.stderr))
         if compose:
@@ -532,6 +532,11 @@ def published_topics(log: Path) -> dict[str, int]:
 # outputs
 
 
+#: the top camera's last message of each frame: robot mode's measuring subscriber reads it for the frames' stamps
+#: instead of the images (hexa_bringup.bench_graph_robot)
+TOP_FRAME_INFO = "cam_top/aligned_depth_to_color/camera_info"
+
+
 def parse_outputs(received: dict[str, list[tuple[int, bytes]]], ns: str) -> dict[str, Any]:
     """Arrival times (monotonic s) and contents of the outputs the probe received."""
     from hexa_bringup.bag import typestore
@@ -539,8 +544,7 @@ def parse_outputs(received: dict[str, list[tuple[int, bytes]]], ns: str) -> dict
     store = typestore()
     t = f"{ns.rstrip('/')}/"
     out: dict[str, Any] = {}
-    for name in ("plate_pose", "residual", "singularity", "joint_states", "cam_top/color/image_raw",
-                 "cam_top/aligned_depth_to_color/image_raw", "cam_top/aligned_depth_to_color/camera_info"):
+    for name in ("plate_pose", "residual", "singularity", "joint_states", TOP_FRAME_INFO):
         rows = received.get(t + name, [])
         out[name] = (np.asarray([r * 1e-9 for r, _ in rows]), np.asarray([cdr_stamp_ns(d) for _, d in rows],
                                                                           dtype=np.int64))

@@ -34,13 +34,12 @@ from typing import Any
 import numpy as np
 
 from hexa.benchmarks import BenchRow
-from hexa_bringup.bench_graph import (CAMERA_TOPICS, CAMERAS, OUTPUTS, TARGET_P95, BagInputs, BenchGraphError,
-                                      Children, CpuSampler, Probe, bag_identity, cpu_rows, frame_pose_latency,
-                                      graph_specs, latency_rows, node_names, parse_outputs, safety_priority, say)
+from hexa_bringup.bench_graph import (CAMERA_TOPICS, CAMERAS, OUTPUTS, TARGET_P95, TOP_FRAME_INFO, BagInputs,
+                                      BenchGraphError, Children, CpuSampler, Probe, bag_identity, cpu_rows,
+                                      frame_pose_latency, graph_specs, latency_rows, node_names, parse_outputs,
+                                      safety_priority, say)
 from hexa_bringup.bench_graph_analysis import cdr_stamp_ns, match_tracked_offset
 
-#: the top camera's last message of each frame, read for the frames' stamps (module docstring)
-TOP_FRAME_INFO = "cam_top/aligned_depth_to_color/camera_info"
 #: the Mega's stream rates measured
 ROBOT_RATES = (1000, 200)
 #: seconds between the graph being up and the measuring window
