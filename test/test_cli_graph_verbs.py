@@ -201,6 +201,8 @@ def test_user_mistakes_end_with_one_line_and_exit_2(graph, tmp_path):
         (["bringup", "replay", str(tmp_path / "no_bag")], "does not exist"),
         (["param", "load", "/hexa/observer", str(tmp_path / "none.yaml")], "cannot read"),
         (["node", "info", "bad name!", "--timeout", "1"], "bad name!"),
+        (["demo", "--rtf", "-1"], "--rtf must be > 0"),
+        (["demo", "--rtf", "nan"], "--rtf must be > 0"),
     ]
     for args, words in cases:
         line = user_error(hexa(graph, *args))

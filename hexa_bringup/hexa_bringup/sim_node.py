@@ -29,7 +29,7 @@ from sensor_msgs.msg import CameraInfo, Image, JointState
 from hexa.kinematics.hexa6rus import rotation_zyx
 from hexa.sim import Simulator
 from hexa.sim.boards import VirtualBoards
-from hexa.sim.pacing import MAX_LAG, Pacer, SimRunner
+from hexa.sim.pacing import MAX_LAG, MAX_REAL_TIME_FACTOR, Pacer, SimRunner
 from hexa.sim.realism import RealismConfig
 from hexa.sim.simulator import LINK_CODES
 
@@ -38,7 +38,7 @@ PARAMETERS = {
     "scenario": Param("plate", "none | plate | arm | rod | scenario YAML path"),
     "seed": Param(0, "seed of noise and randomized scenarios", range=(0, 2**31 - 1)),
     "randomize": Param(False, "draw the scenario's collision from its ranges with `seed`"),
-    "real_time_factor": Param(1.0, "sim s per wall s; 0 = as fast as possible", range=(0.0, 100.0)),
+    "real_time_factor": Param(1.0, "sim s per wall s; 0 = as fast as possible", range=(0.0, MAX_REAL_TIME_FACTOR)),
     "max_lag": Param(MAX_LAG, "wall s behind the pace before the lost time is dropped instead of caught up",
                      range=(0.0, 10.0)),
     "trajectory": Param("", "with scenario none: start at rest at this trajectory's start pose (empty = home)"),

@@ -60,6 +60,12 @@ def run(args: argparse.Namespace) -> int:
     from hexa_bringup.rosenv import ros_env
     from hexa_bringup.supervisor import SupervisorError
 
+    from hexa.sim.pacing import MAX_REAL_TIME_FACTOR
+
+    if args.rtf is not None and not 0.0 < args.rtf <= MAX_REAL_TIME_FACTOR:      # NaN fails too
+        print(f"hexa demo: --rtf must be > 0 and <= {MAX_REAL_TIME_FACTOR:g} (sim seconds per wall second), "
+              f"got {args.rtf}", file=sys.stderr)
+        return 2
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     domain = int(os.environ.get("ROS_DOMAIN_ID", str(100 + os.getpid() % 100)))

@@ -22,6 +22,8 @@ from typing import Callable, Protocol
 MIN_SLEEP = 0.0005
 #: default wall seconds behind the pace before the lost time is dropped (sim_node's `max_lag`)
 MAX_LAG = 0.005
+#: the largest real-time factor the simulator node takes (its `real_time_factor` parameter's range; 0 = unpaced)
+MAX_REAL_TIME_FACTOR = 100.0
 
 
 class Pacer:
