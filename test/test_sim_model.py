@@ -1,6 +1,8 @@
 """Simulator model: MJCF from the description, closed loops, exact state, free-motion tracking, scripted collisions."""
 from __future__ import annotations
 
+import math
+
 import importlib.util
 
 import numpy as np
@@ -268,6 +270,25 @@ def test_lead_in_holds_the_start_pose_then_shifts_trajectory_and_collision(desc)
         sim.collision.onset, abs=2e-3)
     with pytest.raises(SimulatorError, match="lead_in"):
         Simulator(desc, cameras=False, lead_in=-1.0)
+
+
+def test_a_late_trajectory_start_moves_the_scripted_collision_once_and_never_after_its_approach(desc):
+    onset = load_scenario("plate").onset.nominal + 1.0
+    sim = Simulator(desc, scenario="plate", cameras=False, lead_in=1.0, drive="external")
+    sim.run_until(0.9)
+    assert sim.start_scenario_at(1.812) == pytest.approx(0.812) and sim.scenario_shift == pytest.approx(0.812)
+    assert sim.collision.onset == pytest.approx(onset + 0.812)
+    assert sim.start_scenario_at(2.5) is None and sim.collision.onset == pytest.approx(onset + 0.812)   # once
+    sim.run_until(sim.collision.onset + 0.05)
+    log = sim.truth_log()
+    assert log["time"][np.argmax(np.linalg.norm(log["force"], axis=1) > 0)] == pytest.approx(onset + 0.812, abs=2e-3)
+    late = Simulator(desc, scenario="plate", cameras=False, lead_in=1.0, drive="external")
+    late.run_until(late.collision.onset - late.collision.approach_time + 0.01)   # the object is on its way: too late
+    assert late.start_scenario_at(onset) is None and late.collision.onset == pytest.approx(onset)
+    with pytest.raises(SimulatorError, match="finite"):
+        late.start_scenario_at(math.nan)
+    free = Simulator(desc, cameras=False, trajectory="circle", drive="external")
+    assert free.start_scenario_at(1.0) is None                   # no scripted collision
 
 
 @needs_trajectories

@@ -31,8 +31,24 @@ def test_the_start_pose_is_held_at_rest_for_the_start_delay_then_the_trajectory_
     assert first.state == "waiting" and not first.zeta_dot.any()
     assert np.allclose(first.zeta, hexa6rus.inverse_kinematics(desc, START))
     assert r.tick(11.5).state == "running" and r.time(11.5) == pytest.approx(0.5)
+    assert r.start == pytest.approx(11.0)
     fixed = _runner(desc, start_time=0.0)
+    assert fixed.start is None                                   # no tick yet
     assert fixed.tick(2.0).state == "running" and fixed.time(2.0) == pytest.approx(2.0)
+    assert fixed.start == 0.0
+
+
+def test_a_start_time_ahead_is_the_start_once_monitoring_is_ok_before_it(desc):
+    r = _runner(desc, start_time=1.0, require_monitoring=True, monitoring_timeout=1e6)
+    assert r.tick(0.2).state == "waiting_for_monitoring" and r.start is None
+    r.on_monitoring("OK", "", 0.5)
+    assert r.tick(0.51).state == "waiting" and r.start == pytest.approx(1.0)   # ahead of the clock, fixed
+    late = _runner(desc, start_time=1.0, require_monitoring=True, monitoring_timeout=1e6)
+    for now in (0.5, 1.0, 1.5, 1.8):
+        late.tick(now)
+    late.on_monitoring("OK", "", 1.812)                          # a late first OK moves trajectory time 0 to it
+    late.tick(1.82)
+    assert late.start == pytest.approx(1.812)
 
 
 def test_with_an_approach_nothing_is_commanded_before_a_fresh_valid_pose(desc):
@@ -46,11 +62,12 @@ def test_with_an_approach_nothing_is_commanded_before_a_fresh_valid_pose(desc):
     assert r.bad_poses == 2 and [lv for lv, _ in logs] == ["warn", "warn"]
     here = START + np.array([0.015, -0.02, 0.01, 0.04, 0.0, -0.03])
     r.on_pose(here, 5.0 - 2.0, 5.1)                              # 2 s old at 5.1: not used
-    assert r.tick(5.1).zeta is None and r.state == "waiting_for_pose"
+    assert r.tick(5.1).zeta is None and r.state == "waiting_for_pose" and r.start is None
     assert r.collision(5.1) is None and not r.resume(5.1) and not r.hold(5.1)
     r.on_pose(here, 5.2, 5.2)
     first = r.tick(5.2 + APPROACH_POSE_MAX_AGE / 2)
     assert first.state == "approaching" and not r.approach_pending
+    assert r.start == pytest.approx(5.2 + APPROACH_POSE_MAX_AGE / 2)   # the approach is trajectory time 0
     assert np.allclose(first.zeta, hexa6rus.inverse_kinematics(desc, here))
     assert logs[-1][0] == "info" and "approach from plate pose" in logs[-1][1]
     assert r.diagnostic_values()["rejected_poses"] == "2" and float(r.diagnostic_values()["approach_time_s"]) > 0
@@ -113,8 +130,12 @@ def test_nothing_moves_before_the_first_monitoring_ok_then_the_trajectory_starts
         assert tick.state == "waiting_for_monitoring" and not tick.zeta_dot.any() and np.allclose(tick.zeta, z0)
     assert r.on_monitoring("DEGRADED", "settling: residuals fresh for 0.2 of 0.5 s", 12.6) is None
     assert r.tick(12.7).state == "waiting_for_monitoring"
+    assert r.start is None                                      # not fixed before the first OK
     assert "may start" in r.on_monitoring("OK", "", 13.0)
     assert r.tick(13.0).state == "running" and r.time(13.5) == pytest.approx(0.5)   # from trajectory time 0
+    assert r.start == pytest.approx(13.0)
+    r.tick(20.0)
+    assert r.start == pytest.approx(13.0)                       # fixed once known
     assert r.diagnostic_values()["monitoring"] == "OK"
 
 

@@ -21,7 +21,8 @@ from hexa_bringup.supervisor import NodeSpec, Supervisor
 #: cases, which free-motion runs extend in their own process
 CASES: dict[str, tuple[str, str, float]] = dict(DEMO_CASES)
 
-RECORDED = ["sim/wrench_truth", "sim/contact_truth", "sim/plate_pose_truth", "sim/joint_states_truth", "residual",
+RECORDED = ["sim/wrench_truth", "sim/contact_truth", "sim/plate_pose_truth", "sim/joint_states_truth",
+            "sim/scenario_start", "trajectory_start", "residual",
             "collision", "contact", "contact_wrench", "joint_states", "joint_commands", "motor_currents",
             "plate_pose", "plate_detections", "trajectory_state", "singularity", "/diagnostics"]
 IMAGES = ["cam_top/color/image_raw", "cam_top/aligned_depth_to_color/image_raw", "cam_top/color/camera_info",
@@ -186,7 +187,12 @@ def _stamp(h) -> float:
 
 
 def case_data_from_bag(case: str, bag: Path, ns: str = "/hexa"):
-    """The CaseData of hexa.report.collision_demo from a recorded bag.
+    """The CaseData of hexa.report.collision_demo from a recorded bag, its times on the scenario's clock.
+
+    The simulator times its scripted collision from the trajectory's start (`sim/scenario_start`); a trajectory that
+    started after LEAD_IN (collision monitoring OK late) moves the whole case by that much in sim time. The times
+    here are sim time minus that move, so that a case compares with an offline run (trajectory at LEAD_IN) however
+    late the live graph started; a bag without `sim/scenario_start` is taken as not moved.
 
     Raises:
         hexa_bringup.bag.BagError: the bag is unreadable; ValueError: it lacks the simulator's ground truth.
@@ -198,13 +204,16 @@ def case_data_from_bag(case: str, bag: Path, ns: str = "/hexa"):
     store = typestore()
     rows: dict[str, list] = {k: [] for k in ("truth", "wrench_truth", "pose_truth", "zeta_truth", "res", "ev",
                                              "contact", "wrench")}
+    scenario_start = LEAD_IN
     for topic, msgtype, _t, data in read_bag(bag):
         name = topic[len(ns) + 1:] if topic.startswith(ns + "/") else topic
         if name not in ("sim/contact_truth", "sim/wrench_truth", "sim/plate_pose_truth", "sim/joint_states_truth",
-                        "residual", "collision", "contact", "contact_wrench"):
+                        "sim/scenario_start", "residual", "collision", "contact", "contact_wrench"):
             continue
         m = store.deserialize_cdr(data, msgtype)
-        if name == "sim/contact_truth":
+        if name == "sim/scenario_start":
+            scenario_start = _stamp(m)     # the newest: the bag is read in log-time order
+        elif name == "sim/contact_truth":
             rows["truth"].append((_stamp(m.header), m.link, m.chain, m.point.x, m.point.y, m.point.z))
         elif name == "sim/wrench_truth":
             f = m.wrench.force
@@ -227,6 +236,9 @@ def case_data_from_bag(case: str, bag: Path, ns: str = "/hexa"):
             rows["wrench"].append((_stamp(m.header), m.force.x, m.force.y, m.force.z))
     if not rows["truth"] or not rows["wrench_truth"]:
         raise ValueError(f"bag {bag} has no simulator ground truth (sim/contact_truth, sim/wrench_truth)")
+    moved = scenario_start - LEAD_IN
+    if moved:
+        rows = {k: [(r[0] - moved, *r[1:]) for r in v] for k, v in rows.items()}
     truth = np.array(sorted(rows["truth"]), dtype=float)
     wt = np.array(sorted(rows["wrench_truth"]), dtype=float)
     force = np.stack([np.interp(truth[:, 0], wt[:, 0], wt[:, k]) for k in (1, 2, 3)], axis=1)

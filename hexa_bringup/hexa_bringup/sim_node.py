@@ -5,7 +5,12 @@ Topics (relative, e.g. under /hexa): cam_{top,side}/color/image_raw (rgb8), cam_
 cam_{top,side}/aligned_depth_to_color/image_raw (16UC1 mm) and its camera_info (sensor-data QoS); sim/wrench_truth
 (WrenchStamped: force at the contact point), sim/contact_truth (hexa_msgs/Contact), sim/plate_pose_truth
 (PoseStamped), sim/joint_states_truth (JointState: ζ, ζ̇, τ); /clock. All stamps are sim time; the output is
-deterministic for a given seed. The virtual Uno/Mega serial ports appear at `link_dir` (boards: true).
+deterministic for a given seed. Subscribes to `trajectory_start` (std_msgs/Header, transient local, from the
+trajectory node): the scripted collision is timed from trajectory time 0 (Simulator.start_scenario_at), so a
+trajectory that starts late meets the push where the scenario puts it; the run's `duration` grows by the same.
+With a scripted collision `sim/scenario_start` (std_msgs/Header, transient local) holds the sim time of scenario time
+0: `lead_in`, then the trajectory's start once the collision moved to it (what aligns a bag with an offline run).
+The virtual Uno/Mega serial ports appear at `link_dir` (boards: true).
 Parameters: PARAMETERS below (start-up only, read-only), hexa_bringup/config/hexa_params.yaml (`/**/sim`) and
 docs/simulator.md.
 """
@@ -21,10 +26,11 @@ from hexa_ros import qos
 from hexa_ros.cdr import image_to_cdr
 from hexa_ros.conversions import JOINT_NAMES, fill_pose_msg
 from hexa_ros.node import Param, declare_parameters
-from hexa_ros.stamps import to_stamp
+from hexa_ros.stamps import to_sec, to_stamp
 from rclpy.node import Node
 from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import CameraInfo, Image, JointState
+from std_msgs.msg import Header
 
 from hexa.kinematics.hexa6rus import rotation_zyx
 from hexa.sim import Simulator
@@ -96,9 +102,28 @@ class SimNode(Node):
         self.truth_pubs = {k: self.create_publisher(t, f"sim/{k}", qos.RELIABLE) for k, t in (
             ("wrench_truth", WrenchStamped), ("contact_truth", Contact), ("plate_pose_truth", PoseStamped),
             ("joint_states_truth", JointState))}
+        self.create_subscription(Header, "trajectory_start", self._on_trajectory_start, qos.LATCHED)
+        self.scenario_start_pub = self.create_publisher(Header, "sim/scenario_start", qos.LATCHED)
+        if self.sim.collision is not None:
+            self.scenario_start_pub.publish(Header(stamp=to_stamp(self.sim.lead_in), frame_id="base"))
         ports = f"uno {self.boards.uno.port}, mega {self.boards.mega.port}" if self.boards else "no boards"
         self.get_logger().info(f"sim ready: scenario={self.scenario!r} seed={self.seed} rtf={rtf} "
                                f"robot={self.sim.realism.name} ({ports})")
+
+    def _on_trajectory_start(self, msg: Header) -> None:
+        t0 = to_sec(msg.stamp)
+        if self.sim.collision is None or self.sim.scenario_shift is not None:
+            return
+        shift = self.sim.start_scenario_at(t0)
+        if shift is None:
+            self.get_logger().warn(f"trajectory time 0 at {t0:.3f} s comes after the scripted object's approach "
+                                   f"began: the collision keeps its time")
+            return
+        if self.runner.duration > 0:
+            self.runner.duration += max(0.0, shift)
+        self.scenario_start_pub.publish(Header(stamp=to_stamp(self.sim.lead_in + shift), frame_id="base"))
+        self.get_logger().info(f"trajectory time 0 at {t0:.3f} s: the scripted collision moves {shift:+.3f} s "
+                               f"(onset {self.sim.collision.onset:.3f} s)")
 
     # ------------------------------------------------------------------ SimOutputs
     def clock(self) -> None:

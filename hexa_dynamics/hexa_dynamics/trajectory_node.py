@@ -7,7 +7,9 @@ at start-up (read-only: a set on the running node is refused). With the simulato
 that sim time = trajectory time; `hexa bringup robot` sets approach_speed 0.3.
 Topics (relative): pub `joint_commands` (sensor_msgs/JointState, arm_1..arm_6, ζ rad and ζ̇ rad/s),
 `trajectory_state` (std_msgs/String, transient local: a late subscriber gets the current state; waiting |
-waiting_for_monitoring | waiting_for_pose | approaching | running | held | retracting | resuming | finished); sub
+waiting_for_monitoring | waiting_for_pose | approaching | running | held | retracting | resuming | finished),
+`trajectory_start` (std_msgs/Header, transient local, once: its stamp is the clock time of trajectory time 0, known
+after the monitoring's first OK; the simulator times its scripted collision from it); sub
 `collision` (hexa_msgs/CollisionEvent, reliable), `monitoring` (hexa_msgs/MonitoringState, transient local: nothing
 moves before its first OK, LOST holds like a START; docs/monitoring.md), `residual`
 (hexa_msgs/Residual, only with collision_policy "retract", for its direction), `plate_pose`
@@ -25,7 +27,7 @@ from geometry_msgs.msg import PoseStamped
 from hexa_msgs.msg import CollisionEvent, MonitoringState, Residual
 from rclpy.node import Node
 from sensor_msgs.msg import JointState
-from std_msgs.msg import String
+from std_msgs.msg import Header, String
 from std_srvs.srv import Trigger
 
 import hexa_ros.node
@@ -33,7 +35,7 @@ from hexa.trajectory_runner import WARN_STATES, TrajectoryRunner, TrajectorySett
 from hexa_ros import diagnostics, qos
 from hexa_ros.node import DESCRIPTION, DESCRIPTION_PARAM, Param, declare_parameters
 from hexa_ros.conversions import JOINT_NAMES, hexa_pose_from_msg
-from hexa_ros.stamps import to_sec
+from hexa_ros.stamps import to_sec, to_stamp
 
 PARAMETERS = {
     "trajectory": Param("circle", "circle | helix | ellipse (seed 000 eqs 37, 40, 41), random:SEED (the random "
@@ -77,6 +79,8 @@ class TrajectoryNode(Node):
         self.runner = TrajectoryRunner.from_settings(load_hexa(desc_path), s, self._log)
         self.pub = self.create_publisher(JointState, "joint_commands", qos.RELIABLE)
         self.pub_state = self.create_publisher(String, "trajectory_state", qos.LATCHED)
+        self.pub_start = self.create_publisher(Header, "trajectory_start", qos.LATCHED)
+        self._start_sent = False
         self.pub_diag = self.create_publisher(DiagnosticArray, "/diagnostics", qos.RELIABLE)
         self.create_subscription(CollisionEvent, "collision", self._on_collision, qos.EVENT)
         self.create_subscription(MonitoringState, "monitoring", self._on_monitoring, qos.LATCHED)
@@ -125,6 +129,10 @@ class TrajectoryNode(Node):
                              velocity=[float(v) for v in tick.zeta_dot])
             msg.header.stamp = self.get_clock().now().to_msg()
             self.pub.publish(msg)
+        if not self._start_sent and self.runner.start is not None:
+            self._start_sent = True
+            self.pub_start.publish(Header(stamp=to_stamp(self.runner.start)))
+            self.get_logger().info(f"trajectory time 0 at {self.runner.start:.3f} s")
         if tick.state is not None:
             self.pub_state.publish(String(data=tick.state))
             if tick.state != self._state:

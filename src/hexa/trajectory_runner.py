@@ -154,6 +154,16 @@ class TrajectoryRunner:
             return
         self._pose, self._pose_time = pose, (stamp if stamp > 0 else now)
 
+    @property
+    def start(self) -> float | None:
+        """Clock time (s) of trajectory time 0 once it is fixed, else None: after the monitoring's first OK (or
+        at the first tick without required monitoring) and once any approach is planned. It may lie ahead of the
+        clock (a `start_time` not reached yet) and never moves afterwards: a scenario timed in trajectory time (the
+        simulator's scripted collision) starts its clock from it."""
+        if self._t0 is None or not self._watched or self.approach_pending:
+            return None
+        return self._t0
+
     def _fresh(self, now: float) -> bool:
         return self._pose is not None and now - self._pose_time <= APPROACH_POSE_MAX_AGE
 

@@ -16,6 +16,7 @@ the integration and q̈ (`qacc`), τ (`actuator_force`) computed in the same cal
 from __future__ import annotations
 
 import dataclasses
+import math
 import threading
 from collections import deque
 from dataclasses import dataclass, field
@@ -227,6 +228,8 @@ class Simulator:
         if lead_in < 0:
             raise SimulatorError(f"lead_in must be >= 0 s, got {lead_in}")
         self.lead_in = float(lead_in)
+        #: the move of the scripted collision's times by `start_scenario_at` (s); None: none made
+        self.scenario_shift: float | None = None
         if self.collision is not None and self.lead_in > 0:
             self.collision = dataclasses.replace(self.collision, onset=self.collision.onset + self.lead_in)
         self.trajectory = self.collision.trajectory if self.collision is not None else trajectory
@@ -406,6 +409,31 @@ class Simulator:
         with self._lock:
             for _ in range(int(n)):
                 self._step_once(use_schedule=True)
+
+    def start_scenario_at(self, t0: float) -> float | None:
+        """Time the scripted collision from trajectory time 0 at sim time `t0` (s) instead of from `lead_in`.
+
+        A graph whose trajectory starts late (its collision monitoring came up late) would otherwise meet the push at
+        another point of the trajectory: the onset moves by t0 − lead_in, so the push meets the trajectory where the
+        scenario puts it. Once only. Returns the shift (s), or None when nothing moves: no scripted collision, the
+        simulator drives the trajectory itself (from `lead_in`), a shift was made already, or the object's approach
+        has begun at the old or the new time (it cannot move without a jump).
+
+        Raises:
+            SimulatorError: `t0` is not finite.
+        """
+        if not math.isfinite(t0):
+            raise SimulatorError(f"trajectory start must be a finite sim time (s), got {t0!r}")
+        with self._lock:
+            c = self.collision
+            if c is None or self.drive == "trajectory" or self.scenario_shift is not None:
+                return None
+            shift = float(t0) - self.lead_in
+            if self.time >= min(c.onset, c.onset + shift) - c.approach_time:
+                return None
+            self.collision = dataclasses.replace(c, onset=c.onset + shift)
+            self.scenario_shift = shift
+            return shift
 
     def run_until(self, t_end: float) -> None:
         """Step until `time >= t_end`."""
