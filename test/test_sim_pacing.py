@@ -119,9 +119,36 @@ def test_sim_runner_publishes_clock_truth_and_cameras_at_their_sim_rates():
     runner.run(out, lambda: True)
     held = [e for e in out.log if e[1] == 0.0]
     stepped = [e for e in out.log if e[1] > 0.0]
-    assert sum(1 for k, _ in held if k == "spin") == 3                    # 1.2 s held in 0.5 s sleeps
+    assert sum(1 for k, _ in held if k == "clock") == 3                   # 1.2 s held, re-published every 0.5 s
+    assert runner.held == pytest.approx(1.2)
     count = {k: sum(1 for kk, _ in stepped if kk == k) for k in ("clock", "truth", "cameras", "spin")}
     assert count == {"clock": 250, "truth": 100, "cameras": 30, "spin": 19}
     cams = [t for k, t in stepped if k == "cameras"]
     assert cams[0] == pytest.approx(1 / 30, abs=1e-3) and all(b - a < 0.035 for a, b in zip(cams, cams[1:]))
     assert sim.time == pytest.approx(1.0) and wall.t == pytest.approx(1.2 + 1.0, abs=0.01)
+
+
+def test_the_hold_ends_once_the_graph_is_ready_and_never_later_than_start_delay():
+    from hexa.sim.pacing import SimRunner
+
+    class Sim:
+        timestep, time = 0.001, 0.0
+
+        def step(self, n: int) -> None:
+            self.time += n * self.timestep
+
+    class Out:
+        def clock(self) -> None: ...
+
+        def truth(self) -> None: ...
+
+        def cameras(self) -> None: ...
+
+        def spin(self) -> None: ...
+
+    for ready_at, held in ((0.3, 0.3), (5.0, 1.2)):            # up after 0.3 s; never up: the whole delay
+        wall = FakeWall()
+        runner = SimRunner(Sim(), Pacer(1.0, clock=wall.clock, sleep=wall.sleep), 250, 100, None, duration=0.1,
+                           start_delay=1.2, clock=wall.clock, sleep=wall.sleep, ready=lambda: wall.t >= ready_at)
+        runner.run(Out(), lambda: True)
+        assert runner.held == pytest.approx(held, abs=0.051) and runner.sim.time == pytest.approx(0.1)

@@ -97,7 +97,8 @@ class _ClockWatcher:
         self._thread.join(timeout=5)
 
 
-#: wall seconds the simulator holds sim time at 0 while the graph starts (DDS discovery, serial handshakes)
+#: most wall seconds the simulator holds sim time at 0 while the graph starts (DDS discovery, serial handshakes); it
+#: starts sooner once the graph is up (the sim node's `start_subscribers`)
 START_DELAY = 3.0
 #: simulator real-time factor the demo asks for. The pacing drops the wall time each camera render costs
 #: (hexa.sim.pacing), so on 2 cores the demo's graph reaches 0.34-0.40x (`hexa demo` prints it per case); asked
@@ -173,6 +174,11 @@ def run_case(case: str, out_dir: Path, env: dict[str, str], ns: str = "/hexa", s
     topics = [t if t.startswith("/") else f"{ns}/{t}" for t in RECORDED + (IMAGES if record_images else [])]
     specs.append(NodeSpec("record", [sys.executable, "-m", "hexa_bringup.cli", "record", *topics, "-o", str(bag),
                                      "--use-sim-time"], required=True, respawn=False))
+    # sim time starts once every other node (the recorder too) and the progress display below read /clock, or after
+    # START_DELAY at the latest
+    for s in specs:
+        if s.name == "sim":
+            s.cmd += ["-p", f"start_subscribers:={len(specs)}"]
     t0 = time.monotonic()
     with _ClockWatcher(env) as clock:
         sup = Supervisor(specs, env, log_dir=str(case_dir / "logs"), status_every=status_every,

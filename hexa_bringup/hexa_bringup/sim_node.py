@@ -56,7 +56,10 @@ PARAMETERS = {
     "link_dir": Param("/tmp/hexa_sim", "folder of the virtual boards' serial links"),
     "duration": Param(0.0, "sim s to run; 0 = until shut down", range=(0.0, 1e9)),
     "lead_in": Param(0.0, "sim s at rest before the trajectory and the scenario start", range=(0.0, 1e6)),
-    "start_delay": Param(0.0, "wall s with sim time frozen at 0 while the graph starts", range=(0.0, 3600.0)),
+    "start_delay": Param(0.0, "most wall s with sim time frozen at 0 while the graph starts", range=(0.0, 3600.0)),
+    "start_subscribers": Param(0, "with start_delay: the hold ends early once /clock has this many subscribers, "
+                                  "each camera an image subscriber and the driver a stream from both boards "
+                                  "(0 = hold the whole start_delay)", range=(0, 1000)),
     "contact_model": Param("scripted", "scripted (the scenario's force at the point) | physical (a pushing capsule "
                                        "through MuJoCo contacts)", choices=("scripted", "physical")),
     "servo_frame_period": Param(-1.0, "s between servo set-point frames (0..0.1); < 0 = the description's "
@@ -86,8 +89,9 @@ class SimNode(Node):
                              # until the first one (a trajectory drive would move them on its own until then)
                              drive="external" if v["boards"] else None,
                              realism=RealismConfig.named(str(v["realism"])))
+        self.start_subscribers = int(v["start_subscribers"])
         self.runner = SimRunner(self.sim, pacer, clock_rate, truth_rate, cam_rate if cameras else None, duration,
-                                start_delay)
+                                start_delay, ready=self.graph_ready if self.start_subscribers > 0 else None)
         self.boards = VirtualBoards(self.sim, link_dir=str(v["link_dir"])).start() if v["boards"] else None
         self.clock_pub = self.create_publisher(Clock, "/clock", 10)
         self.cam_pubs = {}
@@ -109,6 +113,19 @@ class SimNode(Node):
         ports = f"uno {self.boards.uno.port}, mega {self.boards.mega.port}" if self.boards else "no boards"
         self.get_logger().info(f"sim ready: scenario={self.scenario!r} seed={self.seed} rtf={rtf} "
                                f"robot={self.sim.realism.name} ({ports})")
+
+    def graph_ready(self) -> bool:
+        """The graph is up: `start_subscribers` on /clock, an image subscriber per camera (with cameras), the
+        driver streaming from the Mega and talking to the Uno (with boards)."""
+        if self.clock_pub.get_subscription_count() < self.start_subscribers:
+            return False
+        if self.boards is not None and not (self.boards.mega.streaming and self.boards.uno.rx_frames > 0):
+            return False
+        if self.runner.camera_period is None:
+            return True
+        return all(p["color/image_raw"].get_subscription_count() > 0
+                   or p["aligned_depth_to_color/image_raw"].get_subscription_count() > 0
+                   for p, _info, _frame in self.cam_pubs.values())
 
     def _on_trajectory_start(self, msg: Header) -> None:
         t0 = to_sec(msg.stamp)
@@ -173,6 +190,9 @@ class SimNode(Node):
 
     def close(self) -> None:
         pacer = self.runner.pacer
+        if self.runner.start_delay > 0:
+            self.get_logger().info(f"sim time held at its start for {self.runner.held:.2f} s of wall time (at most "
+                                   f"{self.runner.start_delay:g} s) while the graph started")
         if pacer.stalls:
             self.get_logger().info(f"pacing: {pacer.stalls} stalls over max_lag, {pacer.dropped:.1f} s of wall time "
                                    f"dropped (not caught up)")

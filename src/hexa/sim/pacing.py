@@ -96,21 +96,24 @@ class SimRunner:
     every `truth_rate` Hz and a camera frame pair every 1/`camera_rate` s of sim time, paced by `pacer`.
 
     The output does not depend on wall time (only the pacing does): for a given seed a run publishes the same
-    messages at the same sim times. Before stepping, sim time is held at its start for `start_delay` wall seconds
-    while the rest of the graph starts, re-publishing the clock, the truth and the cameras every 0.5 s.
+    messages at the same sim times. Before stepping, sim time is held at its start for at most `start_delay` wall
+    seconds while the rest of the graph starts, re-publishing the clock, the truth and the cameras every 0.5 s; the
+    hold ends early once `ready()` is true (checked every 50 ms), so a graph that is up does not wait out the delay.
 
     Args:
         sim: the hexa.sim.Simulator (`step(n)`, `time`, `timestep`).
         pacer: the real-time pacing.
         clock_rate, truth_rate: Hz of sim time (0 = never); camera_rate: Hz (0 or None = no cameras).
         duration: sim seconds to run (0 = until `ok()` turns false).
-        start_delay: wall seconds with sim time frozen before stepping.
+        start_delay: most wall seconds with sim time frozen before stepping.
+        ready: true once the graph is up (None: the hold lasts `start_delay`).
         spin_every: steps between two `outputs.spin()` calls (the node's own service/parameter callbacks).
     """
 
     def __init__(self, sim: SteppedSim, pacer: Pacer, clock_rate: float, truth_rate: float, camera_rate: float | None,
                  duration: float = 0.0, start_delay: float = 0.0, spin_every: int = 50,
-                 clock: Callable[[], float] = time.monotonic, sleep: Callable[[float], None] = time.sleep) -> None:
+                 clock: Callable[[], float] = time.monotonic, sleep: Callable[[float], None] = time.sleep,
+                 ready: Callable[[], bool] | None = None) -> None:
         dt = sim.timestep
         self.sim, self.pacer, self.duration, self.start_delay = sim, pacer, float(duration), float(start_delay)
         self.clock_every = max(1, int(round(1.0 / (clock_rate * dt)))) if clock_rate > 0 else 0
@@ -118,7 +121,9 @@ class SimRunner:
         self.camera_period = 1.0 / camera_rate if camera_rate else None
         self.spin_every = max(1, int(spin_every))
         self._clock, self._sleep = clock, sleep
+        self.ready = ready
         self.steps = 0
+        self.held = 0.0          # wall seconds sim time was held before stepping
 
     def run(self, outputs: SimOutputs, ok: Callable[[], bool]) -> None:
         """Hold, then step until `duration` or until `ok()` is false."""
@@ -127,14 +132,21 @@ class SimRunner:
         if self.camera_period is not None:
             outputs.cameras()
             next_cam = self.camera_period
-        hold_until = self._clock() + self.start_delay
+        held_from = self._clock()
+        hold_until = held_from + self.start_delay
+        republish = held_from
         while ok() and self._clock() < hold_until:   # sim time frozen while the graph starts
-            outputs.clock()
-            outputs.truth()
-            if self.camera_period is not None:
-                outputs.cameras()
+            if self._clock() >= republish:
+                outputs.clock()
+                outputs.truth()
+                if self.camera_period is not None:
+                    outputs.cameras()
+                republish += 0.5
             outputs.spin()
-            self._sleep(min(0.5, max(0.0, hold_until - self._clock())))
+            if self.ready is not None and self.ready():
+                break
+            self._sleep(min(0.05, max(0.0, hold_until - self._clock())))
+        self.held = self._clock() - held_from
         self.pacer.start(sim.time)
         k = 0
         while ok():
