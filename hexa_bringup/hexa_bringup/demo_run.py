@@ -100,9 +100,9 @@ class _ClockWatcher:
 #: most wall seconds the simulator holds sim time at 0 while the graph starts (DDS discovery, serial handshakes); it
 #: starts sooner once the graph is up (the sim node's `start_subscribers`)
 START_DELAY = 3.0
-#: simulator real-time factor the demo asks for. The pacing drops the wall time each camera render costs
-#: (hexa.sim.pacing), so on 2 cores the demo's graph reaches 0.34-0.40x (`hexa demo` prints it per case); asked
-#: for 1 it reaches 0.50-0.53x, and then free motion raised a false START (docs/demo.md, "Real time")
+#: simulator real-time factor the demo asks for. The pacing drops the wall time of host stalls (hexa.sim.pacing),
+#: so on 2 cores the demo's graph reaches 0.47-0.48x (`hexa demo` prints it per case); asked for 0.6 the free
+#: motion's residual comes within a sample of a false START (docs/demo.md, "Real time")
 REAL_TIME_FACTOR = 0.5
 #: sim seconds at rest before the trajectory and the scenario clock start (the estimator and observer settle, the
 #: driver's commands take over from the simulator's own start pose)

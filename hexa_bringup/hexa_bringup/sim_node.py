@@ -19,6 +19,8 @@ from __future__ import annotations
 import sys
 from typing import Any
 
+import numpy as np
+
 from geometry_msgs.msg import PoseStamped, WrenchStamped
 from hexa_msgs.msg import Contact
 from hexa_bringup.graphs import DEFAULT_REALISM
@@ -37,6 +39,7 @@ from hexa.sim import Simulator
 from hexa.sim.boards import VirtualBoards
 from hexa.sim.pacing import MAX_LAG, MAX_REAL_TIME_FACTOR, Pacer, SimRunner
 from hexa.sim.realism import RealismConfig
+from hexa.sim.render_thread import RenderThread
 from hexa.sim.simulator import LINK_CODES
 
 
@@ -103,6 +106,8 @@ class SimNode(Node):
                 ("color/image_raw", Image), ("color/camera_info", CameraInfo),
                 ("aligned_depth_to_color/image_raw", Image), ("aligned_depth_to_color/camera_info", CameraInfo))}
             self.cam_pubs[name] = (pub, info, model.frame_id)
+        # camera frames are rendered off the stepping loop (hexa.sim.render_thread), published from that thread
+        self.render = RenderThread(self.sim, self._publish_frame) if cameras else None
         self.truth_pubs = {k: self.create_publisher(t, f"sim/{k}", qos.RELIABLE) for k, t in (
             ("wrench_truth", WrenchStamped), ("contact_truth", Contact), ("plate_pose_truth", PoseStamped),
             ("joint_states_truth", JointState))}
@@ -147,20 +152,26 @@ class SimNode(Node):
         self.clock_pub.publish(Clock(clock=to_stamp(self.sim.time)))
 
     def cameras(self) -> None:
-        """Each camera with a subscriber to its images: render once (colour and depth), publish serialized; a camera
-        nobody listens to is not rendered (its noise advances as if it were: the frames stay those of the seed)."""
-        st = to_stamp(self.sim.time)
-        for name, (pub, info, frame) in self.cam_pubs.items():
-            color, depth_pub = pub["color/image_raw"], pub["aligned_depth_to_color/image_raw"]
-            if color.get_subscription_count() + depth_pub.get_subscription_count() == 0:
-                self.sim.skip_render(name)
-            else:
-                rgb, depth = self.sim.render(name)
-                color.publish(image_to_cdr(st.sec, st.nanosec, frame, rgb, "rgb8"))
-                depth_pub.publish(image_to_cdr(st.sec, st.nanosec, frame, depth, "16UC1"))
-            info.header.stamp = st
-            pub["color/camera_info"].publish(info)
-            pub["aligned_depth_to_color/camera_info"].publish(info)
+        """Hand this instant to the render thread: each camera with a subscriber to its images is rendered there
+        (colour and depth) and published serialized; a camera nobody listens to is not rendered (its noise advances
+        as if it were: the frames stay those of the seed)."""
+        wanted = {name: pub["color/image_raw"].get_subscription_count()
+                  + pub["aligned_depth_to_color/image_raw"].get_subscription_count() > 0
+                  for name, (pub, _info, _frame) in self.cam_pubs.items()}
+        assert self.render is not None
+        self.render.submit(self.sim.frame_state(), wanted)
+
+    def _publish_frame(self, t: float, name: str, rgb: np.ndarray | None, depth: np.ndarray | None) -> None:
+        """One camera's frame at sim time `t` (None images: not rendered, only its camera_info), on the render
+        thread."""
+        pub, info, frame = self.cam_pubs[name]
+        st = to_stamp(t)
+        if rgb is not None and depth is not None:
+            pub["color/image_raw"].publish(image_to_cdr(st.sec, st.nanosec, frame, rgb, "rgb8"))
+            pub["aligned_depth_to_color/image_raw"].publish(image_to_cdr(st.sec, st.nanosec, frame, depth, "16UC1"))
+        info.header.stamp = st
+        pub["color/camera_info"].publish(info)
+        pub["aligned_depth_to_color/camera_info"].publish(info)
 
     def truth(self) -> None:
         s, g = self.sim.state(), self.sim.ground_truth()
@@ -196,6 +207,8 @@ class SimNode(Node):
         if pacer.stalls:
             self.get_logger().info(f"pacing: {pacer.stalls} stalls over max_lag, {pacer.dropped:.1f} s of wall time "
                                    f"dropped (not caught up)")
+        if self.render is not None:
+            self.render.close()
         if self.boards is not None:
             self.boards.stop()
         self.sim.close()
@@ -228,6 +241,9 @@ def main(argv: list[str] | None = None) -> int:
     # from now on a signal only requests the stop, checked between steps: a KeyboardInterrupt raised inside
     # spin_once would interrupt a message being taken and converted and surface as a RuntimeError
     stop_on_signal()
+    # the render thread's numpy work holds the GIL in pieces: hand it back to the 1 ms stepping loop sooner than
+    # Python's default 5 ms, which the pacing would see as stalls
+    sys.setswitchinterval(0.001)
     try:
         node.runner.run(node, lambda: rclpy.ok() and not stop_requested())
     except KeyboardInterrupt:

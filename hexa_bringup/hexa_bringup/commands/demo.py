@@ -14,7 +14,7 @@ def rtf_line(asked: float, reached: float | None) -> str:
     """What the simulator reached against what was asked, in words."""
     if reached is None:
         return f"the real-time factor reached is unknown (no /clock seen; {asked:g}x asked)"
-    return f"the simulator reached {reached:.2f}x real time ({asked:g}x asked; its pacing drops the renders' time)"
+    return f"the simulator reached {reached:.2f}x real time ({asked:g}x asked; its pacing drops stalls)"
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -23,8 +23,8 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--out", default="out/demo", help="output directory (bags, logs, report.md, PNGs)")
     p.add_argument("--seed", type=int, default=0, help="scenario seed (timings/positions drawn from it)")
     p.add_argument("--rtf", type=float, default=None,
-                   help="simulator real-time factor asked for (default 0.5). The pacing drops each camera render's "
-                        "wall time, so the factor reached is lower (0.34-0.40 at 0.5 on 2 cores); each case "
+                   help="simulator real-time factor asked for (default 0.5). The pacing drops the wall time of "
+                        "host stalls, so the factor reached is lower (0.47-0.48 at 0.5 on 2 cores); each case "
                         "prints the one it reached")
     p.add_argument("--record-images", action="store_true", help="also record the camera topics (large bags)")
     p.add_argument("--contact-model", choices=["scripted", "physical"], default="scripted",

@@ -1,8 +1,9 @@
 """Real-time pacing of the simulator's stepping loop, and the loop itself (SimRunner: the sim node publishes
 what it asks for).
 
-The simulator steps as fast as it can and sleeps to keep sim time at `real_time_factor` × wall time. A camera render
-(≈ 22 ms per camera) or a host stall makes it fall behind that pace. Catching up means stepping without sleeping
+The simulator steps as fast as it can and sleeps to keep sim time at `real_time_factor` × wall time. A host stall,
+or a camera render done in the loop (≈ 22 ms per camera; the sim node renders on hexa.sim.render_thread instead),
+makes it fall behind that pace. Catching up means stepping without sleeping
 until the pace is restored: sim time then runs several times faster than the rest of the graph, whose commands
 (trajectory → driver → virtual Uno) then reach the simulated servos sparser in sim time than they were played —
 gaps of 20–50 ms followed by a burst of set-point steps, which the arms really follow with jerks that the observer

@@ -806,16 +806,28 @@ class Simulator:
         Raises:
             SimulatorError: unknown camera; RenderError: the simulator was built with cameras=False.
         """
-        renderer, cam_id = self._renderer_of(camera)
+        renderer, _cam_id = self._renderer_of(camera)
         with self._lock:
-            s = self._scratch_data()
-            s.time = frame.time
-            s.qpos[:] = frame.qpos
-            s.mocap_pos[:] = frame.mocap_pos
-            s.mocap_quat[:] = frame.mocap_quat
-            mujoco.mj_kinematics(self.model, s)
-            mujoco.mj_camlight(self.model, s)          # the cameras' and lights' poses (a fresh MjData has none)
-            rgb, depth = renderer.render(s, cam_id)
+            return self.render_frame_on(renderer, self._scratch_data(), camera, frame, noise)
+
+    def render_frame_on(self, renderer: RGBDRenderer, data: mujoco.MjData, camera: str, frame: FrameState,
+                        noise: bool = True) -> tuple[np.ndarray, np.ndarray]:
+        """`render_frame` with the caller's renderer and MjData of this model, without the physics' lock: a render
+        thread's own GL context (one thread each) renders while the physics steps. The camera's noise is drawn
+        here, so one thread at a time renders or skips a given camera, in frame order.
+
+        Raises:
+            SimulatorError: unknown camera.
+        """
+        if camera not in self._cam_ids:
+            raise SimulatorError(f"unknown camera {camera!r}; cameras: {list(self._cam_ids)}")
+        data.time = frame.time
+        data.qpos[:] = frame.qpos
+        data.mocap_pos[:] = frame.mocap_pos
+        data.mocap_quat[:] = frame.mocap_quat
+        mujoco.mj_kinematics(self.model, data)
+        mujoco.mj_camlight(self.model, data)          # the cameras' and lights' poses (a fresh MjData has none)
+        rgb, depth = renderer.render(data, self._cam_ids[camera])
         return self._camera_images(camera, rgb, depth, noise)
 
     def _renderer_of(self, camera: str) -> tuple[RGBDRenderer, int]:
