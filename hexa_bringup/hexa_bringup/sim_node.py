@@ -17,16 +17,17 @@ docs/simulator.md.
 from __future__ import annotations
 
 import sys
-from typing import Any
+from typing import Any, Callable
 
 import numpy as np
 
 from geometry_msgs.msg import PoseStamped, WrenchStamped
 from hexa_msgs.msg import Contact
 from hexa_bringup.graphs import DEFAULT_REALISM
+import hexa_ros.node
 from hexa_ros import qos
 from hexa_ros.cdr import image_to_cdr
-from hexa_ros.conversions import JOINT_NAMES, fill_pose_msg
+from hexa_ros.conversions import JOINT_NAMES, fill_pose_msg, wrench_stamped
 from hexa_ros.node import Param, declare_parameters
 from hexa_ros.stamps import to_sec, to_stamp
 from rclpy.node import Node
@@ -40,7 +41,7 @@ from hexa.sim.boards import VirtualBoards
 from hexa.sim.pacing import MAX_LAG, MAX_REAL_TIME_FACTOR, Pacer, SimRunner
 from hexa.sim.realism import RealismConfig
 from hexa.sim.render_thread import RenderThread
-from hexa.sim.simulator import LINK_CODES
+from hexa.sim.simulator import LINK_CODES, SimulatorError
 
 
 PARAMETERS = {
@@ -84,14 +85,17 @@ class SimNode(Node):
         pacer = Pacer(rtf, float(v["max_lag"]))  # ValueError names a bad value
         cam_rate, clock_rate, truth_rate = (float(v[k]) for k in ("camera_rate_hz", "clock_rate_hz", "truth_rate_hz"))
         duration, start_delay, frame = float(v["duration"]), float(v["start_delay"]), float(v["servo_frame_period"])
-        self.sim = Simulator(seed=self.seed, scenario=None if self.scenario in ("", "none") else self.scenario,
-                             cameras=cameras, randomize=bool(v["randomize"]), lead_in=float(v["lead_in"]),
-                             contact_model=str(v["contact_model"]), trajectory=str(v["trajectory"]) or None,
-                             servo_frame_period=None if frame < 0 else frame,
-                             # with the boards the servos take only the driver's commands, and hold the start pose
-                             # until the first one (a trajectory drive would move them on its own until then)
-                             drive="external" if v["boards"] else None,
-                             realism=RealismConfig.named(str(v["realism"])))
+        try:
+            self.sim = Simulator(seed=self.seed, scenario=None if self.scenario in ("", "none") else self.scenario,
+                                 cameras=cameras, randomize=bool(v["randomize"]), lead_in=float(v["lead_in"]),
+                                 contact_model=str(v["contact_model"]), trajectory=str(v["trajectory"]) or None,
+                                 servo_frame_period=None if frame < 0 else frame,
+                                 # with the boards the servos take only the driver's commands, and hold the start pose
+                                 # until the first one (a trajectory drive would move them on its own until then)
+                                 drive="external" if v["boards"] else None,
+                                 realism=RealismConfig.named(str(v["realism"])))
+        except SimulatorError as exc:   # a bad scenario, trajectory or value: named, exit 2 (hexa_ros.node.run)
+            raise ValueError(str(exc)) from None
         self.start_subscribers = int(v["start_subscribers"])
         self.runner = SimRunner(self.sim, pacer, clock_rate, truth_rate, cam_rate if cameras else None, duration,
                                 start_delay, ready=self.graph_ready if self.start_subscribers > 0 else None)
@@ -176,28 +180,30 @@ class SimNode(Node):
     def truth(self) -> None:
         s, g = self.sim.state(), self.sim.ground_truth()
         st = to_stamp(g.time)
-        w = WrenchStamped()
-        w.header.stamp, w.header.frame_id = st, "base"
-        w.wrench.force.x, w.wrench.force.y, w.wrench.force.z = (float(v) for v in g.force)
-        w.wrench.torque.x, w.wrench.torque.y, w.wrench.torque.z = (float(v) for v in g.torque)
         c = Contact(link=LINK_CODES[g.link], chain=int(g.chain), pixel_u=-1.0, pixel_v=-1.0, camera="",
                     confidence=1.0 if g.in_contact else 0.0)
-        c.header.stamp, c.header.frame_id = st, "base"
+        ps, js = PoseStamped(), JointState(name=list(JOINT_NAMES), position=s.zeta.tolist(),
+                                           velocity=s.zeta_dot.tolist(), effort=s.tau.tolist())
         c.point.x, c.point.y, c.point.z = (float(v) for v in g.point)
-        ps = PoseStamped()
-        ps.header.stamp, ps.header.frame_id = st, "base"
         fill_pose_msg(ps.pose, rotation_zyx(*s.pose[3:]), s.pose[:3])
-        js = JointState(name=list(JOINT_NAMES), position=s.zeta.tolist(), velocity=s.zeta_dot.tolist(),
-                        effort=s.tau.tolist())
-        js.header.stamp, js.header.frame_id = st, "base"
-        for key, msg in (("wrench_truth", w), ("contact_truth", c), ("plate_pose_truth", ps),
-                         ("joint_states_truth", js)):
+        for m in (c, ps, js):
+            m.header.stamp, m.header.frame_id = st, "base"
+        for key, msg in (("wrench_truth", wrench_stamped("base", st, g.force, g.torque)), ("contact_truth", c),
+                         ("plate_pose_truth", ps), ("joint_states_truth", js)):
             self.truth_pubs[key].publish(msg)
 
     def spin(self) -> None:
         import rclpy
 
         rclpy.spin_once(self, timeout_sec=0.0)
+
+    def run_loop(self, ok: Callable[[], bool]) -> None:
+        """Step until the run's duration or until `ok()` turns false (hexa_ros.node.run calls it instead of an
+        executor; `spin` serves this node's callbacks between steps)."""
+        # the render thread's numpy work holds the GIL in pieces: hand it back to the 1 ms stepping loop sooner than
+        # Python's default 5 ms, which the pacing would see as stalls
+        sys.setswitchinterval(0.001)
+        self.runner.run(self, ok)
 
     def close(self) -> None:
         pacer = self.runner.pacer
@@ -216,45 +222,7 @@ class SimNode(Node):
 
 def main(argv: list[str] | None = None) -> int:
     """Init, build the simulator (exit 2 naming a bad parameter), run its loop until done or Ctrl-C."""
-    import signal
-
-    import rclpy
-    from rclpy.signals import SignalHandlerOptions
-
-    from hexa.sim.simulator import SimulatorError
-    from hexa_ros.env import apply_defaults
-    from hexa_ros.node import install_signal_handlers, stop_on_signal, stop_requested
-
-    apply_defaults()
-    install_signal_handlers()
-    rclpy.init(args=argv if argv is not None else sys.argv, signal_handler_options=SignalHandlerOptions.NO)
-    try:
-        node = SimNode()
-    except BaseException as exc:  # noqa: BLE001 - stopped while the model loads (whatever it interrupted), or
-        rclpy.try_shutdown()      # a bad parameter (scenario, trajectory, max_lag, ...): named, exit 2
-        if stop_requested():
-            return 0
-        if isinstance(exc, (ValueError, SimulatorError)):
-            print(f"hexa sim: {exc}", file=sys.stderr)
-            return 2
-        raise
-    # from now on a signal only requests the stop, checked between steps: a KeyboardInterrupt raised inside
-    # spin_once would interrupt a message being taken and converted and surface as a RuntimeError
-    stop_on_signal()
-    # the render thread's numpy work holds the GIL in pieces: hand it back to the 1 ms stepping loop sooner than
-    # Python's default 5 ms, which the pacing would see as stalls
-    sys.setswitchinterval(0.001)
-    try:
-        node.runner.run(node, lambda: rclpy.ok() and not stop_requested())
-    except KeyboardInterrupt:
-        pass
-    finally:
-        signal.signal(signal.SIGINT, signal.SIG_IGN)   # a second signal must not interrupt the teardown
-        signal.signal(signal.SIGTERM, signal.SIG_IGN)
-        node.close()
-        node.destroy_node()
-        rclpy.try_shutdown()
-    return 0
+    return hexa_ros.node.main(SimNode, "sim", argv)
 
 
 if __name__ == "__main__":

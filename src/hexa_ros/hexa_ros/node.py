@@ -160,6 +160,15 @@ def run(factories: Sequence[Callable[..., Any]], name: str, argv: list[str] | No
     for node in nodes:
         node.get_logger().info("ready")
     stop_on_signal()     # a signal from here on ends the spin before or after its first step, never a traceback
+    loop = getattr(nodes[0], "run_loop", None) if len(nodes) == 1 else None
+    if callable(loop):   # a node that steps its own loop (the simulator) and spins itself between steps
+        try:
+            loop(lambda: rclpy.ok() and not _StopRequest.requested)
+        except KeyboardInterrupt:
+            pass
+        finally:
+            _teardown(nodes)
+        return 0
     try:
         executor = make_executor(executor_kind())
     except ValueError as exc:
