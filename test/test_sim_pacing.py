@@ -152,3 +152,27 @@ def test_the_hold_ends_once_the_graph_is_ready_and_never_later_than_start_delay(
                            start_delay=1.2, clock=wall.clock, sleep=wall.sleep, ready=lambda: wall.t >= ready_at)
         runner.run(Out(), lambda: True)
         assert runner.held == pytest.approx(held, abs=0.051) and runner.sim.time == pytest.approx(0.1)
+
+
+def test_a_later_scenario_start_lengthens_the_run_and_the_summary_says_what_was_held():
+    from hexa.sim.pacing import SimRunner
+
+    class Sim:
+        timestep, time = 0.001, 0.0
+
+        def __init__(self, shift):
+            self.shift = shift
+
+        def step(self, n: int) -> None:
+            self.time += n * self.timestep
+
+        def start_scenario_at(self, t0: float):
+            return self.shift
+
+    for shift, duration in ((0.8, 5.8), (-0.2, 5.0), (None, 5.0)):
+        wall = FakeWall()
+        runner = SimRunner(Sim(shift), Pacer(1.0, clock=wall.clock, sleep=wall.sleep), 250, 100, None,
+                           duration=5.0, start_delay=1.0, clock=wall.clock, sleep=wall.sleep)
+        assert runner.start_scenario_at(1.8) == shift and runner.duration == pytest.approx(duration)
+    assert runner.summary() == ["sim time held at its start for 0.00 s of wall time (at most 1 s) while the graph "
+                                "started"]                # not run yet: nothing held, no stall

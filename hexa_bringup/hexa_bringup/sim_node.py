@@ -5,12 +5,9 @@ Topics (relative, e.g. under /hexa): cam_{top,side}/color/image_raw (rgb8), cam_
 cam_{top,side}/aligned_depth_to_color/image_raw (16UC1 mm) and its camera_info (sensor-data QoS); sim/wrench_truth
 (WrenchStamped: force at the contact point), sim/contact_truth (hexa_msgs/Contact), sim/plate_pose_truth
 (PoseStamped), sim/joint_states_truth (JointState: ζ, ζ̇, τ); /clock. All stamps are sim time; the output is
-deterministic for a given seed. Subscribes to `trajectory_start` (std_msgs/Header, transient local, from the
-trajectory node): the scripted collision is timed from trajectory time 0 (Simulator.start_scenario_at), so a
-trajectory that starts late meets the push where the scenario puts it; the run's `duration` grows by the same.
-With a scripted collision `sim/scenario_start` (std_msgs/Header, transient local) holds the sim time of scenario time
-0: `lead_in`, then the trajectory's start once the collision moved to it (what aligns a bag with an offline run).
-The virtual Uno/Mega serial ports appear at `link_dir` (boards: true).
+deterministic for a given seed. Subscribes to `trajectory_start` (std_msgs/Header, transient local): the scripted
+collision is timed from trajectory time 0, recorded on `sim/scenario_start` (std_msgs/Header, transient local;
+docs/simulator.md). The virtual Uno/Mega serial ports appear at `link_dir` (boards: true).
 Parameters: PARAMETERS below (start-up only, read-only), hexa_bringup/config/hexa_params.yaml (`/**/sim`) and
 docs/simulator.md.
 """
@@ -27,7 +24,7 @@ from hexa_bringup.graphs import DEFAULT_REALISM
 import hexa_ros.node
 from hexa_ros import qos
 from hexa_ros.cdr import image_to_cdr
-from hexa_ros.conversions import JOINT_NAMES, fill_pose_msg, wrench_stamped
+from hexa_ros.conversions import sim_truth_messages
 from hexa_ros.node import Param, declare_parameters
 from hexa_ros.stamps import to_sec, to_stamp
 from rclpy.node import Node
@@ -35,7 +32,6 @@ from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import CameraInfo, Image, JointState
 from std_msgs.msg import Header
 
-from hexa.kinematics.hexa6rus import rotation_zyx
 from hexa.sim import Simulator
 from hexa.sim.boards import VirtualBoards
 from hexa.sim.pacing import MAX_LAG, MAX_REAL_TIME_FACTOR, Pacer, SimRunner
@@ -80,8 +76,8 @@ class SimNode(Node):
     def __init__(self, **kwargs: Any) -> None:
         super().__init__("sim", **kwargs)
         v = declare_parameters(self, PARAMETERS)
-        self.scenario, self.seed, rtf, cameras = str(v["scenario"]), int(v["seed"]), float(v["real_time_factor"]), bool(
-            v["cameras"])
+        self.scenario, self.seed = str(v["scenario"]), int(v["seed"])
+        rtf, cameras = float(v["real_time_factor"]), bool(v["cameras"])
         pacer = Pacer(rtf, float(v["max_lag"]))  # ValueError names a bad value
         cam_rate, clock_rate, truth_rate = (float(v[k]) for k in ("camera_rate_hz", "clock_rate_hz", "truth_rate_hz"))
         duration, start_delay, frame = float(v["duration"]), float(v["start_delay"]), float(v["servo_frame_period"])
@@ -126,30 +122,25 @@ class SimNode(Node):
     def graph_ready(self) -> bool:
         """The graph is up: `start_subscribers` on /clock, an image subscriber per camera (with cameras), the
         driver streaming from the Mega and talking to the Uno (with boards)."""
-        if self.clock_pub.get_subscription_count() < self.start_subscribers:
-            return False
-        if self.boards is not None and not (self.boards.mega.streaming and self.boards.uno.rx_frames > 0):
-            return False
-        if self.runner.camera_period is None:
-            return True
-        return all(p["color/image_raw"].get_subscription_count() > 0
-                   or p["aligned_depth_to_color/image_raw"].get_subscription_count() > 0
-                   for p, _info, _frame in self.cam_pubs.values())
+        boards_up = self.boards is None or (self.boards.mega.streaming and self.boards.uno.rx_frames > 0)
+        return (self.clock_pub.get_subscription_count() >= self.start_subscribers and boards_up
+                and (self.runner.camera_period is None or all(self._wanted().values())))
+
+    def _wanted(self) -> dict[str, bool]:
+        """Per camera: does anyone subscribe to its images."""
+        return {name: pub["color/image_raw"].get_subscription_count()
+                + pub["aligned_depth_to_color/image_raw"].get_subscription_count() > 0
+                for name, (pub, _info, _frame) in self.cam_pubs.items()}
 
     def _on_trajectory_start(self, msg: Header) -> None:
         t0 = to_sec(msg.stamp)
-        if self.sim.collision is None or self.sim.scenario_shift is not None:
-            return
-        shift = self.sim.start_scenario_at(t0)
-        if shift is None:
+        shift = self.runner.start_scenario_at(t0)
+        if shift is not None:
+            self.scenario_start_pub.publish(Header(stamp=to_stamp(self.sim.lead_in + shift), frame_id="base"))
+            self.get_logger().info(f"trajectory time 0 at {t0:.3f} s: the scripted collision moves {shift:+.3f} s")
+        elif self.sim.collision is not None and self.sim.scenario_shift is None:
             self.get_logger().warn(f"trajectory time 0 at {t0:.3f} s comes after the scripted object's approach "
                                    f"began: the collision keeps its time")
-            return
-        if self.runner.duration > 0:
-            self.runner.duration += max(0.0, shift)
-        self.scenario_start_pub.publish(Header(stamp=to_stamp(self.sim.lead_in + shift), frame_id="base"))
-        self.get_logger().info(f"trajectory time 0 at {t0:.3f} s: the scripted collision moves {shift:+.3f} s "
-                               f"(onset {self.sim.collision.onset:.3f} s)")
 
     # ------------------------------------------------------------------ SimOutputs
     def clock(self) -> None:
@@ -159,11 +150,8 @@ class SimNode(Node):
         """Hand this instant to the render thread: each camera with a subscriber to its images is rendered there
         (colour and depth) and published serialized; a camera nobody listens to is not rendered (its noise advances
         as if it were: the frames stay those of the seed)."""
-        wanted = {name: pub["color/image_raw"].get_subscription_count()
-                  + pub["aligned_depth_to_color/image_raw"].get_subscription_count() > 0
-                  for name, (pub, _info, _frame) in self.cam_pubs.items()}
         assert self.render is not None
-        self.render.submit(self.sim.frame_state(), wanted)
+        self.render.submit(self.sim.frame_state(), self._wanted())
 
     def _publish_frame(self, t: float, name: str, rgb: np.ndarray | None, depth: np.ndarray | None) -> None:
         """One camera's frame at sim time `t` (None images: not rendered, only its camera_info), on the render
@@ -178,18 +166,7 @@ class SimNode(Node):
         pub["aligned_depth_to_color/camera_info"].publish(info)
 
     def truth(self) -> None:
-        s, g = self.sim.state(), self.sim.ground_truth()
-        st = to_stamp(g.time)
-        c = Contact(link=LINK_CODES[g.link], chain=int(g.chain), pixel_u=-1.0, pixel_v=-1.0, camera="",
-                    confidence=1.0 if g.in_contact else 0.0)
-        ps, js = PoseStamped(), JointState(name=list(JOINT_NAMES), position=s.zeta.tolist(),
-                                           velocity=s.zeta_dot.tolist(), effort=s.tau.tolist())
-        c.point.x, c.point.y, c.point.z = (float(v) for v in g.point)
-        fill_pose_msg(ps.pose, rotation_zyx(*s.pose[3:]), s.pose[:3])
-        for m in (c, ps, js):
-            m.header.stamp, m.header.frame_id = st, "base"
-        for key, msg in (("wrench_truth", wrench_stamped("base", st, g.force, g.torque)), ("contact_truth", c),
-                         ("plate_pose_truth", ps), ("joint_states_truth", js)):
+        for key, msg in sim_truth_messages(self.sim.state(), self.sim.ground_truth(), LINK_CODES).items():
             self.truth_pubs[key].publish(msg)
 
     def spin(self) -> None:
@@ -206,13 +183,8 @@ class SimNode(Node):
         self.runner.run(self, ok)
 
     def close(self) -> None:
-        pacer = self.runner.pacer
-        if self.runner.start_delay > 0:
-            self.get_logger().info(f"sim time held at its start for {self.runner.held:.2f} s of wall time (at most "
-                                   f"{self.runner.start_delay:g} s) while the graph started")
-        if pacer.stalls:
-            self.get_logger().info(f"pacing: {pacer.stalls} stalls over max_lag, {pacer.dropped:.1f} s of wall time "
-                                   f"dropped (not caught up)")
+        for line in self.runner.summary():
+            self.get_logger().info(line)
         if self.render is not None:
             self.render.close()
         if self.boards is not None:
@@ -221,7 +193,6 @@ class SimNode(Node):
 
 
 def main(argv: list[str] | None = None) -> int:
-    """Init, build the simulator (exit 2 naming a bad parameter), run its loop until done or Ctrl-C."""
     return hexa_ros.node.main(SimNode, "sim", argv)
 
 

@@ -79,6 +79,8 @@ class SteppedSim(Protocol):
 
     def step(self, n: int) -> None: ...
 
+    def start_scenario_at(self, t0: float) -> float | None: ...
+
 
 class SimOutputs(Protocol):
     """What the stepping loop asks its owner to publish (the sim node's publishers)."""
@@ -125,6 +127,26 @@ class SimRunner:
         self.ready = ready
         self.steps = 0
         self.held = 0.0          # wall seconds sim time was held before stepping
+
+    def summary(self) -> list[str]:
+        """What an operator reads at the end: how long sim time was held at the start, the pacing's stalls."""
+        out = []
+        if self.start_delay > 0:
+            out.append(f"sim time held at its start for {self.held:.2f} s of wall time "
+                       f"(at most {self.start_delay:g} s) while the graph started")
+        if self.pacer.stalls:
+            out.append(f"pacing: {self.pacer.stalls} stalls over max_lag, {self.pacer.dropped:.1f} s of wall time "
+                       f"dropped (not caught up)")
+        return out
+
+    def start_scenario_at(self, t0: float) -> float | None:
+        """Time the simulator's scripted collision from trajectory time 0 at sim time `t0`
+        (hexa.sim.Simulator.start_scenario_at) and lengthen the run by a later start, so that the scenario's end is
+        still simulated. The move (s), or None when nothing moved."""
+        shift = self.sim.start_scenario_at(t0)
+        if shift is not None and self.duration > 0:
+            self.duration += max(0.0, shift)
+        return shift
 
     def run(self, outputs: SimOutputs, ok: Callable[[], bool]) -> None:
         """Hold, then step until `duration` or until `ok()` is false."""

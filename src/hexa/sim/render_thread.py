@@ -20,8 +20,6 @@ from typing import TYPE_CHECKING, Callable
 
 import numpy as np
 
-from hexa.sim.camera import RGBDRenderer
-
 if TYPE_CHECKING:
     from hexa.sim.simulator import FrameState, Simulator
 
@@ -75,8 +73,7 @@ class RenderThread:
         import mujoco
 
         try:
-            cams = self.sim.config.cameras.values()
-            renderer = RGBDRenderer(self.sim.model, max(c.width for c in cams), max(c.height for c in cams))
+            renderer = self.sim.new_renderer()
             data = mujoco.MjData(self.sim.model)
         except BaseException as exc:  # noqa: BLE001 - reported to the constructor's caller
             self.error = exc

@@ -345,9 +345,7 @@ class Simulator:
         self.rgb_noise_sigma = self.config.rgb_noise_sigma      # image noise (hexa.sim.randomize changes them)
         self.depth_noise_rel = self.config.depth_noise_rel
         if cameras:
-            w = max(c.width for c in self.config.cameras.values())
-            h = max(c.height for c in self.config.cameras.values())
-            self._renderer = RGBDRenderer(m, w, h)
+            self._renderer = self.new_renderer()
             for k, name in enumerate(CAMERA_NAMES):
                 c = self.config.cameras[name]
                 self._noise[name] = NoiseBank(c.width * c.height * 3, seed=self.seed * 7919 + 17 * (k + 1))
@@ -829,6 +827,16 @@ class Simulator:
         mujoco.mj_camlight(self.model, data)          # the cameras' and lights' poses (a fresh MjData has none)
         rgb, depth = renderer.render(data, self._cam_ids[camera])
         return self._camera_images(camera, rgb, depth, noise)
+
+    def new_renderer(self) -> RGBDRenderer:
+        """An offscreen renderer of this model, as large as the largest camera, with a GL context of its own,
+        current in the calling thread (one per rendering thread: `render_frame_on`).
+
+        Raises:
+            RenderError: no headless GL here.
+        """
+        cams = self.config.cameras.values()
+        return RGBDRenderer(self.model, max(c.width for c in cams), max(c.height for c in cams))
 
     def _renderer_of(self, camera: str) -> tuple[RGBDRenderer, int]:
         """The renderer and the MuJoCo id of `camera`.

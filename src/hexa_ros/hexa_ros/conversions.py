@@ -76,6 +76,36 @@ def wrench_stamped(frame_id: str, stamp: Any, force: Any, torque: Any = (0.0, 0.
     return w
 
 
+def sim_truth_messages(state: Any, truth: Any, link_codes: dict[str, int]) -> dict[str, Any]:
+    """The simulator's ground truth as the messages of its `sim/*_truth` topics, in frame `base`: `wrench_truth`
+    (WrenchStamped at the contact point), `contact_truth` (hexa_msgs/Contact, confidence 1 in contact),
+    `plate_pose_truth` (PoseStamped), `joint_states_truth` (JointState: ζ, ζ̇, τ); stamped with the truth's time.
+
+    Args:
+        state, truth: hexa.sim.SimState and GroundTruth of one instant.
+        link_codes: link name → hexa_msgs/Contact link code (hexa.sim.simulator.LINK_CODES).
+    """
+    from geometry_msgs.msg import PoseStamped
+    from hexa_msgs.msg import Contact
+    from sensor_msgs.msg import JointState
+
+    from hexa.kinematics.hexa6rus import rotation_zyx
+    from hexa_ros.stamps import to_stamp
+
+    st = to_stamp(truth.time)
+    c = Contact(link=link_codes[truth.link], chain=int(truth.chain), pixel_u=-1.0, pixel_v=-1.0, camera="",
+                confidence=1.0 if truth.in_contact else 0.0)
+    c.point.x, c.point.y, c.point.z = (float(v) for v in truth.point)
+    ps = PoseStamped()
+    fill_pose_msg(ps.pose, rotation_zyx(*state.pose[3:]), state.pose[:3])
+    js = JointState(name=list(JOINT_NAMES), position=state.zeta.tolist(), velocity=state.zeta_dot.tolist(),
+                    effort=state.tau.tolist())
+    for m in (c, ps, js):
+        m.header.stamp, m.header.frame_id = st, "base"
+    return {"wrench_truth": wrench_stamped("base", st, truth.force, truth.torque), "contact_truth": c,
+            "plate_pose_truth": ps, "joint_states_truth": js}
+
+
 def hexa_pose_from_msg(pose: Any) -> np.ndarray:
     """Hexa pose (x, y, z, α, β, γ) (Z-Y-X, seed 000 eq 38) of a geometry_msgs/Pose.
 
