@@ -3,9 +3,11 @@ SHELL := /bin/bash
 VENV := .venv
 PY := $(VENV)/bin/python
 export MUJOCO_GL ?= egl
-# Python keeps its bytecode caches (in .venv and in __pycache__/, git-ignored): the set-up installs the wheels without
-# compiling them, and each of the hundreds of processes the tests start imports numpy, rclpy, mujoco & co.; without
-# the caches every one compiled them again (1-2 s of CPU per process on a fresh clone).
+# Python keeps its bytecode caches (in .venv and in __pycache__/, git-ignored), also where the shell sets
+# PYTHONDONTWRITEBYTECODE: the set-up installs the wheels without compiling them, and each of the hundreds of processes
+# the tests start imports numpy, rclpy, mujoco & co.; without the caches every one compiled them again (1-2 s of CPU
+# per process on a fresh clone).
+unexport PYTHONDONTWRITEBYTECODE
 PYTEST_ARGS ?=
 # mypy's cache outside the checkout: a fresh clone re-checks only what changed (the stubs of numpy & co. stay cached)
 MYPY := $(VENV)/bin/mypy --cache-dir $(HOME)/.cache/hexa-mypy

@@ -146,8 +146,7 @@ if __name__ == "__main__" and len(sys.argv) > 1 and sys.argv[1] == "peer":
 
 
 @pytest.mark.ros_parallel   # starts a node that refuses its parameters: no live timing
-@pytest.mark.parametrize("param, words", [("max_lag:=-1.0", "max_lag"), ("catch_up:=1.5", "catch_up"),
-                                          ("trajectory:=square", "unknown trajectory"),
+@pytest.mark.parametrize("param, words", [("max_lag:=-1.0", "max_lag"), ("trajectory:=square", "unknown trajectory"),
                                           ("scenario:=bogus", "not found"), ("realism:=kind", "realism")])
 def test_sim_node_refuses_a_bad_parameter_naming_it(param, words, procs, ros_env):
     proc = procs.start([PY, "-m", "hexa_bringup.sim_node", "--ros-args", "-p", "scenario:=none", "-p", param,

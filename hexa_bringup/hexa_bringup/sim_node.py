@@ -34,7 +34,7 @@ from std_msgs.msg import Header
 
 from hexa.sim import Simulator
 from hexa.sim.boards import VirtualBoards
-from hexa.sim.pacing import CATCH_UP, MAX_LAG, MAX_REAL_TIME_FACTOR, Pacer, SimRunner
+from hexa.sim.pacing import MAX_LAG, MAX_REAL_TIME_FACTOR, Pacer, SimRunner
 from hexa.sim.realism import RealismConfig
 from hexa.sim.render_thread import RenderThread
 from hexa.sim.simulator import LINK_CODES, SimulatorError
@@ -47,8 +47,6 @@ PARAMETERS = {
     "real_time_factor": Param(1.0, "sim s per wall s; 0 = as fast as possible", range=(0.0, MAX_REAL_TIME_FACTOR)),
     "max_lag": Param(MAX_LAG, "wall s behind the pace before the lost time is dropped instead of caught up",
                      range=(0.0, 10.0)),
-    "catch_up": Param(CATCH_UP, "dropped time is made up with sim time this fraction faster than asked; 0 = never",
-                      range=(0.0, 1.0)),
     "trajectory": Param("", "with scenario none: start at rest at this trajectory's start pose (empty = home)"),
     "camera_rate_hz": Param(30.0, "camera frames per sim s", range=(0.1, 120.0)),
     "cameras": Param(True, "render and publish both RGB-D cameras"),
@@ -80,7 +78,7 @@ class SimNode(Node):
         v = declare_parameters(self, PARAMETERS)
         self.scenario, self.seed = str(v["scenario"]), int(v["seed"])
         rtf, cameras = float(v["real_time_factor"]), bool(v["cameras"])
-        pacer = Pacer(rtf, float(v["max_lag"]), float(v["catch_up"]))  # ValueError names a bad value
+        pacer = Pacer(rtf, float(v["max_lag"]))  # ValueError names a bad value
         cam_rate, clock_rate, truth_rate = (float(v[k]) for k in ("camera_rate_hz", "clock_rate_hz", "truth_rate_hz"))
         duration, start_delay, frame = float(v["duration"]), float(v["start_delay"]), float(v["servo_frame_period"])
         try:

@@ -9,9 +9,7 @@ until the pace is restored: sim time then runs several times faster than the res
 gaps of 20–50 ms followed by a burst of set-point steps, which the arms really follow with jerks that the observer
 sees as unmodelled torque (docs/history/observer_node.md, "Command timing"). So when the loop is more than `max_lag`
 wall seconds behind, the lost wall time is dropped instead: the run gets longer, and sim time never runs ahead of the
-requested factor. Dropped time is made up slowly instead: while some is owed (at most `MAX_DEBT` s), sim time
-runs at most `catch_up` (10 %) faster than asked, so that a run asked for 0.5× averages 0.5× when the host has the
-headroom, without a burst.
+requested factor.
 """
 from __future__ import annotations
 
@@ -27,72 +25,47 @@ MIN_SLEEP = 0.0005
 MAX_LAG = 0.005
 #: the largest real-time factor the simulator node takes (its `real_time_factor` parameter's range; 0 = unpaced)
 MAX_REAL_TIME_FACTOR = 100.0
-#: default fraction by which sim time may run faster than asked while making up dropped wall time (sim_node's
-#: `catch_up`)
-CATCH_UP = 0.1
-#: most wall seconds owed at once: a longer stall's excess is dropped for good
-MAX_DEBT = 2.0
 
 
 class Pacer:
-    """Keeps sim time at `real_time_factor` × wall time; drops the wall time lost in stalls longer than `max_lag`
-    and makes it up at most `catch_up` faster than asked.
+    """Keeps sim time at `real_time_factor` × wall time; drops the wall time lost in stalls longer than `max_lag`.
 
     Args:
         real_time_factor: sim seconds per wall second (> 0; 0 or less = as fast as possible, `pace` never sleeps).
         max_lag: wall seconds the loop may fall behind before the lost time is dropped (math.inf = always catch up).
-        catch_up: while dropped time is owed, the pace is (1 + catch_up) × real_time_factor (0..1; 0 = never made
-            up); at most MAX_DEBT wall seconds are owed.
         clock, sleep: wall clock and sleep (replaceable in tests).
     """
 
-    def __init__(self, real_time_factor: float, max_lag: float = MAX_LAG, catch_up: float = CATCH_UP,
+    def __init__(self, real_time_factor: float, max_lag: float = MAX_LAG,
                  clock: Callable[[], float] = time.monotonic, sleep: Callable[[float], None] = time.sleep) -> None:
         if not math.isfinite(real_time_factor):
             raise ValueError(f"real_time_factor must be finite, got {real_time_factor!r}")
         if math.isnan(max_lag) or max_lag < 0.0:
             raise ValueError(f"max_lag must be >= 0 s, got {max_lag!r}")
-        if not (0.0 <= catch_up <= 1.0):
-            raise ValueError(f"catch_up must be in [0, 1], got {catch_up!r}")
         self.rtf = float(real_time_factor)
         self.max_lag = float(max_lag)
-        self.catch_up = float(catch_up)
         self._clock, self._sleep = clock, sleep
         self._wall0 = 0.0
         self._sim0 = 0.0
-        self._last: float | None = None   # wall time of the previous `pace`
         self.stalls = 0          # times the loop fell more than max_lag behind
         self.dropped = 0.0       # wall seconds dropped in them
-        self.debt = 0.0          # of which still to be made up
-        self.made_up = 0.0       # of which made up
 
     def start(self, sim_time: float) -> None:
         """Anchor the pace: `sim_time` now."""
         self._wall0 = self._clock()
         self._sim0 = float(sim_time)
-        self._last = None
 
     def pace(self, sim_time: float) -> None:
-        """Called every step: sleep while ahead of the pace; re-anchor when more than max_lag behind, owing what
-        was dropped; while something is owed, move the anchor back by `catch_up` of the wall time since the last
-        call (the pace runs that much faster)."""
+        """Called every step: sleep while ahead of the pace; re-anchor when more than max_lag behind."""
         if self.rtf <= 0.0:
             return
-        now = self._clock()
-        if self.debt > 0.0 and self._last is not None:
-            repay = min(self.debt, self.catch_up * max(0.0, now - self._last))
-            self._wall0 -= repay
-            self.debt -= repay
-            self.made_up += repay
-        self._last = now
-        ahead = (sim_time - self._sim0) / self.rtf - (now - self._wall0)
+        ahead = (sim_time - self._sim0) / self.rtf - (self._clock() - self._wall0)
         if ahead > MIN_SLEEP:
             self._sleep(ahead)
         elif ahead < -self.max_lag:
             self._wall0 -= ahead
             self.stalls += 1
             self.dropped -= ahead
-            self.debt = min(MAX_DEBT, self.debt - ahead)
 
 
 class SteppedSim(Protocol):
@@ -162,9 +135,8 @@ class SimRunner:
             out.append(f"sim time held at its start for {self.held:.2f} s of wall time "
                        f"(at most {self.start_delay:g} s) while the graph started")
         if self.pacer.stalls:
-            p = self.pacer
-            out.append(f"pacing: {p.stalls} stalls over max_lag, {p.dropped:.1f} s of wall time dropped, "
-                       f"{p.made_up:.1f} s made up at most {100 * p.catch_up:g} % faster than asked")
+            out.append(f"pacing: {self.pacer.stalls} stalls over max_lag, {self.pacer.dropped:.1f} s of wall time "
+                       f"dropped (not caught up)")
         return out
 
     def start_scenario_at(self, t0: float) -> float | None:
