@@ -52,7 +52,9 @@ PIP=("$VENV/bin/python" -m pip install --disable-pip-version-check -q --no-compi
 UV="$VENV/bin/uv"
 uv_pinned=$(sed -n 's/^uv==//p' requirements/uv.txt)
 if [ ! -x "$UV" ] || [ "$("$UV" --version 2>/dev/null | cut -d' ' -f2)" != "$uv_pinned" ]; then
-  "${PIP[@]}" -r requirements/uv.txt 2> >(grep -v "is ignored: it is neither" >&2) || rm -f "$UV"
+  mkdir -p build
+  "${PIP[@]}" -r requirements/uv.txt > build/pip-uv.log 2>&1 \
+    || { rm -f "$UV"; log "pip could not install uv (build/pip-uv.log): pip installs the wheels"; }
 fi
 uv_install() {
   [ -x "$UV" ] || return 1
