@@ -263,7 +263,8 @@ def test_one_sample_time_far_off_is_rejected_and_a_stream_that_went_back_restart
 
 
 @pytest.mark.parametrize("field, value", [("arm_friction", -0.5), ("arm_force_model", "guess"), ("accel_tau", 0.0),
-                                          ("history", math.inf), ("torque_window", -0.01), ("rate_hz", math.nan)])
+                                          ("history", math.inf), ("torque_window", -0.01), ("rate_hz", math.nan),
+                                          ("saturation", 0.0), ("saturation", 1.5)])
 def test_a_bad_setting_is_refused_naming_it(field, value):
     with pytest.raises(ContactForceError, match=field) as exc:
         ContactForceConfig(**{field: value})
@@ -285,6 +286,22 @@ def test_a_force_identified_while_a_servo_is_at_its_stall_torque_is_flagged_for_
     # a force is flagged while a stalled sample lies in its 20 ms torque window: 0.60 ... 0.66 s (0.649 + 0.02)
     assert flagged == pytest.approx([0.6, 0.61, 0.62, 0.63, 0.64, 0.65, 0.66])
     assert len(forces) == 30 and not any(f.servo_stalled for f in forces if f.time < 0.6 or f.time > 0.67)
+
+
+def test_the_stall_criterion_follows_the_saturation_setting():
+    """At saturation 0.5 a servo at 60 % of its stall torque is stalled; at the default 0.97 it is not."""
+    tau = TAU.copy()
+    tau[_k(0.6):_k(0.65), 2] = 0.6 * DESC.torque_max
+    for saturation, stalled in ((0.5, True), (0.97, False)):
+        tr = _tracker(rate_hz=100.0, torque_window=0.02, saturation=saturation)
+        assert tr.stall_torque == pytest.approx(saturation * DESC.torque_max)
+        forces = []
+        for k in range(_k(0.8)):
+            if k == _k(0.5):
+                tr.on_collision("START", 1, 0.5)
+                tr.on_contact(_plate_contact(1, 0.5))
+            forces += tr.step_state(T[k], ZETA[k], ZETA_DOT[k], tau[k])
+        assert any(f.servo_stalled for f in forces) == stalled
 
 
 def test_without_a_grid_a_contact_is_identified_once_on_arrival():

@@ -72,7 +72,8 @@ class ContactForceConfig:
     torque_window: s over which τ is averaged; accel_tau: s, time constant of the low-pass derivative giving ζ̈;
     require_collision: contacts outside a START..END are rejected; history: s of states kept for late contacts
     (0: no backfill); arm_force_model, arm_friction: what an arm force's unobservable directions get and μ of
-    "friction_cone" (hexa.dynamics.identification).
+    "friction_cone" (hexa.dynamics.identification); saturation: a servo whose |τ| exceeds saturation·τ_max is
+    stalled (the ζ estimator's criterion, its `saturation`: that servo's angle is not measured).
     """
 
     rate_hz: float = 100.0
@@ -82,9 +83,11 @@ class ContactForceConfig:
     history: float = 3.0
     arm_force_model: str = "friction_cone"
     arm_friction: float = 0.2
+    saturation: float = EstimatorConfig().saturation
 
     def __post_init__(self) -> None:
         checks = (("rate_hz", self.rate_hz >= 0, "a rate >= 0 Hz"),
+                  ("saturation", 0 < self.saturation <= 1, "a fraction in (0, 1]"),
                   ("torque_window", self.torque_window >= 0, "a window >= 0 s"),
                   ("accel_tau", self.accel_tau > 0, "a time constant > 0 s"),
                   ("history", self.history >= 0, "a duration >= 0 s"),
@@ -160,7 +163,7 @@ class ContactForceTracker:
         self.config = config or ContactForceConfig()
         self.params = params or HexaDynamicParameters.from_description(desc)
         #: N·m: a servo torque this large is a stalled servo (the ζ estimator's criterion: its angle is not measured)
-        self.stall_torque = EstimatorConfig().saturation * float(desc.torque_max)
+        self.stall_torque = self.config.saturation * float(desc.torque_max)
         self.period = 1.0 / self.config.rate_hz if self.config.rate_hz > 0 else math.inf
         self.rejects = {k: 0 for k in REJECT_REASONS}
         self.forces = 0          # ContactForce results returned
