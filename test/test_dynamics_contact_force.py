@@ -276,12 +276,7 @@ def test_a_force_identified_while_a_servo_is_at_its_stall_torque_is_flagged_for_
     assert tr.stall_torque == pytest.approx(0.97 * DESC.torque_max)
     tau = TAU.copy()
     tau[_k(0.6):_k(0.65), 2] = DESC.torque_max        # servo 3 stalls from 0.600 to 0.649 s
-    forces = []
-    for k in range(_k(0.8)):
-        if k == _k(0.5):
-            tr.on_collision("START", 1, 0.5)
-            tr.on_contact(_plate_contact(1, 0.5))
-        forces += tr.step_state(T[k], ZETA[k], ZETA_DOT[k], tau[k])
+    forces = _forces_with(tr, tau)
     flagged = [round(f.time, 3) for f in forces if f.servo_stalled]
     # a force is flagged while a stalled sample lies in its 20 ms torque window: 0.60 ... 0.66 s (0.649 + 0.02)
     assert flagged == pytest.approx([0.6, 0.61, 0.62, 0.63, 0.64, 0.65, 0.66])
@@ -295,13 +290,18 @@ def test_the_stall_criterion_follows_the_saturation_setting():
     for saturation, stalled in ((0.5, True), (0.97, False)):
         tr = _tracker(rate_hz=100.0, torque_window=0.02, saturation=saturation)
         assert tr.stall_torque == pytest.approx(saturation * DESC.torque_max)
-        forces = []
-        for k in range(_k(0.8)):
-            if k == _k(0.5):
-                tr.on_collision("START", 1, 0.5)
-                tr.on_contact(_plate_contact(1, 0.5))
-            forces += tr.step_state(T[k], ZETA[k], ZETA_DOT[k], tau[k])
-        assert any(f.servo_stalled for f in forces) == stalled
+        assert any(f.servo_stalled for f in _forces_with(tr, tau)) == stalled
+
+
+def _forces_with(tr: ContactForceTracker, tau: np.ndarray) -> list:
+    """The forces of a plate contact from 0.5 s (collision START then) over 0.8 s of samples with torques `tau`."""
+    forces = []
+    for k in range(_k(0.8)):
+        if k == _k(0.5):
+            tr.on_collision("START", 1, 0.5)
+            tr.on_contact(_plate_contact(1, 0.5))
+        forces += tr.step_state(T[k], ZETA[k], ZETA_DOT[k], tau[k])
+    return forces
 
 
 def test_without_a_grid_a_contact_is_identified_once_on_arrival():
