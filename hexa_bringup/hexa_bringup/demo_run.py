@@ -53,8 +53,9 @@ class _ClockWatcher:
     def _run(self, env: dict[str, str]) -> None:
         try:
             import rclpy
-            from rclpy.executors import SingleThreadedExecutor
             from rosgraph_msgs.msg import Clock
+
+            from hexa_ros.node import executor_kind, make_executor
 
             ctx = rclpy.context.Context()
             rclpy.init(context=ctx, domain_id=int(env.get("ROS_DOMAIN_ID", "0")))
@@ -69,7 +70,7 @@ class _ClockWatcher:
                         self._first = self._last
 
             node.create_subscription(Clock, "/clock", on_clock, 10)
-            ex = SingleThreadedExecutor(context=ctx)
+            ex = make_executor(executor_kind(), context=ctx)   # the nodes' EventsExecutor: /clock at 125-250 Hz
             ex.add_node(node)
             while not self._stop.is_set():
                 ex.spin_once(timeout_sec=0.1)

@@ -109,6 +109,10 @@ def run_record(args: argparse.Namespace) -> int:
         print(f"hexa record: {exc}", file=sys.stderr)
         return 2
     subs = {}
+    from hexa_ros.node import executor_kind, make_executor
+
+    executor = make_executor(executor_kind())   # the nodes' EventsExecutor: a fraction of the per-message cost
+    executor.add_node(node)
     with recorder:
         start = time.monotonic()
         next_scan = 0.0
@@ -143,12 +147,13 @@ def run_record(args: argparse.Namespace) -> int:
 
                         subs[topic] = node.create_subscription(cls, topic, on_raw, qos, raw=True)
                         print(f"hexa record: recording {topic} [{types[0]}]", file=sys.stderr, flush=True)
-                rclpy.spin_once(node, timeout_sec=0.05)
+                executor.spin_once(timeout_sec=0.05)
                 recorder.tick()
                 if args.duration and now - start >= args.duration:
                     break
         finally:
             counts = dict(recorder.counts)
+            executor.shutdown()
     node.destroy_node()
     if rclpy.ok():
         rclpy.shutdown()
