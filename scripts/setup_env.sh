@@ -56,15 +56,18 @@ if [ ! -x "$UV" ] || [ "$("$UV" --version 2>/dev/null | cut -d' ' -f2)" != "$uv_
   "${PIP[@]}" -r requirements/uv.txt > build/pip-uv.log 2>&1 \
     || { rm -f "$UV"; log "pip could not install uv (build/pip-uv.log): pip installs the wheels"; }
 fi
+UV_ARGS=()   # pip's find-links and index for uv, read once, on the first install
 uv_install() {
   [ -x "$UV" ] || return 1
-  local args=(pip install --python "$VENV/bin/python" -q)
-  local links idx
-  links=${PIP_FIND_LINKS:-$("$VENV/bin/python" -m pip config get global.find-links 2>/dev/null || true)}
-  for l in $links; do args+=(--find-links "$l"); done
-  idx=${PIP_INDEX_URL:-$("$VENV/bin/python" -m pip config get global.index-url 2>/dev/null || true)}
-  [ -z "$idx" ] || args+=(--index-url "$idx")
-  "$UV" "${args[@]}" "$@"
+  if [ ${#UV_ARGS[@]} -eq 0 ]; then
+    local links idx
+    UV_ARGS=(pip install --python "$VENV/bin/python" -q)
+    links=${PIP_FIND_LINKS:-$("$VENV/bin/python" -m pip config get global.find-links 2>/dev/null || true)}
+    for l in $links; do UV_ARGS+=(--find-links "$l"); done
+    idx=${PIP_INDEX_URL:-$("$VENV/bin/python" -m pip config get global.index-url 2>/dev/null || true)}
+    [ -z "$idx" ] || UV_ARGS+=(--index-url "$idx")
+  fi
+  "$UV" "${UV_ARGS[@]}" "$@"
 }
 WHEEL_REQS=(-r requirements/core.txt -r requirements/torch.txt -r requirements/ros.txt -r requirements/ros-build.txt)
 h=$(hash_of requirements/*.txt)

@@ -49,8 +49,9 @@ PARAMETERS = {DESCRIPTION: DESCRIPTION_PARAM,
                                range=(0.0, 60.0)),
               "arm_force_model": Param("friction_cone", "what an arm force's two unobservable directions get"),
               "arm_friction": Param(0.2, "Coulomb coefficient mu of friction_cone (>= 0)"),
-              "saturation": Param(0.97, "|tau| > saturation * torque_max is a stalled servo (flags the wrench "
-                                  "servo_stalled); set it as the observer's", range=(0.01, 1.0)),
+              "saturation": Param(ContactForceConfig().saturation, "|tau| > saturation * torque_max is a stalled "
+                                  "servo (flags the wrench servo_stalled); set it as the observer's",
+                                  range=(0.01, 1.0)),
               "marker_scale": Param(0.02, "force arrow length per newton (m/N)", range=(0.0, 1.0)),
               "frame_id": Param("base", "frame of the contact points and forces")}
 
