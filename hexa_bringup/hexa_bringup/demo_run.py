@@ -102,9 +102,9 @@ class _ClockWatcher:
 #: starts sooner once the graph is up (the sim node's `start_subscribers`)
 START_DELAY = 3.0
 #: simulator real-time factor the demo asks for. The pacing drops the wall time of host stalls (hexa.sim.pacing),
-#: so on 2 cores the demo's graph reaches 0.43-0.49x (`hexa demo` prints it per case); asked for 0.6 the free
-#: motion's residual comes within a sample of a false START (docs/demo.md, "Real time")
-REAL_TIME_FACTOR = 0.5
+#: so on 2 cores the demo's graph reaches 0.53-0.54x (`hexa demo` prints it per case); the free motion's residual
+#: noise grows with the rate (docs/demo.md, "Real time")
+REAL_TIME_FACTOR = 0.55
 #: sim seconds at rest before the trajectory and the scenario clock start (the estimator and observer settle, the
 #: driver's commands take over from the simulator's own start pose)
 LEAD_IN = 1.0
