@@ -220,6 +220,51 @@ def test_gap_is_counted_and_integration_restarts_with_r_kept():
     np.testing.assert_allclose(last, W_EXT, rtol=2e-3, atol=1e-4)
 
 
+def test_a_run_over_the_threshold_does_not_span_a_gap_in_the_stream():
+    """A residual over its threshold just before the stream stops (a quiet board) and again at the first sample
+    after it: a run counted across the gap would START at once; it starts over after the gap and needs min_duration
+    of samples there."""
+    cfg = dataclasses.replace(CFG, min_duration=0.02, max_gap=0.05)
+    d = _data(T, wrench_on=0.5)
+    obs = ResidualObserver(PRM, cfg)
+    k, events, first_over = 0, [], None
+    while first_over is None:                    # up to the first sample over a threshold: a run begins
+        res = obs.update_arm(T[k], d["zeta"][k], d["tau"][k], d["zeta_dot"][k], pose=d["pose"][k])
+        assert res.events == ()
+        if np.any(np.abs(res.wrench) > np.asarray(cfg.thresholds)):
+            first_over = T[k]
+        k += 1
+    resume = int(np.searchsorted(T, first_over + 0.1))    # 100 ms without samples (max_gap 50 ms)
+    for j in range(resume, T.size):
+        res = obs.update_arm(T[j], d["zeta"][j], d["tau"][j], d["zeta_dot"][j], pose=d["pose"][j])
+        events.extend((T[j], e) for e in res.events)
+        if events:
+            break
+    assert obs.rejected["gap"] == 1
+    t_start, start = events[0]
+    assert start.kind == "START" and start.onset == pytest.approx(T[resume])
+    assert t_start - T[resume] == pytest.approx(cfg.min_duration, abs=1.5e-3)
+
+
+def test_detector_break_runs_restarts_the_runs_to_start_and_to_end_but_keeps_a_collision():
+    det = CollisionDetector(ObserverConfig(thresholds=(2.0,) * 6, servo_thresholds=(0.0,) * 6, min_duration=0.01))
+    over, under = np.array([3.0, 0, 0, 0, 0, 0]), np.zeros(6)
+    ev = list(det.update(0.000, over)[1]) + list(det.update(0.005, over)[1])
+    det.break_runs()
+    ev += det.update(0.200, over)[1]             # 200 ms after the run began, but its first sample after the gap
+    assert ev == []
+    ev += det.update(0.205, over)[1]
+    ev += det.update(0.210, over)[1]
+    assert [e.kind for e in ev] == ["START"] and ev[0].onset == pytest.approx(0.2)
+    ev += det.update(0.215, under)[1]
+    det.break_runs()
+    assert det.active                            # the collision in progress stays active
+    ev += det.update(0.400, under)[1]
+    assert [e.kind for e in ev] == ["START"]
+    ev += det.update(0.410, under)[1]
+    assert [e.kind for e in ev] == ["START", "END"]
+
+
 def test_calibration_at_rest_removes_a_torque_offset_and_reset_rezeros():
     t = np.arange(0, 1.0, 0.001)
     offset = np.array([0.02, -0.01, 0.015, 0.0, 0.01, -0.02])  # current-sensor offsets (N·m at the horns)

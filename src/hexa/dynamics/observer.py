@@ -22,7 +22,7 @@ the plate twist is V = J_ζ⁻¹ ζ̇. ζ̇ is the measured rate when the sample
 
 Bad input never touches the state: non-finite values, time not increasing, gaps longer than `max_gap`, pose
 tracking failure or a singular J_ζ are rejected and counted by reason in `rejected`; after a gap the integration
-restarts at the next sample (r is kept).
+restarts at the next sample (r is kept) and the detector's runs toward a START or an END start over there.
 
 Detection (`CollisionDetector`): |r_j| > r_low on any plate axis (the paper's criterion, §3.1), or — beside it — the
 residual as servo torques τ_r = J_ζ⁻ᵀ r (N·m; u = J_ζᵀ τ maps servo torques onto the plate twist, so τ_r is the torque
@@ -198,6 +198,12 @@ class CollisionDetector:
         self._release_since: float | None = None
         self._onset = 0.0
         self._peak = [0.0] * 12
+
+    def break_runs(self) -> None:
+        """The input stream had a gap: a run over a threshold (toward a START) or under release (toward an END)
+        counts min_duration from the next sample on, never across the gap; a collision in progress stays active."""
+        self._cand = [math.inf] * 12
+        self._release_since = None
 
     def set_thresholds(self, thresholds: Iterable[float]) -> None:
         th = np.asarray(list(thresholds), dtype=float)
@@ -497,6 +503,7 @@ class ResidualObserver:
                 self._cam, self._cam_t = None, -math.inf
             else:
                 self._reject("gap")
+                self.detector.break_runs()
             self._prev = None
             self._angles = None
             if self._est is not None:  # predict across the gap at rest, Newton does the rest
