@@ -179,7 +179,7 @@ def test_realism_reaches_the_simulator_in_sim_mode_and_is_refused_elsewhere():
 def test_sim_mode_knows_the_simulated_robot_from_its_overrides_the_parameters_file_and_the_default(tmp_path):
     from hexa_bringup.commands.bringup import sim_robot
     from hexa_bringup.graphs import DEFAULT_PARAMS, DEFAULT_REALISM
-    from hexa_bringup.sim_node import PARAMETERS
+    from hexa_bringup.sim_params import PARAMETERS
     from hexa_bringup.supervisor import SupervisorError
 
     assert PARAMETERS["realism"].default == DEFAULT_REALISM

@@ -21,7 +21,7 @@ PARAMS = REPO / "hexa_bringup" / "hexa_bringup" / "config" / "hexa_params.yaml"
 SOURCES = {"trajectory": "hexa_dynamics/hexa_dynamics/trajectory_node.py",
            "singularity": "hexa_dynamics/hexa_dynamics/singularity_node.py",
            "driver": "hexa_driver/hexa_driver/driver_node.py", "pose": "hexa_vision/hexa_vision/pose_node.py",
-           "isolation": "hexa_vision/hexa_vision/isolation_node.py", "sim": "hexa_bringup/hexa_bringup/sim_node.py"}
+           "isolation": "hexa_vision/hexa_vision/isolation_node.py", "sim": "hexa_bringup/hexa_bringup/sim_params.py"}
 
 
 def _blocks() -> dict[str, dict]:

@@ -142,3 +142,65 @@ def test_polled_subscriptions_keep_the_last_depth_messages_until_taken(ros_env, 
         polled.close()
         owner.destroy_node()
         rclpy.shutdown(context=ctx)
+
+
+def test_a_deferred_service_answers_later_while_the_executor_serves_other_requests(ros_env, monkeypatch):
+    """hexa_ros.deferred: a request whose callback returns Later(delay, finish) is answered `delay` s later with what
+    `finish` filled in; one answered at once meanwhile is not held behind it; close() cancels answers to come."""
+    import threading
+    import time
+
+    for k, v in ros_env.items():
+        monkeypatch.setenv(k, v)
+    import rclpy
+    from rclpy.executors import SingleThreadedExecutor
+    from std_srvs.srv import Trigger
+
+    from hexa_ros.deferred import DeferredService, Later
+
+    def start(req, resp):
+        if not starts:                       # the first request: answered 0.6 s later
+            starts.append(time.monotonic())
+            return Later(0.6, lambda r: setattr(r, "message", "late"))
+        resp.success, resp.message = True, "now"
+        return resp
+
+    starts: list[float] = []
+    ctx = rclpy.Context()
+    rclpy.init(context=ctx)
+    server = rclpy.create_node("deferred_server", context=ctx)
+    client_node = rclpy.create_node("deferred_client", context=ctx)
+    srv = DeferredService(server, Trigger, "job", start)
+    ex = SingleThreadedExecutor(context=ctx)
+    ex.add_node(server)
+    ex.add_node(client_node)
+    spin = threading.Thread(target=ex.spin, daemon=True)
+    spin.start()
+    try:
+        cli = client_node.create_client(Trigger, "job")
+        assert cli.wait_for_service(timeout_sec=20.0)
+        slow = cli.call_async(Trigger.Request())
+        deadline = time.monotonic() + 10.0
+        while not starts and time.monotonic() < deadline:
+            time.sleep(0.01)
+        fast = cli.call_async(Trigger.Request())
+        while not fast.done() and time.monotonic() < deadline:
+            time.sleep(0.01)
+        assert fast.done() and fast.result().message == "now" and not slow.done()   # not held behind the slow one
+        while not slow.done() and time.monotonic() < deadline:
+            time.sleep(0.01)
+        assert slow.done() and slow.result().message == "late"
+        assert time.monotonic() - starts[0] >= 0.6
+        starts.clear()                       # one more slow request, then close(): it is never answered
+        never = cli.call_async(Trigger.Request())
+        while not starts and time.monotonic() < deadline:
+            time.sleep(0.01)
+        time.sleep(0.1)
+        srv.close()
+        time.sleep(0.8)
+        assert not never.done()
+    finally:
+        ex.shutdown()
+        server.destroy_node()
+        client_node.destroy_node()
+        rclpy.shutdown(context=ctx)

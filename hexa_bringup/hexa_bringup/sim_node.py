@@ -8,8 +8,8 @@ cam_{top,side}/aligned_depth_to_color/image_raw (16UC1 mm) and its camera_info (
 deterministic for a given seed. Subscribes to `trajectory_start` (std_msgs/Header, transient local): the scripted
 collision is timed from trajectory time 0, recorded on `sim/scenario_start` (std_msgs/Header, transient local;
 docs/simulator.md). The virtual Uno/Mega serial ports appear at `link_dir` (boards: true).
-Parameters: PARAMETERS below (start-up only, read-only), hexa_bringup/config/hexa_params.yaml (`/**/sim`) and
-docs/simulator.md.
+Parameters: hexa_bringup.sim_params (start-up only, read-only), hexa_bringup/config/hexa_params.yaml (`/**/sim`)
+and docs/simulator.md.
 """
 from __future__ import annotations
 
@@ -20,12 +20,11 @@ import numpy as np
 
 from geometry_msgs.msg import PoseStamped, WrenchStamped
 from hexa_msgs.msg import Contact
-from hexa_bringup.graphs import DEFAULT_REALISM
 import hexa_ros.node
 from hexa_ros import qos
 from hexa_ros.cdr import image_to_cdr
 from hexa_ros.conversions import sim_truth_messages
-from hexa_ros.node import Param, declare_parameters
+from hexa_ros.node import declare_parameters
 from hexa_ros.stamps import to_sec, to_stamp
 from rclpy.node import Node
 from rosgraph_msgs.msg import Clock
@@ -34,40 +33,11 @@ from std_msgs.msg import Header
 
 from hexa.sim import Simulator
 from hexa.sim.boards import VirtualBoards
-from hexa.sim.pacing import MAX_LAG, MAX_REAL_TIME_FACTOR, Pacer, SimRunner
+from hexa.sim.pacing import Pacer, SimRunner
 from hexa.sim.realism import RealismConfig
 from hexa.sim.render_thread import RenderThread
 from hexa.sim.simulator import LINK_CODES, SimulatorError
-
-
-PARAMETERS = {
-    "scenario": Param("plate", "none | plate | arm | rod | scenario YAML path"),
-    "seed": Param(0, "seed of noise and randomized scenarios", range=(0, 2**31 - 1)),
-    "randomize": Param(False, "draw the scenario's collision from its ranges with `seed`"),
-    "real_time_factor": Param(1.0, "sim s per wall s; 0 = as fast as possible", range=(0.0, MAX_REAL_TIME_FACTOR)),
-    "max_lag": Param(MAX_LAG, "wall s behind the pace before the lost time is dropped instead of caught up",
-                     range=(0.0, 10.0)),
-    "trajectory": Param("", "with scenario none: start at rest at this trajectory's start pose (empty = home)"),
-    "camera_rate_hz": Param(30.0, "camera frames per sim s", range=(0.1, 120.0)),
-    "cameras": Param(True, "render and publish both RGB-D cameras"),
-    "clock_rate_hz": Param(250.0, "/clock messages per sim s", range=(1.0, 10000.0)),
-    "truth_rate_hz": Param(100.0, "sim/* ground-truth messages per sim s", range=(0.1, 10000.0)),
-    "boards": Param(True, "virtual Uno and Mega on pseudo-terminals at link_dir"),
-    "link_dir": Param("/tmp/hexa_sim", "folder of the virtual boards' serial links"),
-    "duration": Param(0.0, "sim s to run; 0 = until shut down", range=(0.0, 1e9)),
-    "lead_in": Param(0.0, "sim s at rest before the trajectory and the scenario start", range=(0.0, 1e6)),
-    "start_delay": Param(0.0, "most wall s with sim time frozen at 0 while the graph starts", range=(0.0, 3600.0)),
-    "start_subscribers": Param(0, "with start_delay: the hold ends early once /clock has this many subscribers, "
-                                  "each camera an image subscriber and the driver a stream from both boards "
-                                  "(0 = hold the whole start_delay)", range=(0, 1000)),
-    "contact_model": Param("scripted", "scripted (the scenario's force at the point) | physical (a pushing capsule "
-                                       "through MuJoCo contacts)", choices=("scripted", "physical")),
-    "servo_frame_period": Param(-1.0, "s between servo set-point frames (0..0.1); < 0 = the description's "
-                                      "(or the realism's)", range=(-1.0, 0.1)),
-    "realism": Param(DEFAULT_REALISM, "ideal (the robot is the nodes' model) | realistic (a truth drawn from "
-                                      "`seed`, servo friction, gear play, dead band, 20 ms pulse frame, ACS712 noise; "
-                                      "docs/realism.md)",
-                     choices=("ideal", "realistic"))}
+from hexa_bringup.sim_params import PARAMETERS
 
 
 class SimNode(Node):

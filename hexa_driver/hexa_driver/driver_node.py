@@ -8,10 +8,8 @@ set-points, arm_1..arm_6, in `setpoint`: a consumer needs one topic), `/diagnost
 """
 from __future__ import annotations
 
-import threading
+import functools
 import time
-from collections.abc import Callable
-from typing import Any
 
 import numpy as np
 from diagnostic_msgs.msg import DiagnosticArray
@@ -32,18 +30,11 @@ from hexa.protocol.link import CONNECTED
 from hexa.robots.hexa_description import calibration_summary, load_hexa
 from hexa_ros import cdr, diagnostics, qos
 from hexa_ros.conversions import JOINT_NAMES
+from hexa_ros.deferred import DeferredService, Later
 from hexa_ros.node import DESCRIPTION, DESCRIPTION_PARAM, descriptor
 from hexa_ros.realtime import (REALTIME_PRIORITY, REALTIME_PRIORITY_PARAM, realtime_priority_of,
                                request_realtime_priority)
 from hexa_driver.driver_params import driver_descriptor
-
-
-def _after(delay: float, fn: Callable[..., None], *args: Any, **kwargs: Any) -> threading.Timer:
-    """`fn(*args, **kwargs)` in a daemon thread `delay` s from now."""
-    timer = threading.Timer(delay, fn, args, kwargs)
-    timer.daemon = True
-    timer.start()
-    return timer
 
 
 class DriverNode(Node):
@@ -68,17 +59,14 @@ class DriverNode(Node):
                                             servo_calibrations_from_config(cfg["servos"], desc))
         self.sched = DriverScheduler.from_config(self.core, cfg)
         self._graph_order = [list(self.core.joint_names).index(n) for n in JOINT_NAMES]   # MotorCurrents.setpoint
-        self._calib_timer: threading.Timer | None = None
-        self._calib: tuple[CalibrateCurrents.Response, float] | None = None   # the request being averaged
         self._closed = False
 
         self.pub_states = self.create_publisher(JointState, "joint_states", qos.STREAM)
         self.pub_currents = self.create_publisher(MotorCurrents, "motor_currents", qos.STREAM)
         self.pub_diag = self.create_publisher(DiagnosticArray, "/diagnostics", qos.RELIABLE)
         self.create_subscription(JointState, "joint_commands", self._on_command, qos.RELIABLE)
-        # its response goes out when the averaging ends (`_respond`): the executor does not wait for it
-        self._calib_srv = self.create_service(CalibrateCurrents, "calibrate_currents", self._on_calibrate)
-        self._send_response, self._calib_srv.send_response = self._calib_srv.send_response, self._respond
+        # answered when the averaging ends: the executor does not wait for it
+        self._calib_srv = DeferredService(self, CalibrateCurrents, "calibrate_currents", self._on_calibrate)
         self.uno, self.mega = driver_links_from_config(cfg, self.core, self._on_samples, self.sched.on_latch,
                                                        self._on_link_state)
         self.create_timer(float(cfg["diagnostics_period"]), self._publish_diagnostics)
@@ -93,8 +81,7 @@ class DriverNode(Node):
     def close(self) -> None:
         """Stop the timers and the serial links first: the link threads publish."""
         self._closed = True
-        if self._calib_timer is not None:
-            self._calib_timer.cancel()
+        self._calib_srv.close()
         self.uno.stop()
         self.mega.stop()
 
@@ -144,17 +131,10 @@ class DriverNode(Node):
         except CalibrationRefused as exc:
             resp.success, resp.message = False, str(exc)
             return resp
-        self._calib = (resp, req.duration if req.duration > 0 else float(self.cfg["calibration_duration"]))
-        return resp
+        duration = req.duration if req.duration > 0 else float(self.cfg["calibration_duration"])
+        return Later(duration, functools.partial(self._finish_calibration, duration))
 
-    def _respond(self, resp: CalibrateCurrents.Response, header) -> None:
-        """The executor sends what `_on_calibrate` returned: a started calibration is answered when it ends."""
-        if self._calib is None or resp is not self._calib[0]:
-            return self._send_response(resp, header)
-        self._calib_timer = _after(self._calib[1], self._finish_calibration, *self._calib, header)
-        self._calib = None
-
-    def _finish_calibration(self, resp: CalibrateCurrents.Response, duration: float, header) -> None:
+    def _finish_calibration(self, duration: float, resp: CalibrateCurrents.Response) -> None:
         try:
             offsets, n = self.sched.finish_calibration(duration)
             resp.success, resp.offsets = True, offsets.tolist()
@@ -162,8 +142,6 @@ class DriverNode(Node):
             self.get_logger().info(f"zero-current calibration: I_0 = {np.round(offsets, 4).tolist()} A")
         except CalibrationRefused as exc:
             resp.success, resp.message = False, str(exc)
-        if not self._closed and self.context.ok():
-            self._send_response(resp, header)
 
     def _publish_diagnostics(self) -> None:
         reports = driver_reports(self.sched, self.uno, self.mega, time.monotonic(), float(self.cfg["stale_timeout"]))
