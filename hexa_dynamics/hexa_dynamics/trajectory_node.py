@@ -92,14 +92,15 @@ class TrajectoryNode(Node):
         self.runner.on_pose(pose, to_sec(msg.header.stamp), self._now())   # the image's time
 
     def _tick(self) -> None:
-        tick = self.runner.tick(self._now())
+        now = self._now()
+        tick = self.runner.tick(now)
         if self._pose_sub is not None and not self.runner.approach_pending:
             self.destroy_subscription(self._pose_sub)
             self._pose_sub = None
         if tick.zeta is not None:
             msg = JointState(name=list(JOINT_NAMES), position=[float(v) for v in tick.zeta],
                              velocity=[float(v) for v in tick.zeta_dot])
-            msg.header.stamp = self.get_clock().now().to_msg()
+            msg.header.stamp = to_stamp(now)   # the time the command was computed for, not when it went out
             self.pub.publish(msg)
         if not self._start_sent and self.runner.start is not None:
             self._start_sent = True
@@ -109,7 +110,7 @@ class TrajectoryNode(Node):
             self.pub_state.publish(String(data=tick.state))
             if tick.state != self._state:
                 self._state = tick.state
-                self.get_logger().info(f"trajectory state {tick.state} at {self._now():.3f} s")
+                self.get_logger().info(f"trajectory state {tick.state} at {now:.3f} s")
 
     def _on_residual(self, msg: Residual) -> None:
         f = msg.wrench.force
