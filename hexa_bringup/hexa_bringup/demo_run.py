@@ -102,7 +102,7 @@ class _ClockWatcher:
 #: starts sooner once the graph is up (the sim node's `start_subscribers`)
 START_DELAY = 3.0
 #: simulator real-time factor the demo asks for. The pacing drops the wall time of host stalls (hexa.sim.pacing),
-#: so on 2 cores the demo's graph reaches 0.52-0.54x (`hexa demo` prints it per case); the free motion's residual
+#: so on 2 cores the demo's graph reaches 0.48-0.54x (`hexa demo` prints it per case); the free motion's residual
 #: noise grows with the rate (docs/demo.md, "Real time")
 REAL_TIME_FACTOR = 0.55
 #: sim seconds at rest before the trajectory and the scenario clock start (the estimator and observer settle, the

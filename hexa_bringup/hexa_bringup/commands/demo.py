@@ -24,7 +24,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--seed", type=int, default=0, help="scenario seed (timings/positions drawn from it)")
     p.add_argument("--rtf", type=float, default=None,
                    help="simulator real-time factor asked for (default 0.55). The pacing drops the wall time of "
-                        "host stalls, so the factor reached is lower (0.52-0.54 at 0.55 on 2 cores); each case "
+                        "host stalls, so the factor reached is lower (0.48-0.54 at 0.55 on 2 cores); each case "
                         "prints the one it reached")
     p.add_argument("--record-images", action="store_true", help="also record the camera topics (large bags)")
     p.add_argument("--contact-model", choices=["scripted", "physical"], default="scripted",
