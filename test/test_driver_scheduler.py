@@ -3,6 +3,7 @@ coalescing, commands dated after their write and confirmed by the next read, the
 Uno's frames moved onto the Mega's clock, the calibration's averaging, diagnostics and concurrent callers."""
 from __future__ import annotations
 
+import math
 import threading
 from types import SimpleNamespace
 
@@ -317,3 +318,13 @@ def test_diagnostics_name_a_stale_board_and_the_watchdog_hold(core):
     uno_r, _ = driver_reports(sched, uno, mega, now=10.8, stale_timeout=0.25)
     assert (uno_r.level, uno_r.message) == ("ERROR", "latch report stale (no LATCH for 0.30 s)")
     assert uno_r.values["latch_rerequests"] == 0 and uno_r.values["board_reconfigures_outputs_off"] == 0
+
+
+def test_a_calibration_duration_that_is_not_finite_or_too_long_is_refused_naming_it():
+    from hexa.protocol.driver_scheduler import MAX_CALIBRATION_DURATION, calibration_duration
+
+    assert calibration_duration(0.4, 1.0) == 0.4
+    assert calibration_duration(0.0, 1.0) == 1.0 and calibration_duration(-2.0, 1.0) == 1.0
+    for bad in (math.nan, math.inf, MAX_CALIBRATION_DURATION + 1.0, 1e300):
+        with pytest.raises(CalibrationRefused, match="duration must be a finite number of seconds"):
+            calibration_duration(bad, 1.0)

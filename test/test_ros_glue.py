@@ -204,3 +204,12 @@ def test_a_deferred_service_answers_later_while_the_executor_serves_other_reques
         server.destroy_node()
         client_node.destroy_node()
         rclpy.shutdown(context=ctx)
+
+
+def test_a_deferred_answer_refuses_a_delay_no_timer_can_wait():
+    from hexa_ros.deferred import Later
+
+    assert Later(0.5, print).delay == 0.5
+    for bad in (-1.0, float("nan"), float("inf"), 1e300):
+        with pytest.raises(ValueError, match="delay"):
+            Later(bad, print)

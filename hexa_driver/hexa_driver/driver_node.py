@@ -25,7 +25,7 @@ from hexa.protocol import frames as fr
 from hexa.protocol.driver_core import (SCALAR_KEYS, CommandRejected, default_driver_config_path,
                                        driver_core_from_config, driver_links_from_config, load_driver_config,
                                        servo_calibrations_from_config)
-from hexa.protocol.driver_scheduler import CalibrationRefused, DriverScheduler, driver_reports
+from hexa.protocol.driver_scheduler import CalibrationRefused, DriverScheduler, calibration_duration, driver_reports
 from hexa.protocol.link import CONNECTED
 from hexa.robots.hexa_description import calibration_summary, load_hexa
 from hexa_ros import cdr, diagnostics, qos
@@ -127,11 +127,11 @@ class DriverNode(Node):
     def _on_calibrate(self, req: CalibrateCurrents.Request, resp: CalibrateCurrents.Response):
         resp.offsets = self.core.offsets.tolist()
         try:
+            duration = calibration_duration(req.duration, float(self.cfg["calibration_duration"]))
             self.sched.start_calibration(time.monotonic(), float(self.cfg["rest_quiet_time"]), self.mega.stats.state)
         except CalibrationRefused as exc:
             resp.success, resp.message = False, str(exc)
             return resp
-        duration = req.duration if req.duration > 0 else float(self.cfg["calibration_duration"])
         return Later(duration, functools.partial(self._finish_calibration, duration))
 
     def _finish_calibration(self, duration: float, resp: CalibrateCurrents.Response) -> None:

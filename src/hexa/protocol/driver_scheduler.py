@@ -38,10 +38,24 @@ if TYPE_CHECKING:
 OFFSET_WINDOW = 50
 #: fewest samples a zero-current calibration averages
 MIN_CALIBRATION_SAMPLES = 5
+#: longest zero-current averaging a request may ask for (s): the robot stays at rest throughout
+MAX_CALIBRATION_DURATION = 60.0
 
 
 class CalibrationRefused(RuntimeError):
     """A zero-current calibration that cannot be done now; the message says why."""
+
+
+def calibration_duration(requested: float, default: float) -> float:
+    """The averaging time (s) of a zero-current calibration request: `requested`, or `default` when it is 0 or less.
+
+    Raises:
+        CalibrationRefused: `requested` is not finite or longer than MAX_CALIBRATION_DURATION.
+    """
+    if not math.isfinite(requested) or requested > MAX_CALIBRATION_DURATION:
+        raise CalibrationRefused(f"duration must be a finite number of seconds up to {MAX_CALIBRATION_DURATION:g} "
+                                 f"(0 = {default:g} s), got {requested!r}")
+    return float(requested) if requested > 0 else float(default)
 
 
 class SampleReading(NamedTuple):

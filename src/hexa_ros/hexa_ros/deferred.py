@@ -20,6 +20,10 @@ class Later:
     delay: float
     finish: Callable[[Any], None]
 
+    def __post_init__(self) -> None:
+        if not 0.0 <= self.delay < 1e6:   # NaN fails too; a timer thread cannot wait longer than its platform's time_t
+            raise ValueError(f"Later: delay must be in [0, 1e6) s, got {self.delay!r}")
+
 
 class DeferredService:
     """A service of `node` whose callback `start(request, response)` returns the response (sent at once) or `Later`.
