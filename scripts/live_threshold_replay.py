@@ -53,12 +53,13 @@ def main() -> int:
     ap.add_argument("--scales", type=scales_of, default="0.6,0.7,0.8,0.9,1", help="threshold scales, comma-separated")
     a = ap.parse_args()
     from hexa_bringup import demo_run
+    from hexa_bringup.graphs import DEMO_REAL_TIME_FACTOR
     from hexa_bringup.rosenv import ros_env
 
     case = "free_sequence"
     demo_run.CASES.setdefault(case, ("none", "circle+helix+ellipse", a.seconds))
     run = demo_run.run_case(case, Path(tempfile.mkdtemp()), ros_env(a.domain), duration=a.seconds,
-                            status_every=1e9, real_time_factor=demo_run.REAL_TIME_FACTOR, loop=True,
+                            status_every=1e9, real_time_factor=DEMO_REAL_TIME_FACTOR, loop=True,
                             realism=a.realism, description=demo_run.nodes_description(a.realism, 0))
     d = demo_run.case_data_from_bag(case, run.bag)
     out = {"realism": a.realism, "seconds": a.seconds, "samples": len(d.residual_t), "live_events": len(d.events),

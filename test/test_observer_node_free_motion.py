@@ -42,9 +42,9 @@ def free_motion_run(trajectory: str, out_dir, domain: int, duration: float,
     from hexa_bringup.bag import read_bag, typestore
     from hexa_bringup.rosenv import ros_env
 
-    from hexa_bringup.graphs import DEFAULT_REALISM
+    from hexa_bringup.graphs import DEFAULT_REALISM, DEMO_REAL_TIME_FACTOR
 
-    real_time_factor = demo_run.REAL_TIME_FACTOR if real_time_factor is None else real_time_factor
+    real_time_factor = DEMO_REAL_TIME_FACTOR if real_time_factor is None else real_time_factor
     realism = DEFAULT_REALISM if realism is None else realism
     description = demo_run.nodes_description(realism, 0)
     case = f"free_{trajectory}"

@@ -14,7 +14,7 @@ from pathlib import Path
 import numpy as np
 
 from hexa.report.collision_demo import DEMO_CASES
-from hexa_bringup.graphs import DEFAULT_PARAMS, build_graph, with_description
+from hexa_bringup.graphs import DEFAULT_PARAMS, DEMO_REAL_TIME_FACTOR, build_graph, with_description
 from hexa_bringup.supervisor import NodeSpec, Supervisor
 
 #: case -> (scenario, trajectory, sim seconds to run: nominal onset + rise + release + margin); the demo's
@@ -101,10 +101,6 @@ class _ClockWatcher:
 #: most wall seconds the simulator holds sim time at 0 while the graph starts (DDS discovery, serial handshakes); it
 #: starts sooner once the graph is up (the sim node's `start_subscribers`)
 START_DELAY = 3.0
-#: simulator real-time factor the demo asks for. The pacing drops the wall time of host stalls (hexa.sim.pacing),
-#: so on 2 cores the demo's graph reaches 0.48-0.54x (`hexa demo` prints it per case); the free motion's residual
-#: noise grows with the rate (docs/demo.md, "Real time")
-REAL_TIME_FACTOR = 0.55
 #: sim seconds at rest before the trajectory and the scenario clock start (the estimator and observer settle, the
 #: driver's commands take over from the simulator's own start pose)
 LEAD_IN = 1.0
@@ -126,7 +122,8 @@ def nodes_description(realism: str, seed: int, log: Callable[[str], None] | None
 
 
 def run_case(case: str, out_dir: Path, env: dict[str, str], ns: str = "/hexa", seed: int = 0,
-             real_time_factor: float = REAL_TIME_FACTOR, record_images: bool = False, duration: float | None = None,
+             real_time_factor: float = DEMO_REAL_TIME_FACTOR, record_images: bool = False,
+             duration: float | None = None,
              params: Path = DEFAULT_PARAMS, status_every: float = 5.0, loop: bool = False,
              contact_model: str = "scripted", servo_frame_period: float | None = None,
              stream_rate_hz: int | None = None, realism: str = "ideal",

@@ -16,6 +16,10 @@ DEFAULT_PARAMS = CONFIG_DIR / "hexa_params.yaml"
 #: hexa.sim.realism); on the realistic robot the other nodes run a calibration overlay identified on it
 #: (hexa_bringup.demo_run.nodes_description; docs/realism.md, "The live graph on the realistic robot")
 DEFAULT_REALISM = "realistic"
+#: simulator real-time factor `hexa demo` asks for. The pacing drops the wall time of host stalls (hexa.sim.pacing),
+#: so the factor reached is lower and follows the host's load (docs/demo.md, "Real time"); the free motion's residual
+#: noise grows with the rate
+DEMO_REAL_TIME_FACTOR = 0.55
 
 # name, module, required, modes
 NODES: list[tuple[str, str, bool, tuple[str, ...]]] = [

@@ -38,6 +38,7 @@ from hexa_ros.conversions import JOINT_NAMES, hexa_pose_from_msg
 from hexa_ros.stamps import to_sec, to_stamp
 from hexa_dynamics.trajectory_params import PARAMETERS
 
+
 class TrajectoryNode(Node):
     """Publishes arm-angle commands at `rate_hz` from the TrajectoryRunner; holds on collision START."""
 

@@ -7,7 +7,7 @@ import os
 import sys
 from pathlib import Path
 
-from hexa_bringup.graphs import DEFAULT_REALISM
+from hexa_bringup.graphs import DEFAULT_REALISM, DEMO_REAL_TIME_FACTOR
 
 
 def rtf_line(asked: float, reached: float | None) -> str:
@@ -22,10 +22,9 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--case", choices=["plate", "arm", "rod", "all"], default="all")
     p.add_argument("--out", default="out/demo", help="output directory (bags, logs, report.md, PNGs)")
     p.add_argument("--seed", type=int, default=0, help="scenario seed (timings/positions drawn from it)")
-    p.add_argument("--rtf", type=float, default=None,
-                   help="simulator real-time factor asked for (default 0.55). The pacing drops the wall time of "
-                        "host stalls, so the factor reached is lower (0.48-0.54 at 0.55 on 2 cores); each case "
-                        "prints the one it reached")
+    p.add_argument("--rtf", type=float, default=DEMO_REAL_TIME_FACTOR,
+                   help="simulator real-time factor asked for (default %(default)s). The pacing drops the wall time "
+                        "of host stalls, so the factor reached is lower; each case prints the one it reached")
     p.add_argument("--record-images", action="store_true", help="also record the camera topics (large bags)")
     p.add_argument("--contact-model", choices=["scripted", "physical"], default="scripted",
                    help="scripted: the scenario's force applied exactly along the object's axis (default); physical: "
@@ -55,14 +54,13 @@ def watch_hint(domain: int, ns: str = "/hexa") -> str:
 def run(args: argparse.Namespace) -> int:
     from hexa.report.collision_demo import (compute_metrics, markdown_table, plate_equivalent_truth, plot_case,
                                             write_report)
-    from hexa_bringup.demo_run import (CASES, DEFAULT_PARAMS, REAL_TIME_FACTOR, case_data_from_bag, nodes_description,
-                                       run_case)
+    from hexa_bringup.demo_run import CASES, DEFAULT_PARAMS, case_data_from_bag, nodes_description, run_case
     from hexa_bringup.rosenv import ros_env
     from hexa_bringup.supervisor import SupervisorError
 
     from hexa.sim.pacing import MAX_REAL_TIME_FACTOR
 
-    if args.rtf is not None and not 0.0 < args.rtf <= MAX_REAL_TIME_FACTOR:      # NaN fails too
+    if not 0.0 < args.rtf <= MAX_REAL_TIME_FACTOR:      # NaN fails too
         print(f"hexa demo: --rtf must be > 0 and <= {MAX_REAL_TIME_FACTOR:g} (sim seconds per wall second), "
               f"got {args.rtf}", file=sys.stderr)
         return 2
@@ -73,7 +71,7 @@ def run(args: argparse.Namespace) -> int:
     os.environ.update(env)  # the progress display in this process joins the same graph
     print(watch_hint(domain, args.ns), flush=True)
     cases = list(CASES) if args.case == "all" else [args.case]
-    rtf = REAL_TIME_FACTOR if args.rtf is None else args.rtf
+    rtf = args.rtf
     params = DEFAULT_PARAMS if args.params is None else Path(args.params)
     if not params.is_file():
         print(f"hexa demo: parameter file {params} not found", file=sys.stderr)
