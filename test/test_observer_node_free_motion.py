@@ -35,7 +35,7 @@ def free_motion_run(trajectory: str, out_dir, domain: int, duration: float,
     goes with it (hexa_bringup.demo_run.nodes_description: on the realistic robot the calibration overlay identified
     on it, cached per robot, so that only the first run of a fresh cache identifies it).
 
-    At the demo's real-time factor (0.55) the whole graph (simulator, two rendered cameras, vision, dynamics, recorder)
+    At the demo's real-time factor (0.5) the whole graph (simulator, two rendered cameras, vision, dynamics, recorder)
     keeps this 2-core machine about 120 % busy of its 200 %; the residual's noise grows with the factor, as each wall
     millisecond a command waits is more sim time (docs/demo.md, "Real time")."""
     from hexa_bringup import demo_run
