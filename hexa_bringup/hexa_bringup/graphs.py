@@ -18,7 +18,7 @@ DEFAULT_PARAMS = CONFIG_DIR / "hexa_params.yaml"
 DEFAULT_REALISM = "realistic"
 #: simulator real-time factor `hexa demo` asks for. The pacing drops the wall time of host stalls (hexa.sim.pacing),
 #: so the factor reached is lower and follows the host's load (docs/demo.md, "Real time"); the free motion's residual
-#: noise grows with the rate (at 0.55 the CI free-motion sequence raised a false START on a slow hour)
+#: noise grows with the rate, and at 0.55 on a slow host it comes within reach of a false START
 DEMO_REAL_TIME_FACTOR = 0.5
 
 # name, module, required, modes
