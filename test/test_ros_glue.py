@@ -90,6 +90,34 @@ def test_composed_nodes_keep_their_names_and_parameters_and_stop_on_ctrl_c(procs
     assert "[glue.observer]: ready" in err and "[glue.singularity]: ready" in err, err
 
 
+SIGNAL_AT_READY = """
+import os, signal, sys
+from rclpy.node import Node
+from hexa_ros import node
+
+class SignalledWhenBuilt(Node):
+    built = False
+
+    def __init__(self):
+        super().__init__("signalled_when_built")
+        self.built = True
+
+    def get_logger(self):   # the "ready" line: the signal arrives between the build and the spin
+        if self.built:
+            os.kill(os.getpid(), signal.%s)
+        return super().get_logger()
+
+sys.exit(node.main(SignalledWhenBuilt, "probe", ["probe"]))
+"""
+
+
+@pytest.mark.parametrize("sig", ["SIGINT", "SIGTERM"])
+def test_a_signal_between_the_build_and_the_spin_stops_with_rc_0_and_no_traceback(procs, ros_env, sig):
+    p = procs.start([PY, "-c", SIGNAL_AT_READY % sig], ros_env)
+    _out, err = p.communicate(timeout=60)
+    assert p.returncode == 0 and "Traceback" not in err, (p.returncode, err)
+
+
 def test_compose_with_an_unknown_class_exits_2_in_one_line(procs, ros_env):
     p = procs.start([PY, "-m", "hexa_ros.compose", "x=hexa_dynamics.observer_node:NoSuchNode"], ros_env)
     _out, err = p.communicate(timeout=60)

@@ -140,13 +140,14 @@ def run(factories: Sequence[Callable[..., Any]], name: str, argv: list[str] | No
 
     apply_defaults()
     install_signal_handlers()     # a stop requested earlier (hexa_ros.start, while importing) still counts
-    rclpy.init(args=argv if argv is not None else sys.argv, signal_handler_options=SignalHandlerOptions.NO)
     nodes: list[Any] = []
     try:
+        rclpy.init(args=argv if argv is not None else sys.argv, signal_handler_options=SignalHandlerOptions.NO)
         for k, factory in enumerate(factories):
             nodes.append(factory(**(node_kwargs[k] if node_kwargs else {})))
-    except BaseException as exc:  # noqa: BLE001 - stopped while building (whatever the signal interrupted), or
-        _teardown(nodes)          # a configuration error
+        stop_on_signal()  # built: a signal from here on only requests the stop (logging "ready" walks every module)
+    except BaseException as exc:  # noqa: BLE001 - stopped while starting ROS or building (whatever the signal
+        _teardown(nodes)          # interrupted), or a configuration error
         if _StopRequest.requested:
             return 0
         if isinstance(exc, CONFIG_ERRORS):
@@ -159,7 +160,6 @@ def run(factories: Sequence[Callable[..., Any]], name: str, argv: list[str] | No
         apply_requested_priority(nodes)     # this process is the nodes' own: SCHED_FIFO when one asked for it
     for node in nodes:
         node.get_logger().info("ready")
-    stop_on_signal()     # a signal from here on ends the spin before or after its first step, never a traceback
     loop = getattr(nodes[0], "run_loop", None) if len(nodes) == 1 else None
     if callable(loop):   # a node that steps its own loop (the simulator) and spins itself between steps
         try:

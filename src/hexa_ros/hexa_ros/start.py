@@ -30,7 +30,12 @@ def main(argv: list[str] | None = None) -> int:
         if node.stop_requested():
             return 0
         raise
-    return module.main([args[0], *args[1:]])
+    try:
+        return module.main([args[0], *args[1:]])
+    except KeyboardInterrupt:  # stopped between the import and the node's own handling (hexa_ros.node.run)
+        if node.stop_requested():
+            return 0
+        raise
 
 
 if __name__ == "__main__":
