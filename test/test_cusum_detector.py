@@ -123,3 +123,23 @@ def test_the_baseline_learns_a_slow_model_error_but_not_a_contact_held_for_secon
     assert det.active
     without = CusumDetector(ObserverConfig(), CusumConfig(baseline_tau=0.0))
     assert [e.kind for _, e in feed(without, bias)] == ["START"]   # the same drift alarms without a baseline
+
+
+def test_a_gap_integrates_nothing_and_the_sums_start_over_after_it():
+    """Across a gap (`break_runs`, the observer's max_gap) no step integrates the gap's length and the evidence
+    before it is dropped: a weak residual that would alarm summed over both sides does not, and one that stays
+    alarms with its onset at the first sample after the gap."""
+    cfg = CusumConfig(drift=0.5, alarm=0.01, baseline_tau=0.0)
+    det = CusumDetector(ObserverConfig(), cfg)
+    # 1.6 N on fx = 0.8 threshold units: (0.8 − 0.5)·Δt = 0.0015 per sample, so h = 0.01 takes 7 samples
+    assert feed(det, [1.6] * 4) == []
+    det.break_runs()
+    t0 = 1.0
+    assert feed(det, [1.6] * 6, t0=t0) == []      # 4 + 6 samples would have summed past h; 6 after the gap do not
+    ev = feed(det, [1.6] * 2, t0=t0 + 6 * DT)
+    assert [e.kind for _t, e in ev] == ["START"]
+    assert ev[0][0] == pytest.approx(t0 + 7 * DT) and ev[0][1].onset == pytest.approx(t0)
+    # without the gap's reset, the first sample after it would have integrated MAX_STEP of evidence
+    plain = CusumDetector(ObserverConfig(), cfg)
+    feed(plain, [1.6] * 4)
+    assert [e.kind for _t, e in feed(plain, [1.6], t0=t0)] == ["START"]

@@ -108,6 +108,15 @@ class CusumDetector(CollisionDetector):
         self._pk = [0.0] * 12
         self._t: float | None = None
 
+    def break_runs(self) -> None:
+        """The input stream had a gap: no CUSUM step integrates across it (the next sample's Δt is 0) and every sum
+        starts over from the next sample, so evidence before the gap never adds to evidence after it; a collision
+        in progress stays active and its release run restarts (`CollisionDetector.break_runs`)."""
+        super().break_runs()
+        self._t = None
+        self._g = [0.0] * 12
+        self._zero_t = [-math.inf] * 12
+
     def set_thresholds(self, thresholds: Iterable[float]) -> None:
         super().set_thresholds(thresholds)
         self._sc = self._scale.tolist()
