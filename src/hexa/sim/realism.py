@@ -220,7 +220,7 @@ class RealismConfig:
 
     @staticmethod
     def ideal() -> "RealismConfig":
-        """Today's world: the robot is its model, set-points at once, ADC noise only, a punctual host."""
+        """The robot is its model, set-points at once, ADC noise only, a punctual host."""
         return RealismConfig()
 
     @staticmethod
