@@ -77,3 +77,26 @@ def test_sigint_stops_every_node_of_the_sim_graph_with_rc_0_and_no_traceback(pro
         text = log.read_text(errors="replace")
         assert "Traceback" not in text, f"{log.name}:\n{text[-3000:]}"
     assert "did not stop" not in out
+
+
+def test_ctrl_c_during_a_demo_case_stops_the_graph_writes_no_report_and_exits_130(procs, ros_env, tmp_path,
+                                                                                monkeypatch):
+    """A case cut short has no result: `hexa demo` says where its bag and logs are and exits 130, with no report
+    built from the partial case, every node stopped cleanly."""
+    out = tmp_path / "demo"
+    demo = procs.start([sys.executable, "-m", "hexa_bringup.cli", "demo", "--case", "plate", "--out", str(out)],
+                       ros_env)
+    # the calibration of the default robot comes first (cached after the first run): up to minutes on a fresh clone
+    assert _wait_for_nodes(ros_env, NODES, 300.0, monkeypatch), "the demo's graph did not come up"
+    time.sleep(2.0)
+    assert demo.poll() is None, demo.communicate()[0]
+    demo.send_signal(signal.SIGINT)
+    stdout, stderr = demo.communicate(timeout=60)
+    assert demo.returncode == 130, (demo.returncode, stdout[-2000:], stderr[-2000:])
+    assert "stopped during case plate" in stderr and "no report" in stderr, stderr
+    assert not (out / "report.md").exists()
+    assert "Traceback" not in stdout + stderr
+    rows = [m.groups() for line in stdout.splitlines() if (m := ROW.match(line))][-9:]   # 8 nodes and the recorder
+    assert len(rows) == 9 and all(state == "exited" and rc == "0" for _n, state, _r, rc in rows), rows
+    for log in (out / "plate" / "logs").glob("*.log"):
+        assert "Traceback" not in log.read_text(errors="replace"), log.name

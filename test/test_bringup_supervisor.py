@@ -195,3 +195,24 @@ def test_sim_mode_knows_the_simulated_robot_from_its_overrides_the_parameters_fi
     own.write_text("/**/sim:\n  ros__parameters:\n    seed: seven\n")
     with pytest.raises(SupervisorError, match="seed"):
         sim_robot(own, {})
+
+
+def test_a_signal_stops_the_graph_while_it_runs_and_reaches_the_caller_again_after(tmp_path):
+    """`run` takes SIGINT/SIGTERM only while the graph runs (`stopped_by` names the signal) and gives the process's
+    own handlers back when it returns: `hexa demo` sees a Ctrl-C between cases or while writing its report."""
+    import io
+    import os
+    import threading
+
+    from hexa_bringup.supervisor import NodeSpec, Supervisor
+
+    mine, mine_term = signal.getsignal(signal.SIGINT), signal.getsignal(signal.SIGTERM)
+    spec = NodeSpec("sleeper", [PY, "-c", "import time; time.sleep(60)"])
+    sup = Supervisor([spec], dict(os.environ), log_dir=str(tmp_path / "a"), out=io.StringIO())
+    assert sup.run(duration=0.3) == 0 and sup.stopped_by is None
+    assert signal.getsignal(signal.SIGINT) is mine
+    sup = Supervisor([spec], dict(os.environ), log_dir=str(tmp_path / "b"), out=io.StringIO())
+    threading.Timer(0.5, os.kill, (os.getpid(), signal.SIGTERM)).start()
+    assert sup.run() == 0 and sup.stopped_by == signal.SIGTERM
+    assert signal.getsignal(signal.SIGINT) is mine and signal.getsignal(signal.SIGTERM) is mine_term
+    assert sup.nodes[0].state == "exited"

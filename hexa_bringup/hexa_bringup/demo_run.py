@@ -38,6 +38,8 @@ class CaseRun:
     wall_s: float
     #: sim seconds per wall second from the simulator's first /clock after t = 0 to its last (None: no /clock seen)
     reached_rtf: float | None = None
+    #: the signal (Ctrl-C: SIGINT) that stopped the graph before the case ended; None when it ran to its end
+    stopped_by: int | None = None
 
 
 class _ClockWatcher:
@@ -183,7 +185,7 @@ def run_case(case: str, out_dir: Path, env: dict[str, str], ns: str = "/hexa", s
                          progress=lambda: f"case {case}: sim t = {clock.t:5.2f} / {sim_s:.2f} s "
                                           f"({100 * min(1.0, clock.t / sim_s):3.0f} %)")
         rc = sup.run()
-    return CaseRun(case, bag, case_dir / "logs", rc, time.monotonic() - t0, clock.reached_rtf)
+    return CaseRun(case, bag, case_dir / "logs", rc, time.monotonic() - t0, clock.reached_rtf, sup.stopped_by)
 
 
 def _stamp(h) -> float:

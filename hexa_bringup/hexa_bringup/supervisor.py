@@ -193,13 +193,29 @@ class Supervisor:
 
     def run(self, duration: float = 0.0, install_signal_handlers: bool = True) -> int:
         """Start the graph and supervise it until a signal, `duration` seconds (0 = forever) or a failure.
+        With `install_signal_handlers`, SIGINT/SIGTERM stop the graph while it runs (`stopped_by`); the process's
+        previous handlers are back when this returns, so a Ctrl-C after the graph stopped reaches the caller.
 
         Returns:
             0 after a requested stop or the duration; 1 when a required node could not be kept running.
         """
+        previous = {}
         if install_signal_handlers:
-            signal.signal(signal.SIGINT, lambda s, f: self.request_stop(s))
-            signal.signal(signal.SIGTERM, lambda s, f: self.request_stop(s))
+            for sig in (signal.SIGINT, signal.SIGTERM):
+                previous[sig] = signal.signal(sig, lambda s, f: self.request_stop(s))
+        try:
+            return self._supervise(duration)
+        finally:
+            for sig, handler in previous.items():
+                signal.signal(sig, signal.SIG_DFL if handler is None else handler)   # None: set outside Python
+
+    @property
+    def stopped_by(self) -> int | None:
+        """The signal that stopped the graph (`request_stop`), None when it ended by itself, its duration or a
+        failure."""
+        return self._stop_signal
+
+    def _supervise(self, duration: float) -> int:
         for n in self.nodes:
             self._start(n)
         start = self.clock()

@@ -4,6 +4,7 @@ from __future__ import annotations
 import argparse
 import json
 import os
+import signal
 import sys
 from pathlib import Path
 
@@ -102,6 +103,10 @@ def run(args: argparse.Namespace) -> int:
         except SupervisorError as exc:
             print(f"hexa demo: cannot start the graph: {exc}", file=sys.stderr)
             return 2
+        if run.stopped_by is not None:   # Ctrl-C: a case cut short has no result to report
+            print(f"hexa demo: stopped during case {case} (signal {signal.Signals(run.stopped_by).name}); no report "
+                  f"written. The case's bag and node logs so far: {run.bag}, {run.log_dir}", file=sys.stderr)
+            return 130
         if run.returncode != 0:
             problems.append(f"{case}: the graph did not run cleanly (see {run.log_dir})")
         try:
