@@ -88,7 +88,11 @@ def test_ctrl_c_during_a_demo_case_stops_the_graph_writes_no_report_and_exits_13
                        ros_env)
     # the calibration of the default robot comes first (cached after the first run): up to minutes on a fresh clone
     assert _wait_for_nodes(ros_env, NODES, 300.0, monkeypatch), "the demo's graph did not come up"
-    time.sleep(2.0)
+    record_log, t_end = out / "plate" / "logs" / "record.log", time.monotonic() + 60.0
+    while time.monotonic() < t_end and "hexa record: recording" not in (
+            record_log.read_text(errors="replace") if record_log.exists() else ""):
+        time.sleep(0.2)   # the recorder too has set up its own Ctrl-C handling and subscribed
+    time.sleep(1.0)
     assert demo.poll() is None, demo.communicate()[0]
     demo.send_signal(signal.SIGINT)
     stdout, stderr = demo.communicate(timeout=60)
