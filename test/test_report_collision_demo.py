@@ -63,6 +63,7 @@ def test_report_and_plot_are_written(tmp_path):
     assert png.stat().st_size > 10_000
     text = rep.read_text()
     assert "| plate | plate 0 | plate 0 |" in text and "plate.png" in text
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["plate.png", "report.md"]   # no part file left beside it
 
 
 def test_observer_lag_is_measured_from_the_plate_equivalent_wrench():

@@ -363,5 +363,7 @@ def write_report(metrics: list[CaseMetrics], plots: dict[str, Path], out_dir: st
     for case, p in plots.items():
         lines += [f"## {case}", "", f"![{case}]({Path(p).name})", ""]
     path = out / "report.md"
-    path.write_text("\n".join(lines), encoding="utf-8")
+    part = path.with_name(path.name + ".part")   # written aside, then renamed: an interrupted run leaves no half report
+    part.write_text("\n".join(lines), encoding="utf-8")
+    part.replace(path)
     return path
