@@ -124,7 +124,15 @@ def run_echo(args: argparse.Namespace) -> int:
         deadline = time.monotonic() + args.timeout if args.timeout else math.inf
         name, type_name = _resolve(cli, args.topic, args.type, args.timeout)
         cls = get_message_class(type_name)
-        cli.spin_for(0.2)  # let publishers' QoS be discovered
+        # the subscription's QoS follows the publishers (_qos_for), so it waits for the first one: a best-effort
+        # subscription made before a reliable publisher appears would take a message sent only once, with no resend
+        while cli.context.ok() and not cli.node.get_publishers_info_by_topic(name):
+            if time.monotonic() > deadline:
+                print(f"hexa topic echo: 0 of {wanted or 'any'} messages on {name} within {args.timeout:g} s (no "
+                      f"publisher appeared)", file=sys.stderr)
+                return 1
+            cli.executor.spin_once(timeout_sec=0.05)
+        cli.spin_for(0.2)  # let the other publishers' QoS be discovered
         max_array = args.max_array or None
 
         def on_msg(msg) -> None:
@@ -227,6 +235,7 @@ def _graph_type(cli: RosCli, name: str, timeout: float) -> str:
 
 
 def run_pub(args: argparse.Namespace) -> int:
+    from rclpy.duration import Duration
     from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 
     from hexa_bringup.msgutil import get_message_class, set_message_fields
@@ -274,7 +283,16 @@ def run_pub(args: argparse.Namespace) -> int:
                 break
             next_t += period
             cli.spin_for(max(0.0, next_t - time.monotonic()))
-        cli.spin_for(0.3)                              # the last reliable message goes out before the node does
+        cli.spin_for(0.3)                              # a best-effort message leaves before the node does
+        # a reliable one is acknowledged first: the publisher matched the subscriber before publishing, but that side
+        # may match this publisher only after the sample went out once (a loaded host), and gets it on a resend
+        deadline = time.monotonic() + min(5.0, args.timeout)
+        step = Duration(nanoseconds=100_000_000)
+        while not pub.wait_for_all_acked(step) and cli.context.ok():
+            if time.monotonic() >= deadline:
+                print(f"hexa topic pub: not every subscription of {name} acknowledged the last message within "
+                      f"{min(5.0, args.timeout):g} s", file=sys.stderr)
+                break
     return 0
 
 
