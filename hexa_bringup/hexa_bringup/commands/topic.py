@@ -124,15 +124,6 @@ def run_echo(args: argparse.Namespace) -> int:
         deadline = time.monotonic() + args.timeout if args.timeout else math.inf
         name, type_name = _resolve(cli, args.topic, args.type, args.timeout)
         cls = get_message_class(type_name)
-        # the subscription's QoS follows the publishers (_qos_for), so it waits for the first one: a best-effort
-        # subscription made before a reliable publisher appears would take a message sent only once, with no resend
-        while cli.context.ok() and not cli.node.get_publishers_info_by_topic(name):
-            if time.monotonic() > deadline:
-                print(f"hexa topic echo: 0 of {wanted or 'any'} messages on {name} within {args.timeout:g} s (no "
-                      f"publisher appeared)", file=sys.stderr)
-                return 1
-            cli.executor.spin_once(timeout_sec=0.05)
-        cli.spin_for(0.2)  # let the other publishers' QoS be discovered
         max_array = args.max_array or None
 
         def on_msg(msg) -> None:
@@ -146,11 +137,16 @@ def run_echo(args: argparse.Namespace) -> int:
             else:
                 print(_yaml_like(data) + "---", flush=True)
 
-        cli.node.create_subscription(cls, name, on_msg, _qos_for(cli, name))
+        # the subscription's QoS follows the publishers (_qos_for), so it is made once the first one is there: a
+        # best-effort subscription made before a reliable publisher appears would take a message sent once, unresent
+        sub = None
         while cli.context.ok() and (not wanted or received < wanted):
+            if sub is None and cli.node.get_publishers_info_by_topic(name):
+                cli.spin_for(0.2)  # let the other publishers' QoS be discovered
+                sub = cli.node.create_subscription(cls, name, on_msg, _qos_for(cli, name))
             if time.monotonic() > deadline:
                 print(f"hexa topic echo: {received} of {wanted or 'any'} messages on {name} within "
-                      f"{args.timeout:g} s", file=sys.stderr)
+                      f"{args.timeout:g} s{' (no publisher appeared)' if sub is None else ''}", file=sys.stderr)
                 return 1
             cli.executor.spin_once(timeout_sec=0.05)
     return 0

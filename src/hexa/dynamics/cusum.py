@@ -114,8 +114,7 @@ class CusumDetector(CollisionDetector):
         in progress stays active and its release run restarts (`CollisionDetector.break_runs`)."""
         super().break_runs()
         self._t = None
-        self._g = [0.0] * 12
-        self._zero_t = [-math.inf] * 12
+        self._g = [0.0] * 12   # each g_j is 0 at the next sample, which becomes its zero time (its change point)
 
     def set_thresholds(self, thresholds: Iterable[float]) -> None:
         super().set_thresholds(thresholds)

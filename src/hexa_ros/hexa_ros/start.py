@@ -18,22 +18,17 @@ from hexa_ros import node  # noqa: E402
 
 
 def main(argv: list[str] | None = None) -> int:
-    """Import MODULE (argv[0]) and return its `main([MODULE, *rest])`; 0 when stopped while importing."""
+    """Import MODULE (argv[0]) and return its `main([MODULE, *rest])`; 0 when stopped before `main` handles signals
+    itself (hexa_ros.node.run)."""
     args = list(sys.argv[1:] if argv is None else argv)
     if not args:
         print("usage: python -m hexa_ros.start MODULE [ARGS ...]", file=sys.stderr)
         return 2
     node.install_signal_handlers()
     try:
-        module = importlib.import_module(args[0])
-    except BaseException:  # noqa: BLE001 - stopped while importing (an ImportError may wrap the interrupt)
-        if node.stop_requested():
-            return 0
-        raise
-    try:
-        return module.main([args[0], *args[1:]])
-    except KeyboardInterrupt:  # stopped between the import and the node's own handling (hexa_ros.node.run)
-        if node.stop_requested():
+        return importlib.import_module(args[0]).main([args[0], *args[1:]])
+    except BaseException:  # noqa: BLE001 - stopped while importing (an ImportError may wrap the interrupt) or
+        if node.stop_requested():   # before `run` took the signals over
             return 0
         raise
 
